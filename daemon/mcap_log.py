@@ -12,6 +12,7 @@ finishes the file (summary and indexes). Errors in the writer thread reach ``on_
 from __future__ import annotations
 
 import collections
+import io
 import json
 import logging
 import os
@@ -56,7 +57,7 @@ class LoggerStats:
 
 def _open_exclusive(path: Path) -> IO[bytes]:
     """Default opener: create ``path``; refuse to overwrite an existing file."""
-    return open(path, "xb")  # noqa: SIM115 - the logger owns and closes it
+    return open(path, "xb")  # the logger owns and closes it
 
 
 class McapLogger:
@@ -239,6 +240,8 @@ class McapLogger:
     def _open_next(self) -> None:
         path = self._next_path()
         stream = self._opener(path)
+        if isinstance(stream, io.RawIOBase):  # else mcap wraps it in a buffer we cannot flush
+            stream = io.BufferedWriter(stream)
         writer = Writer(stream, chunk_size=self._chunk_size, compression=self._compression)
         writer.start(profile=PROFILE, library="cmm-comp mcap 1.x")
         ids: dict[str, int] = {}

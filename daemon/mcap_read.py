@@ -91,6 +91,7 @@ class MessageStream:
                     break
                 except _TRUNCATION_ERRORS as exc:
                     self.errors.append(f"{path}: {type(exc).__name__}: {exc}")
+                    complete = False  # even a footer without its closing magic is a cut file
                     break
                 if isinstance(record, Message):
                     channel = channels.get(record.channel_id)

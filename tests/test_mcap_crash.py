@@ -1,0 +1,113 @@
+"""A real writer process killed with SIGKILL or stopped with SIGTERM (Linux/POSIX)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+
+from daemon.mcap_read import read_messages
+
+ROOT = Path(__file__).resolve().parents[1]
+FLUSH_PERIOD_S = 0.2
+RATE_HZ = 1000
+
+# Logs /cmm/raw at a steady rate with log_time = wall clock; chunk_size is large, so only the
+# flush timer cuts chunks. Prints "ready" once the file is open.
+WRITER = """
+import signal, sys, time
+from daemon.mcap_log import McapLogger
+path, flush_s, rate, mode = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
+logger = McapLogger(path, flush_period_s=flush_s, chunk_size=16 * 1024 * 1024)
+if mode == "term":
+    def on_term(signum, frame):
+        ok = logger.stop(5.0)
+        sys.exit(0 if ok and logger.error is None else 3)
+    signal.signal(signal.SIGTERM, on_term)
+print("ready", flush=True)
+t0 = time.monotonic()
+i = 0
+while True:
+    logger.log("/cmm/raw", {"seq": i, "x_mm": i * 0.001, "y_mm": 0.0, "z_mm": 0.0})
+    i += 1
+    delay = t0 + i / rate - time.monotonic()
+    if delay > 0:
+        time.sleep(delay)
+"""
+
+pytestmark = pytest.mark.skipif(os.name != "posix", reason="needs POSIX signals")
+
+
+def _start(path: Path, mode: str) -> subprocess.Popen[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", WRITER, str(path), str(FLUSH_PERIOD_S), str(RATE_HZ), mode],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=ROOT,
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    if line.strip() != "ready":
+        proc.kill()
+        proc.wait(5)
+        pytest.fail(f"writer did not start: {line!r}")
+    return proc
+
+
+def test_sigkill_loses_at_most_the_last_flush_period(tmp_path: Path) -> None:
+    path = tmp_path / "killed.mcap"
+    proc = _start(path, "kill")
+    try:
+        time.sleep(1.2)
+    finally:
+        t_kill_ns = time.time_ns()
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(5)
+        assert proc.stdout is not None
+        proc.stdout.close()
+    assert proc.returncode == -signal.SIGKILL
+
+    with open(path, "rb") as f, pytest.raises(McapError):
+        make_reader(f).get_summary()  # the seeking reader cannot open a cut file...
+
+    res = read_messages(path)  # ...the stream reader reads up to the break
+    assert res.truncated and res.error is not None
+    seqs = [m.payload["seq"] for m in res.messages]
+    assert seqs == list(range(len(seqs)))  # no gaps: everything before the break is there
+    assert len(seqs) > 0.5 * RATE_HZ
+    # every message older than the last flush (plus scheduling slack) is present
+    lost_s = (t_kill_ns - res.messages[-1].log_time_ns) / 1e9
+    assert lost_s < 2.5 * FLUSH_PERIOD_S, f"lost the last {lost_s:.3f} s"
+    assert dict(res.metadata)["session"]["pid"] == str(proc.pid)
+
+
+def test_sigterm_finishes_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "term.mcap"
+    proc = _start(path, "term")
+    try:
+        time.sleep(0.5)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(10)
+        assert proc.stdout is not None
+        proc.stdout.close()
+    assert proc.returncode == 0
+
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.chunk_indexes
+    res = read_messages(path)
+    assert not res.truncated and res.error is None
+    seqs = [m.payload["seq"] for m in res.messages]
+    assert seqs == list(range(len(seqs))) and len(seqs) > 0.2 * RATE_HZ
+    assert summary.statistics is not None and summary.statistics.message_count == len(seqs)
+    assert dict(res.metadata)["session_end"]["dropped"] == "0"
