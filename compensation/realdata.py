@@ -227,8 +227,8 @@ def read_camonitor_log(path: str | Path) -> dict[str, PvSeries]:
 
     Times are seconds since the timestamp of the log's first line (the session start; the
     initial values camonitor prints on connection may carry older record timestamps and so
-    negative times). Each PV's updates are sorted by time. Lines about disconnection
-    (``*** disconnected`` etc.) and non-numeric values are kept as NaN.
+    negative times). Each PV's updates are sorted by time. Connection notices
+    (``PV *** disconnected``) are skipped; non-numeric values (``<undefined>``) become NaN.
 
     Raises:
         RealDataError: naming the file and line, for a line without PV, date, time and value.
@@ -245,8 +245,8 @@ def read_camonitor_log(path: str | Path) -> dict[str, PvSeries]:
     alarms: list[str] = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         parts = line.split()
-        if not parts:
-            continue
+        if not parts or (len(parts) > 1 and parts[1] == "***"):
+            continue  # blank line or a connection notice such as "PV *** disconnected"
         if len(parts) < 4:
             raise RealDataError(
                 f"{path}:{lineno}: expected 'PV date time value [alarm]', got {line.strip()!r}"

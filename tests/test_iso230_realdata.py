@@ -173,6 +173,10 @@ def test_log_bad_line_and_missing_pv(tmp_path: Path) -> None:
     path = _write(tmp_path, "A:PV 2022-04-06 11:00:00.0 1\n", "one.log")
     with pytest.raises(RealDataError, match=r"PV 'IOC_TEST:TestNumber' not in the log .*A:PV"):
         iso230_points_from_log(read_camonitor_log(path))
+    text = "A:PV 2022-04-06 11:00:00.0 1\nA:PV *** disconnected\nA:PV 2022-04-06 11:00:01.5 <undefined> UDF INVALID\n"
+    series = read_camonitor_log(_write(tmp_path, text, "disc.log"))["A:PV"]
+    assert series.time_s.tolist() == [0.0, 1.5] and np.isnan(series.value[1])
+    assert series.alarm[1] == "UDF INVALID" and series.at(1.0)[0] == 1.0
     path = _write(tmp_path, "A:PV 2022-04-06 25:00:00.0 1\n", "time.log")
     with pytest.raises(RealDataError, match=r"time.log: bad date/time"):
         read_camonitor_log(path)
