@@ -1,1 +1,96 @@
-"""protocol."""
+"""Bus contracts of cmm-comp: the CAN message set, the Modbus TCP register map, their codecs.
+
+Pure codecs and contracts only (no daemon logic). ``protocol`` imports nothing from ``daemon``
+or ``sim_controller``. See docs/can.md and docs/modbus.md.
+"""
+
+from .assembler import (
+    AssemblerEvent,
+    Duplicate,
+    Incomplete,
+    OutOfOrder,
+    Superseded,
+    Triplet,
+    TripletAssembler,
+)
+from .can_codec import (
+    BadLength,
+    BadValue,
+    DecodeResult,
+    NotData,
+    Undecodable,
+    UnknownId,
+    decode_message,
+    encode_message,
+)
+from .can_frames import (
+    CorrectedAxis,
+    CorrectionStatus,
+    Frame,
+    Heartbeat,
+    ProbeDirection,
+    RawAxis,
+    TemperatureSample,
+)
+from .can_ids import CanIds, MessageKind, dbc_text
+from .codes import (
+    Applied,
+    Axis,
+    DaemonState,
+    Direction,
+    Status,
+    grid_id_from_sha256,
+    seq_distance,
+)
+from .modbus_client import AnswerTimeoutError, ControllerClient, ModbusExceptionError
+from .modbus_codec import AnswerBlock, DaemonBlock, ReadingBlock, TemperatureSlot, decode_output
+from .modbus_device import build_sim_device
+from .modbus_map import ExceptionCode, check_request, check_write, commits_reading
+
+__all__ = [
+    "AnswerBlock",
+    "AnswerTimeoutError",
+    "Applied",
+    "AssemblerEvent",
+    "Axis",
+    "BadLength",
+    "BadValue",
+    "CanIds",
+    "ControllerClient",
+    "CorrectedAxis",
+    "CorrectionStatus",
+    "DaemonBlock",
+    "DaemonState",
+    "DecodeResult",
+    "Direction",
+    "Duplicate",
+    "ExceptionCode",
+    "Frame",
+    "Heartbeat",
+    "Incomplete",
+    "MessageKind",
+    "ModbusExceptionError",
+    "NotData",
+    "OutOfOrder",
+    "ProbeDirection",
+    "RawAxis",
+    "ReadingBlock",
+    "Status",
+    "Superseded",
+    "TemperatureSample",
+    "TemperatureSlot",
+    "Triplet",
+    "TripletAssembler",
+    "Undecodable",
+    "UnknownId",
+    "build_sim_device",
+    "check_request",
+    "check_write",
+    "commits_reading",
+    "dbc_text",
+    "decode_message",
+    "decode_output",
+    "encode_message",
+    "grid_id_from_sha256",
+    "seq_distance",
+]

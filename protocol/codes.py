@@ -1,0 +1,167 @@
+"""Codes and scalings shared by the CAN message set and the Modbus register map.
+
+Every enum here has stable integer codes: they are on the wire, never renumber them; add new
+members at unused codes only. String labels (``Status.label``) are the status strings of
+``FORMATS.md`` (``"ok"``, ``"outside_volume"``, …), used in CSV output and the MCAP log.
+
+Raw ↔ physical scalings (physical = raw · factor + offset, offset always 0 here):
+
+| quantity | raw type | factor | unit |
+|---|---|---|---|
+| position | int40 (CAN) / int64 (Modbus) | 1e-6 | mm (raw unit: nm) |
+| temperature | int32 | 0.001 | °C (raw unit: m°C) |
+| probing direction component | int16 | 2**-14 | 1 (unit vector component) |
+| correction magnitude | uint16 | 0.01 | µm (raw unit: 10 nm), saturating |
+| latency | uint16 | 1 | µs, saturating |
+"""
+
+from __future__ import annotations
+
+import enum
+
+NM_PER_MM = 1_000_000
+"""Raw position unit: 1 nm; physical mm = raw · 1e-6."""
+TEMP_C_PER_LSB = 0.001
+"""Raw temperature unit: 0.001 °C (m°C)."""
+DIRECTION_LSB = 2.0**-14
+"""Raw probing direction unit: 2**-14 (exact in binary and decimal, so DBC factors are exact)."""
+CORRECTION_UM_PER_LSB = 0.01
+"""Raw correction-magnitude unit: 0.01 µm = 10 nm."""
+UINT16_MAX = 0xFFFF
+SEQ_MODULUS = 1 << 16
+"""Sequence counters and event counters wrap modulo 2**16."""
+
+
+class Axis(enum.IntEnum):
+    """Machine axis; code is the 2-bit axis field of axis frames."""
+
+    X = 0
+    Y = 1
+    Z = 2
+
+
+class Direction(enum.IntEnum):
+    """Direction an axis last travelled before the reading (2-bit code on the wire)."""
+
+    UNKNOWN = 0
+    POSITIVE = 1
+    NEGATIVE = 2
+
+    @property
+    def sign(self) -> int:
+        """+1, −1, or 0 for unknown (the ``dir_x`` convention of FORMATS.md)."""
+        return {0: 0, 1: 1, 2: -1}[int(self)]
+
+    @classmethod
+    def from_sign(cls, sign: int) -> Direction:
+        """Map +1 → POSITIVE, −1 → NEGATIVE, 0 → UNKNOWN; anything else raises ValueError."""
+        try:
+            return {0: cls.UNKNOWN, 1: cls.POSITIVE, -1: cls.NEGATIVE}[sign]
+        except KeyError:
+            raise ValueError(f"direction sign {sign!r} is not one of +1, -1, 0") from None
+
+
+class Status(enum.IntEnum):
+    """Outcome of correcting one reading. Code fits in 6 bits (0..63).
+
+    ``label`` is the FORMATS.md status string. ``OK`` means fully corrected; every other status
+    says why the output is not (fully) corrected: then the daemon's output positions carry the
+    indicated (raw) position unchanged, except ``NOT_THERMALLY_CORRECTED`` and
+    ``MISSING_DIRECTION`` where the geometric correction was applied but a term was left out.
+    """
+
+    OK = 0
+    OUTSIDE_VOLUME = 1
+    NO_TEMPERATURE = 2
+    STALE_TEMPERATURE = 3
+    IMPLAUSIBLE_TEMPERATURE = 4
+    NO_GRID = 5
+    INCOMPLETE_READING = 6
+    CORRECTION_LIMIT = 7
+    NOT_THERMALLY_CORRECTED = 8
+    MISSING_DIRECTION = 9
+    INVALID_READING = 10
+    """The controller flagged a scale reading as invalid (valid bit clear)."""
+    STALE_READING = 11
+    """The reading was too old when the daemon got to it (overload, queueing)."""
+    OVERLOAD = 12
+    """Reading dropped or answered late because the daemon is saturated."""
+    NOT_READY = 13
+    """The daemon is starting or stopping."""
+    INTERNAL_ERROR = 63
+
+    @property
+    def label(self) -> str:
+        """FORMATS.md status string, e.g. ``"outside_volume"``."""
+        return self.name.lower()
+
+    @property
+    def geometric_correction_applied(self) -> bool:
+        """True when the output positions include the geometric (grid) correction."""
+        return self in _GEOMETRY_APPLIED
+
+    @classmethod
+    def from_label(cls, label: str) -> Status:
+        """Inverse of ``label``; raises ValueError naming the label and the allowed ones."""
+        try:
+            return cls[label.upper()]
+        except KeyError:
+            allowed = ", ".join(s.label for s in cls)
+            raise ValueError(f"unknown status {label!r}; allowed: {allowed}") from None
+
+
+_GEOMETRY_APPLIED = frozenset({Status.OK, Status.NOT_THERMALLY_CORRECTED, Status.MISSING_DIRECTION})
+
+
+class DaemonState(enum.IntEnum):
+    """State of the compensation daemon (heartbeat frame, Modbus daemon block)."""
+
+    STARTING = 0
+    READY = 1
+    DEGRADED = 2
+    """Running, but some answers are not ``ok`` (e.g. temperatures stale)."""
+    NO_GRID = 3
+    FAULT = 4
+    STOPPING = 5
+
+    @property
+    def label(self) -> str:
+        """Lower-case name, used as ``state`` in the MCAP ``/cmm/status`` topic."""
+        return self.name.lower()
+
+
+class Applied(enum.IntFlag):
+    """Which correction terms went into an answer (bit mask, 8 bits on the wire)."""
+
+    NONE = 0
+    GEOMETRY = 0x01
+    SCALE_THERMAL = 0x02
+    WORKPIECE_THERMAL = 0x04
+    REVERSAL = 0x08
+    """Direction-dependent (reversal) term, needs travel directions."""
+    PROBE_DIRECTION = 0x10
+    """Probing-direction-dependent term (lobing), needs the probing direction."""
+
+
+APPLIED_MASK = 0x1F
+
+
+def grid_id_from_sha256(sha256_hex: str) -> int:
+    """Short grid id: the first 24 bits (6 hex digits) of the grid file's SHA-256.
+
+    >>> hex(grid_id_from_sha256("a1b2c3" + "0" * 58))
+    '0xa1b2c3'
+    """
+    if len(sha256_hex) != 64:
+        raise ValueError(f"sha256 hex digest must have 64 characters, got {len(sha256_hex)}")
+    return int(sha256_hex[:6], 16)
+
+
+def saturate_u16(value: int) -> int:
+    """Clamp a non-negative count to 0..65535 (saturating fields: latency, correction)."""
+    return max(0, min(UINT16_MAX, int(value)))
+
+
+def seq_distance(newer: int, older: int) -> int:
+    """Forward distance ``newer − older`` modulo 2**16 (0..65535)."""
+    return (newer - older) % SEQ_MODULUS
