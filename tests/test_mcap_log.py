@@ -290,3 +290,15 @@ def test_cut_anywhere_reads_a_prefix_and_never_raises(tmp_path: Path) -> None:
     assert best > 250  # only the tail chunk(s) are lost
     shutil.copy(full, cut)
     assert not read_messages(cut).truncated
+
+
+def test_rolling_by_time(tmp_path: Path) -> None:
+    with McapLogger(tmp_path, roll_s=0.1, flush_period_s=0.05) as lg:
+        for i in range(40):
+            lg.log("/cmm/raw", sample("/cmm/raw", i))
+            time.sleep(0.01)
+    assert len(lg.files) >= 2
+    res = read_messages(tmp_path)
+    assert [m.payload["seq"] for m in res.messages] == list(range(40)) and not res.truncated
+    indexes = [int(meta["file_index"]) for name, meta in res.metadata if name == "session"]
+    assert indexes == list(range(len(lg.files)))
