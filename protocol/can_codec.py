@@ -71,11 +71,11 @@ def decode_message(msg: can.Message, ids: CanIds) -> DecodeResult:
     kind: MessageKind | None = None
     try:
         can_id = int(msg.arbitration_id)
+        if msg.is_error_frame:  # its id field carries error classes, not a message id
+            return NotData(can_id, None, "error frame")
         if msg.is_extended_id:
             return UnknownId(can_id, True)
         kind = ids.kind_of(can_id)
-        if msg.is_error_frame:
-            return NotData(can_id, kind, "error frame")
         if kind is None:
             return UnknownId(can_id, False)
         if msg.is_remote_frame:

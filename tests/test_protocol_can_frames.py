@@ -42,10 +42,16 @@ i16 = st.integers(-0x8000, 0x7FFF)
 raw_axes = st.builds(
     RawAxis, st.sampled_from(Axis), u16, int40, st.sampled_from(Direction), st.booleans()
 )
-corrected_axes = st.builds(CorrectedAxis, st.sampled_from(Axis), u16, int40, st.sampled_from(Status))
+corrected_axes = st.builds(
+    CorrectedAxis, st.sampled_from(Axis), u16, int40, st.sampled_from(Status)
+)
 probe_dirs = st.builds(ProbeDirection, u16, i16, i16, i16)
 temps = st.builds(
-    TemperatureSample, st.integers(0, 255), st.integers(-(1 << 31), (1 << 31) - 1), u16, st.booleans()
+    TemperatureSample,
+    st.integers(0, 255),
+    st.integers(-(1 << 31), (1 << 31) - 1),
+    u16,
+    st.booleans(),
 )
 statuses = st.builds(
     CorrectionStatus, u16, st.sampled_from(Status), st.integers(0, 31).map(Applied), u16, u16
