@@ -1,27 +1,55 @@
-"""The one command line, ``cmm-comp``: subcommands from every package are registered here."""
+"""The one command line, ``cmm-comp``: subcommands from every package are registered here.
+
+Problems with the user's input are printed as one line ``cmm-comp: error: …`` (exit 2), never
+as a traceback; nothing is written when a command fails on its input.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
+
+# (module, function) pairs that add subcommands; imported lazily so a missing optional part
+# cannot break the rest of the CLI.
+_REGISTRARS: tuple[tuple[str, str], ...] = (
+    ("compensation.cli", "add_parsers"),
+    ("compensation.grid_cli", "add_parsers"),
+    ("compensation.diagnosis_cli", "add_parsers"),
+    ("daemon.commands", "add_parsers"),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="cmm-comp", description="Volumetric error compensation for CMMs."
+        prog="cmm-comp",
+        description="Volumetric error compensation for coordinate measuring machines.",
     )
-    parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for module_name, func in _REGISTRARS:
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name == module_name:
+                continue
+            raise
+        getattr(module, func)(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    from compensation.errors import CmmCompError
+
     parser = build_parser()
     args = parser.parse_args(argv)
-    handler = getattr(args, "handler", None)
-    if handler is None:  # pragma: no cover - argparse enforces a subcommand
-        parser.print_help()
+    try:
+        return int(args.handler(args) or 0)
+    except (CmmCompError, ValueError, OSError) as exc:
+        print(f"cmm-comp: error: {exc}", file=sys.stderr)
         return 2
-    return int(handler(args) or 0)
+    except KeyboardInterrupt:
+        print("cmm-comp: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover
