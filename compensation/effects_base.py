@@ -18,6 +18,7 @@ Effects are stored in the machine description as ``[[effects]]`` tables with a `
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -106,7 +107,7 @@ def effect_from_table(table: Mapping[str, Any]) -> Effect:
 def _load_builtin_effects() -> None:
     # The concrete effects live in compensation.effects, which registers them on import.
     try:
-        from . import effects  # noqa: F401
+        importlib.import_module(f"{__package__}.effects")
     except ModuleNotFoundError as exc:  # optional module: only its own absence is tolerated
         if exc.name != f"{__package__}.effects":
             raise

@@ -1,0 +1,203 @@
+"""Machine descriptions: FORMATS.md §1 parsing, validation messages, round trips."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from compensation.errors import MachineFileError
+from compensation.machine import Machine
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = sorted((ROOT / "examples" / "machines").glob("*.toml"))
+
+MINIMAL = """
+format = "cmm-machine/1"
+name = "tiny"
+model = "FB1"
+[volume]
+x = [0.0, 500.0]
+y = [0.0, 400.0]
+z = [0.0, 300.0]
+reference = [0.0, 0.0, 0.0]
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "m.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_examples_round_trip_through_to_toml(path: Path, tmp_path: Path) -> None:
+    m = Machine.from_toml(path)
+    out = tmp_path / "again.toml"
+    m.to_toml(out)
+    m2 = Machine.from_toml(out)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(m.volume.lower_mm, m.volume.upper_mm, (100, 3))
+    temps = {"T_x": 23.0, "T_y": 21.0, "T_z": 19.5, "T_wp": 22.0}
+    np.testing.assert_array_equal(
+        m.volumetric_error(pts, (10, 20, -150), temps),
+        m2.volumetric_error(pts, (10, 20, -150), temps),
+    )
+    assert m.identity_sha256() == m2.identity_sha256()
+
+
+def test_minimal_machine_has_zero_error(tmp_path: Path) -> None:
+    m = Machine.from_toml(write(tmp_path, MINIMAL))
+    err = m.volumetric_error(np.array([[100.0, 200.0, 300.0]]), (0, 0, -100))
+    np.testing.assert_array_equal(err, 0.0)
+
+
+def test_iso_aliases_and_our_names_are_the_same_table(tmp_path: Path) -> None:
+    ours = MINIMAL + "[errors.ey_x]\nposition = [0.0, 500.0]\nvalue = [0.0, 10.0]\n"
+    iso = MINIMAL + "[errors.EBX]\nposition = [0.0, 500.0]\nvalue = [0.0, 10.0]\n"
+    a = Machine.from_toml(write(tmp_path, ours, "a.toml"))
+    b = Machine.from_toml(write(tmp_path, iso, "b.toml"))
+    pts = np.array([[250.0, 100.0, 300.0]])
+    np.testing.assert_array_equal(a.volumetric_error(pts), b.volumetric_error(pts))
+    # FB1: ΔX = … + z·Ey(x): 300 mm × 5 µrad = 1.5 µm
+    assert a.volumetric_error(pts)[0, 0] == pytest.approx(1.5)
+
+
+def test_polynomial_and_curve_inputs(tmp_path: Path) -> None:
+    poly = MINIMAL + "[errors.dx_x]\npolynomial = [1.0, 0.01, -2e-5]\n"
+    m = Machine.from_toml(write(tmp_path, poly))
+    assert m.volumetric_error(np.array([[200.0, 0, 0]]))[0, 0] == pytest.approx(1 + 2 - 0.8)
+    # curve input: a least-squares cubic through a few samples of a known cubic is that cubic
+    q = np.array([0.0, 100, 200, 300, 400, 500])
+    v = 0.5 + 0.02 * q - 1e-4 * q**2 + 1e-7 * q**3
+    curve = (
+        MINIMAL
+        + f"[errors.dy_y]\ncurve = {{ position = {q.tolist()}, value = {v.tolist()}, order = 3 }}\n"
+    )
+    m = Machine.from_toml(write(tmp_path, curve, "c.toml"))
+    y = 150.0
+    assert m.volumetric_error(np.array([[0.0, y, 0]]))[0, 1] == pytest.approx(
+        0.5 + 0.02 * y - 1e-4 * y**2 + 1e-7 * y**3, abs=1e-9
+    )
+
+
+def test_csv_file_table(tmp_path: Path) -> None:
+    (tmp_path / "dz_z.csv").write_text("position,value,random\n0,0,0.2\n150,2.0,0.2\n300,1.0,0.4\n")
+    m = Machine.from_toml(write(tmp_path, MINIMAL + '[errors.dz_z]\nfile = "dz_z.csv"\n'))
+    assert m.volumetric_error(np.array([[0, 0, 150.0]]))[0, 2] == pytest.approx(2.0)
+    assert m.random_error(np.array([[0, 0, 300.0]]))[0, 2] == pytest.approx(0.4)
+
+
+def test_spline_interpolates_the_table_exactly_at_nodes(tmp_path: Path) -> None:
+    q = [0.0, 100.0, 250.0, 400.0, 500.0]
+    v = [0.0, 3.0, -1.0, 2.0, 0.5]
+    m = Machine.from_toml(
+        write(tmp_path, MINIMAL + f"[errors.dx_x]\nposition = {q}\nvalue = {v}\n")
+    )
+    got = m.volumetric_error(np.column_stack([q, np.zeros(5), np.zeros(5)]))[:, 0]
+    np.testing.assert_allclose(got, v, atol=1e-12)
+
+
+def test_custom_chain(tmp_path: Path) -> None:
+    text = (
+        MINIMAL.replace('model = "FB1"', 'model = "custom"')
+        + '[chain]\ntool = ["x", "z"]\nworkpiece = ["y"]\n'
+    )
+    text += "[errors.ez_y]\nposition = [0.0, 400.0]\nvalue = [0.0, 40.0]\n"
+    custom = Machine.from_toml(write(tmp_path, text))
+    fb1 = Machine.from_toml(
+        write(
+            tmp_path,
+            text.replace('model = "custom"', 'model = "FB1"').split("[chain]")[0]
+            + "[errors.ez_y]\nposition = [0.0, 400.0]\nvalue = [0.0, 40.0]\n",
+            "fb1.toml",
+        )
+    )
+    pts = np.array([[300.0, 200.0, 100.0]])
+    np.testing.assert_allclose(custom.volumetric_error(pts), fb1.volumetric_error(pts))
+
+
+BAD = [
+    ("format = 'cmm-machine/9'\n" + MINIMAL.split("\n", 2)[2], "format", "unsupported format"),
+    (MINIMAL.replace('model = "FB1"', 'model = "XX9"'), "model", "unknown model"),
+    (MINIMAL.replace("x = [0.0, 500.0]", "x = [500.0, 0.0]"), "volume.x", "greater than lower"),
+    (MINIMAL.replace('name = "tiny"', ""), "name", "name is required"),
+    (
+        MINIMAL + "[errors.dq_x]\nposition = [0.0]\nvalue = [1.0]\n",
+        "errors.dq_x",
+        "unknown error component",
+    ),
+    (
+        MINIMAL + "[errors.dx_x]\nposition = [0.0, 1.0]\nvalue = [1.0]\n",
+        "errors.dx_x",
+        "position has 2 values",
+    ),
+    (
+        MINIMAL + "[errors.dx_x]\nposition = [0.0, 0.0]\nvalue = [1.0, 2.0]\n",
+        "errors.dx_x.position",
+        "increase strictly",
+    ),
+    (MINIMAL + "[errors.dx_x]\npostion = [0.0]\nvalue = [1.0]\n", "errors.dx_x", "unknown key"),
+    (
+        MINIMAL + "[errors.dx_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 'a']\n",
+        "errors.dx_x.value[1]",
+        "expected a number",
+    ),
+    (
+        MINIMAL
+        + "[errors.dx_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 2.0]\ncriterion = 'least_squares'\n",
+        "errors.dx_x.criterion",
+        "straightness tables only",
+    ),
+    (
+        MINIMAL + "[errors.dy_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 2.0]\ncriterion = 'best'\n",
+        "errors.dy_x.criterion",
+        "unknown criterion",
+    ),
+    (
+        MINIMAL + "[errors.dx_x]\npolynomial = [" + ", ".join(["1.0"] * 12) + "]\n",
+        "errors.dx_x.polynomial",
+        "order",
+    ),
+    (MINIMAL + "[errors.dx_x]\nfile = 'missing.csv'\n", "errors.dx_x.file", "cannot read"),
+    (
+        MINIMAL
+        + "[errors.EXX]\nposition = [0.0]\nvalue = [1.0]\n[errors.dx_x]\nposition = [0.0]\nvalue = [1.0]\n",
+        "errors.dx_x",
+        "given twice",
+    ),
+    (
+        MINIMAL + "[thermal]\nexpansion = { x = 10.0, w = 3.0 }\n",
+        "thermal.expansion",
+        "unknown key",
+    ),
+    (MINIMAL + "[squareness]\nalpha = nan\n", "squareness.alpha", "finite"),
+    (MINIMAL + "[volume2]\nx = 1\n", "volume2", "unknown table"),
+    (MINIMAL + "[[effects]]\ncause = 'gremlins'\n", "effects[0]", "unknown effect cause"),
+    ("name = 'x'\nmodel = 'MB1'\n[volume\n", "", "invalid TOML"),
+]
+
+
+@pytest.mark.parametrize(("text", "where", "problem"), BAD, ids=[b[2] for b in BAD])
+def test_bad_files_give_one_clear_error(
+    tmp_path: Path, text: str, where: str, problem: str
+) -> None:
+    path = write(tmp_path, text)
+    with pytest.raises(MachineFileError) as info:
+        Machine.from_toml(path)
+    msg = str(info.value)
+    assert str(path) in msg
+    assert where in msg
+    assert problem in msg
+
+
+def test_pose_error_reproduces_volumetric_error_for_any_stylus() -> None:
+    m = Machine.from_toml(EXAMPLES[0])
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(m.volume.lower_mm, m.volume.upper_mm, (50, 3))
+    temps = {"T_x": 25.0, "T_wp": 18.0}
+    pose = m.pose_error(pts, temps)
+    for _ in range(3):
+        p = rng.uniform(-200, 200, 3)
+        np.testing.assert_allclose(pose.error_um(p), m.volumetric_error(pts, p, temps), atol=1e-9)
