@@ -160,3 +160,32 @@ def test_connect_failure_is_a_connection_error() -> None:
             client.close()
 
     asyncio.run(scenario())
+
+
+def test_answer_published_later_through_the_pull_hook() -> None:
+    """A daemon that computes outside on_commit publishes through answer_block()."""
+    queued: list[ReadingBlock] = []
+    published: list[AnswerBlock] = []
+
+    async def main() -> None:
+        device = build_sim_device(
+            1,
+            on_commit=lambda r: queued.append(r),  # returns None: answer comes later
+            answer_block=lambda: published[-1] if published else None,
+        )
+        server = ModbusTcpServer(device, address=("127.0.0.1", 0))
+        await server.serve_forever(background=True)
+        try:
+            port = server.transport.sockets[0].getsockname()[1]  # type: ignore[union-attr]
+            async with ControllerClient("127.0.0.1", port) as client:
+                await client.write_reading(ReadingBlock.from_mm(3, (1.0, 1.0, 1.0)))
+                first, _ = await client.read_output()
+                assert (first.seq, first.status) == (0, Status.NOT_READY)  # not answered yet
+                assert [r.seq for r in queued] == [3]
+                published.append(AnswerBlock(3, Status.OUTSIDE_VOLUME, queued[0].position_nm))
+                answer = await client.wait_answer(3)
+                assert answer.status is Status.OUTSIDE_VOLUME
+        finally:
+            await server.shutdown()
+
+    asyncio.run(main())
