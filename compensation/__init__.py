@@ -1,1 +1,80 @@
-"""compensation."""
+"""compensation: the parametric volumetric error model of a CMM and its correction grid.
+
+Fixed entry points (FORMATS.md §5)::
+
+    from compensation import Machine, CorrectionGrid
+    machine = Machine.from_toml("machine.toml")
+    err_um = machine.volumetric_error(points_mm, stylus_mm=(0, 0, 0), temps_C=None)
+
+Units: positions mm, linear errors µm, angles µrad, temperatures °C; error = true − indicated.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from .components import ALL_COMPONENTS, ISO_ALIASES, TABLE_COMPONENTS, Component, parse_component
+from .effects_base import Effect, EvalContext, effect_from_table, known_causes, register_effect
+from .errors import CmmCompError, MachineFileError, MeasurementFileError
+from .kinematics import MODEL_CHAINS, Chain, exact_pose, first_order_error, first_order_jacobian
+from .machine import Machine, PoseError, Volume
+from .maps import (
+    LineReport,
+    VolumetricMap,
+    diagonal_endpoints,
+    diagonals_um,
+    length_error_um,
+    line_report,
+    volumetric_map,
+)
+from .straightness import CRITERIA, apply_criterion, reference_line, straightness_um
+from .tables import ErrorTable
+
+if TYPE_CHECKING:
+    from .grid import CorrectionGrid
+
+__all__ = [
+    "ALL_COMPONENTS",
+    "CRITERIA",
+    "ISO_ALIASES",
+    "MODEL_CHAINS",
+    "TABLE_COMPONENTS",
+    "Chain",
+    "CmmCompError",
+    "Component",
+    "CorrectionGrid",
+    "Effect",
+    "ErrorTable",
+    "EvalContext",
+    "LineReport",
+    "Machine",
+    "MachineFileError",
+    "MeasurementFileError",
+    "PoseError",
+    "Volume",
+    "VolumetricMap",
+    "apply_criterion",
+    "diagonal_endpoints",
+    "diagonals_um",
+    "effect_from_table",
+    "exact_pose",
+    "first_order_error",
+    "first_order_jacobian",
+    "known_causes",
+    "length_error_um",
+    "line_report",
+    "parse_component",
+    "reference_line",
+    "register_effect",
+    "straightness_um",
+    "volumetric_map",
+]
+
+
+def __getattr__(name: str) -> Any:
+    # The grid pulls in numba; import it only when asked for.
+    if name == "CorrectionGrid":
+        from .grid import CorrectionGrid
+
+        return CorrectionGrid
+    raise AttributeError(f"module 'compensation' has no attribute {name!r}")
