@@ -124,12 +124,18 @@ def npl_bridge() -> dict:
     }
 
 
-def main() -> None:
-    HERE.mkdir(parents=True, exist_ok=True)
+def main(out_dir: Path = HERE) -> list[Path]:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
     for data in (gec_mh2(), npl_bridge()):
-        (HERE / f"{data['name']}.toml").write_text(tomli_w.dumps(data), encoding="utf-8")
-        print(f"wrote {HERE / (data['name'] + '.toml')}")
+        path = out_dir / f"{data['name']}.toml"
+        path.write_text(tomli_w.dumps(data), encoding="utf-8")
+        written.append(path)
+        print(f"wrote {path}")
+    return written
 
 
 if __name__ == "__main__":
-    main()
+    import sys
+
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else HERE)
