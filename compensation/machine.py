@@ -160,6 +160,9 @@ class Machine:
                 out[f"T_{axis}"] = ref
         if self.thermal.workpiece_expansion:
             out["T_wp"] = ref
+        for table in self.tables.values():
+            if table.reversal is not None:
+                out[f"dir_{table.component.axis}"] = 0.0
         for effect in self.effects:
             out.update(effect.signals())
         return out
@@ -174,6 +177,18 @@ class Machine:
             out[:, AXIS_INDEX[c.axis], c.slot] += table.evaluate(q[:, AXIS_INDEX[c.axis]])
         return out
 
+    def _errors_with_reversal(self, q: FloatArray, signals: dict[str, FloatArray]) -> FloatArray:
+        errors = self.parametric_errors(q)
+        for table in self.tables.values():
+            if table.reversal is not None:
+                k = AXIS_INDEX[table.component.axis]
+                direction = signals.get(f"dir_{table.component.axis}")
+                if direction is not None:
+                    errors[:, k, k] += np.clip(direction, -1.0, 1.0) * table.evaluate_reversal(
+                        q[:, k]
+                    )
+        return errors
+
     def _context(
         self,
         points_mm: ArrayLike,
@@ -187,7 +202,7 @@ class Machine:
             q_mm=q,
             u_mm=q - self.volume.reference_mm,
             signals=signals,
-            errors=self.parametric_errors(q),
+            errors=self._errors_with_reversal(q, signals),
             squareness_urad=np.broadcast_to(self.squareness_urad, (n, 3)).copy(),
             direct_um=np.zeros((n, 3)),
             reference_C=self.thermal.reference_C,

@@ -43,6 +43,7 @@ _TABLE_KEYS = {
     "offset",
     "criterion",
     "file",
+    "reversal",
     "polynomial",
     "curve",
     "random_band",
@@ -308,7 +309,7 @@ class _Parser:
         sources = [k for k in ("position", "file", "polynomial", "curve") if k in tbl]
         if len(sources) != 1:
             raise self.fail(where, "give exactly one of position/value, file, polynomial or curve")
-        position = value = poly = random = None
+        position = value = poly = random = reversal = None
         if "position" in tbl or "file" in tbl:
             if "file" in tbl:
                 position, value, random = self.read_csv(tbl["file"], where)
@@ -329,6 +330,18 @@ class _Parser:
                 )
             if random is not None and len(random) != len(position):
                 raise self.fail(where, f"random has {len(random)} values, position {len(position)}")
+            if "reversal" in tbl:
+                if not comp.is_positional:
+                    raise self.fail(
+                        f"{where}.reversal",
+                        "a reversal applies to positional tables (dx_x, dy_y, dz_z) only",
+                    )
+                reversal = self.vector(tbl["reversal"], f"{where}.reversal")
+                if len(reversal) != len(position):
+                    raise self.fail(
+                        where, f"reversal has {len(reversal)} values, position {len(position)}"
+                    )
+                norm["reversal"] = reversal.tolist()
             if np.any(np.diff(position) <= 0):
                 i = int(np.argmax(np.diff(position) <= 0)) + 1
                 raise self.fail(
@@ -402,6 +415,7 @@ class _Parser:
             random_band=band,
             offset_mm=offset,
             criterion=criterion,
+            reversal=reversal,
             source=dict(norm),
         )
         return table, norm

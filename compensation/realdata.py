@@ -391,9 +391,9 @@ def error_table_from_run(run: Iso230Run, axis: str = "x") -> tuple[str, dict[str
     """Positional error table (FORMATS.md §1) of the run's axis: ``("dx_x", table)`` for x.
 
     ``value`` = x̄_i (mean bidirectional deviation, µm; error = true − indicated, so the
-    correction to add), ``random`` = the 2σ band max(2s_i↑, 2s_i↓) (µm), plus optional keys
-    ``reversal`` = B_i/2 (error approaching in + is ``value + reversal``, in − ``value −
-    reversal``), ``forward`` = x̄_i↑ and ``backward`` = x̄_i↓ (µm).
+    correction to add), ``random`` = the 2σ band max(2s_i↑, 2s_i↓) (µm), and ``reversal`` =
+    B_i/2 (µm): the error after an approach in + is ``value + reversal`` (= x̄_i↑), in −
+    ``value − reversal`` (= x̄_i↓); the machine model applies it with the ``dir_<axis>`` signal.
     """
     if axis not in AXES:
         raise ValueError(f"unknown axis {axis!r}: allowed are {', '.join(AXES)}")
@@ -403,8 +403,6 @@ def error_table_from_run(run: Iso230Run, axis: str = "x") -> tuple[str, dict[str
         "value": r.mean_bidir_um.tolist(),
         "random": (2.0 * np.maximum(r.s_fwd_um, r.s_bwd_um)).tolist(),
         "reversal": (0.5 * r.reversal_um).tolist(),
-        "forward": r.mean_fwd_um.tolist(),
-        "backward": r.mean_bwd_um.tolist(),
     }
     return f"d{axis}_{axis}", table
 

@@ -34,6 +34,7 @@ class ErrorTable:
     random_2sigma: FloatArray | None = None  # at position_mm, same unit
     random_band: float | None = None  # uniform 2σ band over the span
     offset_mm: FloatArray | None = None  # where the line was measured (x, y, z)
+    reversal: FloatArray | None = None  # positional tables: half reversal B_i/2 at position_mm
     criterion: str | None = None
     source: dict[str, object] = field(default_factory=dict)
     _spline: CubicSpline | None = field(default=None, init=False, repr=False)
@@ -56,6 +57,7 @@ class ErrorTable:
             random_2sigma=self.random_2sigma,
             random_band=self.random_band,
             offset_mm=self.offset_mm,
+            reversal=self.reversal,
             criterion=self.criterion,
             source=dict(self.source),
         )
@@ -99,6 +101,14 @@ class ErrorTable:
         if self.random_2sigma is None or self.position_mm is None:
             return np.zeros(q.shape)
         return np.interp(q, self.position_mm, self.random_2sigma)
+
+    def evaluate_reversal(self, q_mm: FloatArray) -> FloatArray:
+        """Half reversal (µm) at ``q_mm``: the error after an approach in + is value + this,
+        in − value − this (linear interpolation, end values held)."""
+        q = np.asarray(q_mm, dtype=float)
+        if self.reversal is None or self.position_mm is None:
+            return np.zeros(q.shape)
+        return np.interp(q, self.position_mm, self.reversal)
 
     @property
     def has_random(self) -> bool:

@@ -189,7 +189,7 @@ def test_error_table_and_measurements(tmp_path: Path) -> None:
     assert table["position"] == [0.0, 10.0]
     assert table["value"] == pytest.approx([0.5, 1.5])  # x̄_i = (x̄↑ + x̄↓)/2
     assert table["reversal"] == pytest.approx([1.5, 1.5])  # B_i / 2
-    assert table["forward"] == pytest.approx(np.add(table["value"], table["reversal"]))
+    assert run.evaluate().mean_fwd_um == pytest.approx(np.add(table["value"], table["reversal"]))
     assert table["random"] == pytest.approx([2 * np.sqrt(2.0), 2 * np.sqrt(2.0)])
     rows = measurement_rows(run, axis="y")
     assert len(rows) == 8 and "t" not in rows[0]

@@ -201,3 +201,29 @@ def test_pose_error_reproduces_volumetric_error_for_any_stylus() -> None:
     for _ in range(3):
         p = rng.uniform(-200, 200, 3)
         np.testing.assert_allclose(pose.error_um(p), m.volumetric_error(pts, p, temps), atol=1e-9)
+
+
+def test_reversal_table_follows_the_travel_direction(tmp_path: Path) -> None:
+    text = (
+        MINIMAL
+        + "[errors.dx_x]\nposition = [0.0, 500.0]\nvalue = [1.0, 3.0]\nreversal = [2.0, 4.0]\n"
+    )
+    m = Machine.from_toml(write(tmp_path, text))
+    assert m.runtime_signals()["dir_x"] == 0.0
+    pts = np.array([[250.0, 0, 0]] * 3)
+    err = m.volumetric_error(pts, inputs={"dir_x": np.array([1.0, -1.0, 0.0])})[:, 0]
+    np.testing.assert_allclose(
+        err, [2.0 + 3.0, 2.0 - 3.0, 2.0]
+    )  # value ± half reversal; unknown → mean
+    with pytest.raises(MachineFileError, match="positional tables"):
+        Machine.from_toml(write(tmp_path, text.replace("dx_x", "dy_x"), "bad.toml"))
+
+
+def test_straightness_criterion_removes_the_reference_line(tmp_path: Path) -> None:
+    q = [0.0, 100.0, 200.0, 300.0, 400.0, 500.0]
+    v = [0.0, 1.0, 3.0, 2.0, 4.0, 5.0]  # a tilted line with a bump
+    text = MINIMAL + f"[errors.dy_x]\nposition = {q}\nvalue = {v}\ncriterion = 'least_squares'\n"
+    m = Machine.from_toml(write(tmp_path, text))
+    resid = m.tables["dy_x"].value
+    slope, icpt = np.polyfit(q, v, 1)
+    np.testing.assert_allclose(resid, np.array(v) - (slope * np.array(q) + icpt), atol=1e-12)
