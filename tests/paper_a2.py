@@ -18,7 +18,7 @@ OCR clean-up only (no metrology changed): ``d*x(z)`` → ``δ*x(z)``; ``δ*z(y) 
 its ``↔`` printed as ``+``; ``δxy(y)`` (FH1) → ``δ*y(y)``; ``∫32`` (CY1) → ``β2*``; ``βi``, ``β_{i*``
 → ``β1``. FH1's ``β2*`` is illegible in the source (``\\int_{0}^{2} x =``) and is recorded as
 ``None``. Where the printed rule disagrees with the kinematic chain the disagreement is listed in
-``SLIPS``/``SQUARENESS_SLIPS`` below and explained in docs/seed-equations-a2.md; the expressions in
+``SLIPS``/``SQUARENESS_AGREE`` below and explained in docs/seed-equations-a2.md; the expressions in
 ``PRINTED`` are the paper's, not ours.
 """
 
@@ -185,7 +185,19 @@ PRINTED: dict[str, dict[str, Rule]] = {
 #: (model, linear error) → the rule the kinematic chain gives where the printed one differs.
 #: Filled from the derivation (tests/test_offsets.py checks both directions: every rule not
 #: listed here agrees coefficient by coefficient, every rule listed disagrees as stated).
-SLIPS: dict[tuple[str, str], str] = {}
+SLIPS: dict[tuple[str, str], str] = {
+    # MB1's ΔX (A.1) has z·Ey(x), not y·Ey(x): the pitch of X acts on a Z offset
+    ("MB1", "dx_x"): "dx_x - (z - zo)*ey_x",
+    # MH1's X is the arm itself: nothing it carries sits at an offset, A.1 has no z·Ex(x) in ΔY
+    ("MH1", "dy_x"): "dy_x",
+    # FH1 = FB2's chain (the table is X): the table's yaw acts on a Y offset, as printed for FB2;
+    # the same term is missing from FH1's ΔX in A.1 (tests/paper_a1.py CORRECTIONS)
+    ("FH1", "dx_x"): "dx_x - (y - yo)*ez_x + (z - zo)*ey_x",
+}
 
-#: (model, squareness) → short description of the printed rule's disagreement with the chain.
-SQUARENESS_SLIPS: dict[tuple[str, str], str] = {}
+#: The printed squareness rules that agree with the chain (docs/seed-equations-a2.md, with the
+#: chord ``E(a)/(a − ao)`` read as the least-squares slope of E along its axis). Every other
+#: printed squareness rule disagrees with the derivation; the table in the doc lists how.
+SQUARENESS_AGREE: frozenset[tuple[str, str]] = frozenset(
+    {("MB1", "beta2"), ("MB2", "beta1"), ("MH1", "beta2"), ("MH2", "beta1")}
+)
