@@ -1,0 +1,208 @@
+"""Least-squares fitting of candidate terms, profiles over nonlinear parameters, grouped CV, F-tests.
+
+The residuals of all points and measured axes are stacked into one vector y (3N, or fewer when an
+axis was never measured); a model is a list of :class:`Term` (candidate + nonlinear parameter),
+its design the stacked columns of their designs, fitted jointly by linear least squares (columns
+scaled for conditioning). A nonlinear parameter (period, time constant, lobes) is profiled: every
+grid value is fitted (the accepted terms projected out by QR), and a continuous one is refined by
+a bounded scalar search between the neighbouring grid values.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import optimize, stats
+
+from .candidates import Candidate
+from .residuals import FloatArray, Residuals
+
+#: Designs of candidates scanning more grid values than this are not cached.
+_CACHE_LIMIT = 64
+
+
+@dataclass(frozen=True)
+class Term:
+    candidate: Candidate
+    theta: Any = None
+
+
+@dataclass
+class Problem:
+    """The stacked residual vector, which axes are measured, and the CV folds."""
+
+    res: Residuals
+    axes: tuple[int, ...]  # measured axes (residual not identically zero)
+    folds: list[FloatArray]  # index arrays of held-out points
+
+    @property
+    def y(self) -> FloatArray:
+        return self.res.residual_um[:, self.axes]
+
+    def design(self, term: Term, rows: Any = slice(None)) -> FloatArray:
+        """(rows·axes, p) stacked design of ``term``."""
+        cand = term.candidate
+        if len(cand.thetas) > _CACHE_LIMIT and cand.design_fn is not None:
+            x = cand.design_fn(self.res, term.theta)
+        else:
+            x = cand.design(self.res, term.theta)
+        x = x[rows][:, self.axes, :]
+        return x.reshape(-1, x.shape[2])
+
+    def stacked(self, terms: Sequence[Term], rows: Any = slice(None)) -> FloatArray:
+        n = len(self.y[rows]) * len(self.axes)
+        cols = [self.design(t, rows) for t in terms]
+        return np.hstack(cols) if cols else np.zeros((n, 0))
+
+
+def make_problem(res: Residuals, n_folds: int = 5, seed: int = 0) -> Problem:
+    """Folds by ``group`` (groups shuffled into ``n_folds`` folds), else by time blocks, else by
+    blocks of consecutive rows: held-out points are never neighbours of training points in the
+    same artefact position / time."""
+    r = res.residual_um
+    axes = tuple(k for k in range(3) if np.any(r[:, k] != 0.0))
+    data = res.data
+    n = data.n
+    if data.group is not None and len(np.unique(data.group)) >= 2:
+        labels = np.unique(data.group)
+        rng = np.random.default_rng(seed)
+        order = rng.permutation(len(labels))
+        k = min(n_folds, len(labels))
+        fold_of = {labels[i]: j % k for j, i in enumerate(order)}
+        which = np.array([fold_of[g] for g in data.group])
+    else:
+        key = data.t_s if data.t_s is not None else np.arange(n, dtype=float)
+        rank = np.argsort(np.argsort(key, kind="stable"), kind="stable")
+        which = rank * n_folds // max(n, 1)
+        k = n_folds
+    folds = [np.flatnonzero(which == j) for j in range(k)]
+    return Problem(res=res, axes=axes or (0,), folds=[f for f in folds if len(f)])
+
+
+def lstsq(x: FloatArray, y: FloatArray) -> tuple[FloatArray, float, int]:
+    """Least squares with column scaling: (coefficients, residual sum of squares, rank)."""
+    if x.shape[1] == 0:
+        return np.zeros(0), float(np.sum(y**2)), 0
+    scale = np.sqrt(np.sum(x**2, axis=0))
+    scale[scale == 0] = 1.0
+    beta, _, rank, _ = np.linalg.lstsq(x / scale, y, rcond=1e-10)
+    beta = beta / scale
+    rss = float(np.sum((y - x @ beta) ** 2))
+    return beta, rss, int(rank)
+
+
+def _rows_index(rows: Any) -> Any:
+    return slice(None) if rows is None else rows
+
+
+def fit(problem: Problem, terms: Sequence[Term], rows: Any = None) -> tuple[FloatArray, float, int]:
+    """Joint least-squares fit of ``terms`` on ``rows`` (all when None)."""
+    r = _rows_index(rows)
+    return lstsq(problem.stacked(terms, r), problem.y[r].reshape(-1))
+
+
+def _projector(x: FloatArray) -> FloatArray | None:
+    if x.shape[1] == 0:
+        return None
+    q, rdiag = np.linalg.qr(x)
+    keep = np.abs(np.diag(rdiag)) > 1e-10 * max(1.0, float(np.max(np.abs(np.diag(rdiag)))))
+    return q[:, keep]
+
+
+def _profile_rss(
+    problem: Problem, cand: Candidate, theta: Any, r: Any, q: FloatArray | None, y: FloatArray
+) -> tuple[float, int]:
+    xc = problem.design(Term(cand, theta), r)
+    if q is not None:
+        xc = xc - q @ (q.T @ xc)
+        y = y - q @ (q.T @ y)
+    _, rss, rank = lstsq(xc, y)
+    return rss, rank
+
+
+def best_theta(
+    problem: Problem, base: Sequence[Term], cand: Candidate, rows: Any = None
+) -> tuple[Any, float, int]:
+    """Profile ``cand``'s nonlinear parameter with ``base`` fitted jointly: (theta, rss, rank)."""
+    r = _rows_index(rows)
+    y = problem.y[r].reshape(-1)
+    q = _projector(problem.stacked(base, r))
+    scores = [_profile_rss(problem, cand, th, r, q, y) for th in cand.thetas]
+    i = int(np.argmin([s[0] for s in scores]))
+    theta, (rss, rank) = cand.thetas[i], scores[i]
+    if len(cand.thetas) > 1 and isinstance(theta, float):
+        lo = cand.thetas[max(i - 1, 0)]
+        hi = cand.thetas[min(i + 1, len(cand.thetas) - 1)]
+        lo, hi = min(lo, hi), max(lo, hi)
+        if hi > lo:
+            sol = optimize.minimize_scalar(
+                lambda th: _profile_rss(problem, cand, float(th), r, q, y)[0],
+                bounds=(lo, hi),
+                method="bounded",
+                options={"xatol": 1e-6 * (hi - lo)},
+            )
+            if sol.fun < rss:
+                theta = float(sol.x)
+                rss, rank = _profile_rss(problem, cand, theta, r, q, y)
+    return theta, rss, rank
+
+
+def f_test_p(rss0: float, rss1: float, extra: int, n: int, p_total: int) -> float:
+    """p-value of the nested-model F-test (``extra`` parameters added, ``p_total`` in the bigger
+    model, ``n`` observations)."""
+    dof = n - p_total
+    if extra <= 0 or dof <= 0 or rss1 <= 0:
+        return 1.0
+    f = ((rss0 - rss1) / extra) / (rss1 / dof)
+    return float(stats.f.sf(max(f, 0.0), extra, dof))
+
+
+def cv_predictions(problem: Problem, terms: Sequence[Term], rescan: bool = True) -> FloatArray:
+    """(N, 3) out-of-fold predictions: each fold predicted by the terms fitted on the others
+    (nonlinear parameters re-profiled on the training folds when ``rescan``)."""
+    res = problem.res
+    pred = np.zeros((res.n, 3))
+    if not terms:
+        return pred
+    all_rows = np.arange(res.n)
+    for test in problem.folds:
+        train = np.setdiff1d(all_rows, test)
+        fold_terms: list[Term] = []
+        for i, t in enumerate(terms):
+            if rescan and len(t.candidate.thetas) > 1:
+                others = [*fold_terms, *terms[i + 1 :]]
+                theta, _, _ = best_theta(problem, others, t.candidate, train)
+                fold_terms.append(Term(t.candidate, theta))
+            else:
+                fold_terms.append(t)
+        beta, _, _ = fit(problem, fold_terms, train)
+        x_test = problem.stacked(fold_terms, test)
+        p = (x_test @ beta).reshape(len(test), len(problem.axes))
+        pred[np.ix_(test, problem.axes)] = p
+    return pred
+
+
+def cv_mse(problem: Problem, terms: Sequence[Term], rescan: bool = True) -> float:
+    """Mean squared out-of-fold residual per measured component (µm²)."""
+    pred = cv_predictions(problem, terms, rescan)
+    r = problem.res.residual_um - pred
+    return float(np.mean(r[:, problem.axes] ** 2))
+
+
+def predictions(problem: Problem, terms: Sequence[Term], beta: FloatArray) -> FloatArray:
+    """(N, 3) fitted displacement of ``terms`` with coefficients ``beta`` at all points."""
+    out = np.zeros((problem.res.n, 3))
+    if terms:
+        out[:, problem.axes] = (problem.stacked(terms) @ beta).reshape(problem.res.n, -1)
+    return out
+
+
+def split_coefficients(terms: Sequence[Term], beta: FloatArray) -> list[list[float]]:
+    out, i = [], 0
+    for t in terms:
+        out.append([float(v) for v in beta[i : i + t.candidate.n_params]])
+        i += t.candidate.n_params
+    return out

@@ -1,0 +1,183 @@
+"""Residuals of a machine model against verification measurements, and their statistics.
+
+residual = observed error − predicted error (µm), per point and axis, where the observed error is
+``(ref − indicated)·1000`` and the prediction is :meth:`Machine.volumetric_error` at the point's
+stylus offset, temperatures, directions and probing direction. :class:`Residuals` also holds the
+first-order Jacobian of the chain at every point (the Abbe arms a parametric perturbation acts
+through), which the candidate causes use so that fit and forward model agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..kinematics import first_order_jacobian
+from ..machine import Machine
+from ..measurements import Measurements
+
+FloatArray = NDArray[np.float64]
+
+
+def rms3d(r_um: FloatArray) -> float:
+    """3-D RMS (µm): square root of the mean over points of the squared residual length."""
+    r = np.asarray(r_um, dtype=float)
+    return float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) if len(r) else float("nan")
+
+
+@dataclass
+class Residuals:
+    """Model residuals at N points with everything a candidate cause needs to fit them."""
+
+    machine: Machine
+    data: Measurements
+    stylus_mm: FloatArray  # (N, 3)
+    signals: dict[str, FloatArray]  # temperatures (filled with the reference) and inputs
+    predicted_um: FloatArray  # (N, 3)
+    residual_um: FloatArray  # (N, 3)
+    jacobian: FloatArray  # (N, 3 out, 3 axes, 6)
+    squareness_jacobian: FloatArray  # (N, 3 out, 3)
+
+    @property
+    def n(self) -> int:
+        return self.data.n
+
+    @property
+    def q_mm(self) -> FloatArray:
+        return self.data.indicated_mm
+
+    @property
+    def u_mm(self) -> FloatArray:
+        return self.data.indicated_mm - self.machine.volume.reference_mm
+
+    def has(self, *names: str) -> bool:
+        """Whether the measurements carry every signal in ``names`` (not just the default)."""
+        given = set(self.data.temps_C) | set(self.data.inputs())
+        return all(n in given for n in names)
+
+    def subset(self, index: Any) -> Residuals:
+        return Residuals(
+            machine=self.machine,
+            data=self.data.subset(index),
+            stylus_mm=self.stylus_mm[index],
+            signals={k: v[index] for k, v in self.signals.items()},
+            predicted_um=self.predicted_um[index],
+            residual_um=self.residual_um[index],
+            jacobian=self.jacobian[index],
+            squareness_jacobian=self.squareness_jacobian[index],
+        )
+
+
+def compute_residuals(machine: Machine, data: Measurements) -> Residuals:
+    """Residuals of ``machine`` against ``data`` (see module docstring)."""
+    stylus = data.stylus(machine.probe.offset_mm)
+    predicted = machine.volumetric_error(
+        data.indicated_mm, stylus, data.temps_C, inputs=data.inputs()
+    )
+    ref_c = machine.thermal.reference_C
+    signals: dict[str, FloatArray] = {
+        k: np.full(data.n, ref_c)
+        for k in ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
+    }
+    signals.update(data.temps_C)
+    signals.update(data.inputs())
+    jac, sq = first_order_jacobian(
+        machine.chain, data.indicated_mm - machine.volume.reference_mm, stylus
+    )
+    return Residuals(
+        machine=machine,
+        data=data,
+        stylus_mm=stylus,
+        signals=signals,
+        predicted_um=predicted,
+        residual_um=data.observed_error_um() - predicted,
+        jacobian=jac,
+        squareness_jacobian=sq,
+    )
+
+
+# ----------------------------------------------------------------------------- statistics
+def axis_statistics(r_um: FloatArray) -> dict[str, dict[str, float]]:
+    """Per axis: mean, standard deviation, RMS and max |r| (µm); plus the 3-D RMS."""
+    r = np.asarray(r_um, dtype=float)
+    out: dict[str, dict[str, float]] = {}
+    for k, a in enumerate("xyz"):
+        c = r[:, k]
+        out[a] = {
+            "mean_um": float(np.mean(c)),
+            "std_um": float(np.std(c, ddof=1)) if len(c) > 1 else 0.0,
+            "rms_um": float(np.sqrt(np.mean(c**2))),
+            "max_abs_um": float(np.max(np.abs(c))),
+        }
+    out["3d"] = {"rms_um": rms3d(r)}
+    return out
+
+
+def explanatory_variables(res: Residuals) -> dict[str, FloatArray]:
+    """What residuals are shown against: positions, time, temperatures, directions, azimuth."""
+    d = res.data
+    out: dict[str, FloatArray] = {
+        f"position {a} (mm)": d.indicated_mm[:, k] for k, a in enumerate("xyz")
+    }
+    if d.t_s is not None:
+        out["time (s)"] = d.t_s
+    for name, v in d.temps_C.items():
+        out[f"{name} (°C)"] = v
+    if "T_top" in d.temps_C and "T_bottom" in d.temps_C:
+        out["T_top − T_bottom (°C)"] = d.temps_C["T_top"] - d.temps_C["T_bottom"]
+    for name, v in d.directions.items():
+        out[name] = v
+    if d.normals is not None:
+        out["probing azimuth (deg)"] = np.degrees(np.arctan2(d.normals[:, 1], d.normals[:, 0]))
+    return out
+
+
+def binned_statistics(x: FloatArray, r_um: FloatArray, bins: int = 8) -> dict[str, list[float]]:
+    """Mean residual per axis in ``bins`` equal-count bins of ``x`` (±1 variables: 2 bins)."""
+    x = np.asarray(x, dtype=float)
+    levels = np.unique(x)
+    if len(levels) <= 2:
+        edges_idx = [x == v for v in levels]
+        centres = [float(v) for v in levels]
+    else:
+        qs = np.quantile(x, np.linspace(0, 1, bins + 1))
+        which = np.clip(np.searchsorted(qs, x, side="right") - 1, 0, bins - 1)
+        edges_idx = [which == b for b in range(bins)]
+        centres = [float(np.mean(x[m])) if m.any() else float("nan") for m in edges_idx]
+    out: dict[str, list[float]] = {"centre": centres, "count": [int(m.sum()) for m in edges_idx]}
+    for k, a in enumerate("xyz"):
+        out[f"mean_{a}_um"] = [
+            float(np.mean(r_um[m, k])) if m.any() else float("nan") for m in edges_idx
+        ]
+    return out
+
+
+def length_error_e0_um(
+    reference_mm: FloatArray, residual_um: FloatArray, group: NDArray[np.str_] | None
+) -> float:
+    """ISO 10360-2-style E0 estimate (µm): max |length error| over point pairs of one artefact.
+
+    For points i, j of the same group (artefact position), the length error of the corrected
+    coordinates is ``(r_j − r_i)·(p_j − p_i)/|p_j − p_i|`` with r the residual (true − corrected)
+    and p the reference positions; pairs closer than 1 mm are skipped. Without groups, blocks of
+    30 consecutive points stand in for artefact positions.
+    """
+    n = len(reference_mm)
+    labels = group if group is not None else np.asarray([str(i // 30) for i in range(n)])
+    worst = 0.0
+    for g in np.unique(labels):
+        idx = np.flatnonzero(labels == g)
+        p = reference_mm[idx]
+        r = residual_um[idx]
+        dp = p[None, :, :] - p[:, None, :]
+        length = np.linalg.norm(dp, axis=2)
+        mask = length > 1.0
+        if not mask.any():
+            continue
+        dr = r[None, :, :] - r[:, None, :]
+        err = np.einsum("ijk,ijk->ij", dr, dp)[mask] / length[mask]
+        worst = max(worst, float(np.max(np.abs(err))))
+    return worst

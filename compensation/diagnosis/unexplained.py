@@ -1,0 +1,104 @@
+"""Structure no known cause explains: a generic smooth model of what remains.
+
+Per measured axis, the remaining residual is fitted with Legendre products of total degree ≤ 3
+in the normalised position, Legendre polynomials (1–4) of time, linear terms in every temperature
+given and the travel directions. If that model passes the same F-test (at ``alpha``, Bonferroni
+over its blocks) and CV-gain rule as a cause, the residual has structure the causes do not
+explain: reported as ``unexplained`` with the block (position / time / temperature / direction)
+that carries most of it, never as an effect of the model.
+"""
+
+from __future__ import annotations
+
+from itertools import product
+from typing import Any
+
+import numpy as np
+from numpy.polynomial import legendre
+
+from .candidates import Candidate
+from .fitting import Problem, Term, cv_mse, f_test_p, fit
+from .residuals import FloatArray, Residuals
+
+
+def _leg(s: FloatArray, k: int) -> FloatArray:
+    c = np.zeros(k + 1)
+    c[k] = 1.0
+    return legendre.legval(s, c)
+
+
+def _norm(v: FloatArray) -> FloatArray:
+    lo, hi = float(np.min(v)), float(np.max(v))
+    return np.zeros_like(v) if hi <= lo else 2 * (v - lo) / (hi - lo) - 1
+
+
+def generic_blocks(res: Residuals) -> dict[str, FloatArray]:
+    """Scalar basis functions (N, k) per block name."""
+    s = [_norm(res.q_mm[:, k]) for k in range(3)]
+    moved = [float(np.ptp(res.q_mm[:, k])) > 1e-6 for k in range(3)]
+    pos = []
+    for i, j, k in product(range(4), repeat=3):
+        if (
+            0 < i + j + k <= 3
+            and (i == 0 or moved[0])
+            and (j == 0 or moved[1])
+            and (k == 0 or moved[2])
+        ):
+            pos.append(_leg(s[0], i) * _leg(s[1], j) * _leg(s[2], k))
+    blocks: dict[str, FloatArray] = {"position": np.column_stack([np.ones(res.n), *pos])}
+    d = res.data
+    if d.t_s is not None and np.ptp(d.t_s) > 0:
+        ts = _norm(d.t_s)
+        blocks["time"] = np.column_stack([_leg(ts, k) for k in range(1, 5)])
+    temps = [v - np.mean(v) for v in d.temps_C.values() if np.ptp(v) > 0]
+    if temps:
+        blocks["temperature"] = np.column_stack(temps)
+    dirs = [v for v in d.directions.values() if np.ptp(v) > 0]
+    if dirs:
+        blocks["direction"] = np.column_stack(dirs)
+    return blocks
+
+
+def _block_candidate(name: str, basis: FloatArray) -> Candidate:
+    k = basis.shape[1]
+
+    def design(_res: Residuals, _theta: Any) -> FloatArray:
+        x = np.zeros((basis.shape[0], 3, 3 * k))
+        for a in range(3):
+            x[:, a, a * k : (a + 1) * k] = basis
+        return x
+
+    return Candidate("unexplained", {"block": name}, 3 * k, lambda _a, _t: None, design_fn=design)  # type: ignore[arg-type,return-value]
+
+
+def unexplained_candidate(
+    problem: Problem, accepted: list[Term], alpha: float, min_cv_gain: float, cv_current: float
+) -> dict[str, Any] | None:
+    """The ``unexplained`` entry (FORMATS.md §4) when a generic model still pays, else None."""
+    blocks = generic_blocks(problem.res)
+    terms = [Term(_block_candidate(n, b)) for n, b in blocks.items()]
+    _, rss0, rank0 = fit(problem, accepted)
+    _, rss1, rank1 = fit(problem, [*accepted, *terms])
+    p = f_test_p(rss0, rss1, rank1 - rank0, problem.y.size, rank1)
+    if p * len(blocks) >= alpha:
+        return None
+    cv1 = cv_mse(problem, [*accepted, *terms], rescan=False)
+    gain = (cv_current - cv1) / cv_current if cv_current > 0 else 0.0
+    if gain < min_cv_gain:
+        return None
+    shares = {}
+    for i, t in enumerate(terms):
+        _, rss_wo, _ = fit(problem, [*accepted, *terms[:i], *terms[i + 1 :]])
+        shares[t.candidate.keys["block"]] = max(rss_wo - rss1, 0.0)
+    total = float(np.sum(problem.y**2))
+    main = max(shares, key=lambda k: shares[k])
+    return {
+        "cause": "unexplained",
+        "parameters": {
+            "varies_mostly_with": main,
+            "block_sum_of_squares_um2": shares,
+            "cv_gain": gain,
+            "p_value_adjusted": min(1.0, p * len(blocks)),
+        },
+        "explained_fraction": (rss0 - rss1) / total if total else 0.0,
+    }
