@@ -1,0 +1,114 @@
+"""The diagnosis report: residual plots (PNG, Agg backend) and one HTML page linking them.
+
+Plots: residual per axis against each position, time, temperature, the temperature difference,
+travel directions and probing azimuth, before (model as described) and after (extended model,
+out-of-fold predictions); residual statistics per axis; the effects found and the candidates'
+test table of the first round.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .residuals import axis_statistics, binned_statistics, explanatory_variables
+from .selection import Diagnosis
+
+
+def _plot_against(
+    path: Path, name: str, x: np.ndarray, before: np.ndarray, after: np.ndarray
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharex=True)
+    for k, ax in enumerate(axes):
+        ax.plot(x, before[:, k], ".", ms=3, alpha=0.5, label="before")
+        ax.plot(x, after[:, k], ".", ms=3, alpha=0.5, label="after (held out)")
+        stats = binned_statistics(x, before)
+        ax.plot(stats["centre"], stats[f"mean_{'xyz'[k]}_um"], "k-", lw=1.5, label="binned mean")
+        ax.set_title(f"residual {'xyz'[k]}")
+        ax.set_xlabel(name)
+        ax.set_ylabel("µm")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _slug(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name.split(" (")[0]).strip("_")
+
+
+def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagnosis") -> Path:
+    """Write PNGs, ``diagnosis.json`` and ``index.html`` into ``out_dir``; returns the HTML path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    res = diagnosis.residuals
+    before = res.residual_um
+    after = before - diagnosis.heldout_pred_um
+    images: list[tuple[str, str]] = []
+    binned: dict[str, Any] = {}
+    for name, x in explanatory_variables(res).items():
+        if np.ptp(x) == 0:
+            continue
+        fname = f"residual_vs_{_slug(name)}.png"
+        _plot_against(out / fname, name, x, before, after)
+        images.append((name, fname))
+        binned[name] = binned_statistics(x, before)
+    stats = {"before": axis_statistics(before), "after_heldout": axis_statistics(after)}
+    payload = {**diagnosis.to_json(), "statistics": stats, "binned_before": binned}
+    (out / "diagnosis.json").write_text(json.dumps(payload, indent=2, default=float))
+    rows = "".join(
+        f"<tr><td>{html.escape(str(e.get('cause')))}</td><td>"
+        f"{html.escape(json.dumps({k: v for k, v in e.items() if k not in ('cause', 'parameters', 'explained_fraction', 'label')}))}"
+        f"</td><td>{html.escape(json.dumps(e.get('parameters', {}), default=float))}</td>"
+        f"<td>{e.get('explained_fraction', 0):.3f}</td></tr>"
+        for e in diagnosis.entries
+    )
+    stat_rows = "".join(
+        f"<tr><td>{a}</td>"
+        + "".join(
+            f"<td>{stats[w][a].get(m, float('nan')):.3f}</td>"
+            for w in ("before", "after_heldout")
+            for m in ("mean_um", "std_um", "rms_um")
+        )
+        + "</tr>"
+        for a in ("x", "y", "z")
+    )
+    cand_rows = ""
+    if diagnosis.rounds:
+        for r in diagnosis.rounds[0][:12]:
+            cand_rows += (
+                f"<tr><td>{html.escape(r['label'])}</td><td>{r['p_adj']:.3g}</td>"
+                f"<td>{r.get('cv_gain', float('nan')):.3f}</td></tr>"
+            )
+    s = diagnosis.summary
+    figs = "".join(
+        f'<h3>{html.escape(n)}</h3><a href="{f}"><img src="{f}" width="900"></a>' for n, f in images
+    )
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;max-width:960px;margin:auto}}td,th{{padding:2px 8px;border-bottom:1px solid #ddd}}</style>
+</head><body><h1>{html.escape(title)}</h1>
+<p>Verdict: <b>{diagnosis.verdict}</b>. Points: {s["n_points"]}, measured axes: {", ".join(s["measured_axes"])},
+CV folds: {s["folds"]}.</p>
+<table><tr><th></th><th>before</th><th>after</th></tr>
+<tr><td>residual RMS 3-D (µm)</td><td>{s["residual_rms_um"]["before"]:.3f}</td><td>{s["residual_rms_um"]["after"]:.3f}</td></tr>
+<tr><td>held-out RMS 3-D (µm)</td><td>{s["heldout_rms_um"]["before"]:.3f}</td><td>{s["heldout_rms_um"]["after"]:.3f}</td></tr>
+<tr><td>E0 estimate (µm)</td><td>{s["e0_um"]["before"]:.3f}</td><td>{s["e0_um"]["after"]:.3f}</td></tr></table>
+<h2>Effects found</h2><table><tr><th>cause</th><th>keys</th><th>parameters</th><th>explained</th></tr>{rows}</table>
+<h2>Residual statistics per axis (µm)</h2><table><tr><th>axis</th><th>mean</th><th>std</th><th>rms</th>
+<th>mean (after)</th><th>std (after)</th><th>rms (after)</th></tr>{stat_rows}</table>
+<h2>First round: best candidates</h2><table><tr><th>candidate</th><th>p (adjusted)</th><th>CV gain</th></tr>{cand_rows}</table>
+<h2>Residuals against position, time, temperature, direction</h2>{figs}
+<p><a href="diagnosis.json">diagnosis.json</a></p></body></html>"""
+    path = out / "index.html"
+    path.write_text(page, encoding="utf-8")
+    return path

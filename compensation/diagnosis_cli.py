@@ -1,0 +1,121 @@
+"""``cmm-comp diagnose`` and ``cmm-comp extend`` (FORMATS.md §4).
+
+Register with :func:`add_parsers` (each subparser sets ``handler``). Bad input files give one
+message naming the file, line and column on stderr, write nothing and return exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from .errors import CmmCompError
+
+
+def _load(args: argparse.Namespace) -> tuple[Any, Any]:
+    from .machine import Machine
+    from .measurements import read_measurements
+
+    machine = Machine.from_toml(args.machine)
+    data = read_measurements(args.measurements)
+    return machine, data
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
+
+
+def _run(args: argparse.Namespace, action: Any) -> int:
+    from .diagnosis import diagnose
+
+    try:
+        machine, data = _load(args)
+    except (CmmCompError, OSError) as exc:
+        print(f"cmm-comp {args.command}: {exc}", file=sys.stderr)
+        return 2
+    try:
+        diagnosis = diagnose(machine, data)
+    except ValueError as exc:
+        print(f"cmm-comp {args.command}: {args.measurements}: {exc}", file=sys.stderr)
+        return 2
+    return action(diagnosis)
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """``diagnose MACHINE MEASUREMENTS --json OUT [--report DIR]``: exit 0 found or not."""
+
+    def action(diagnosis: Any) -> int:
+        _atomic_write(Path(args.json), json.dumps(diagnosis.to_json(), indent=2, default=float))
+        if args.report:
+            from .diagnosis.report import write_report
+
+            write_report(diagnosis, args.report, title=f"Diagnosis of {args.machine}")
+        print(
+            f"verdict: {diagnosis.verdict}; "
+            + ", ".join(e.get("label", e["cause"]) for e in diagnosis.entries)
+            + f"; held-out RMS {diagnosis.summary['heldout_rms_um']['before']:.3f} → "
+            f"{diagnosis.summary['heldout_rms_um']['after']:.3f} µm"
+        )
+        return 0
+
+    return _run(args, action)
+
+
+def cmd_extend(args: argparse.Namespace) -> int:
+    """``extend MACHINE MEASUREMENTS -o EXTENDED.toml``: the machine with the effects found."""
+
+    def action(diagnosis: Any) -> int:
+        extended = diagnosis.extended_machine()
+        out = Path(args.output)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".toml")
+        os.close(fd)
+        try:
+            extended.to_toml(tmp)
+            os.replace(tmp, out)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        print(f"{out}: {len(diagnosis.effects)} effect(s) added")
+        return 0
+
+    return _run(args, action)
+
+
+def add_parsers(subparsers: Any) -> None:
+    """Add ``diagnose`` and ``extend`` to an argparse subparsers object."""
+    p = subparsers.add_parser(
+        "diagnose", help="compare the model with measurements and name the causes of the misfit"
+    )
+    p.add_argument("machine", help="machine.toml")
+    p.add_argument("measurements", help="measurements.csv (FORMATS.md §2)")
+    p.add_argument("--json", required=True, help="output JSON (FORMATS.md §4)")
+    p.add_argument("--report", help="directory for PNG plots and index.html")
+    p.set_defaults(handler=cmd_diagnose)
+    e = subparsers.add_parser("extend", help="write the machine extended by the effects found")
+    e.add_argument("machine", help="machine.toml")
+    e.add_argument("measurements", help="measurements.csv (FORMATS.md §2)")
+    e.add_argument("-o", "--output", required=True, help="extended machine.toml")
+    e.set_defaults(handler=cmd_extend)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry (``python -m compensation.diagnosis_cli``) until the CLI registers us."""
+    parser = argparse.ArgumentParser(prog="cmm-comp")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_parsers(sub)
+    args = parser.parse_args(argv)
+    return int(args.handler(args))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
