@@ -1,0 +1,348 @@
+"""The daemon's CAN side: receive raw axis frames and temperatures, answer each reading at once.
+
+One supervised thread owns the bus: it receives, assembles X/Y/Z triplets
+(:class:`protocol.TripletAssembler`), corrects (:class:`daemon.engine.CorrectionEngine`),
+sends the three corrected axis frames and the correction-status frame, then logs. The same
+thread sends the heartbeat (every ``heartbeat_s`` and on a state change), drops readings that
+stopped arriving (``triplet_timeout_s``) with an ``incomplete_reading`` status, and on a bus
+error closes the bus and reopens it with back-off, reporting the condition to the state board.
+No exception ends the thread silently: each reaches :meth:`CanEndpoint.on_error` (counted,
+logged, reflected in the state). The message handler is a ``can.Listener`` so it could also be
+driven by a ``can.Notifier``; the own loop is used because reconnecting replaces the bus.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+import can
+
+from daemon.mcap_schemas import ns_from_can_timestamp, stamp_from_ns
+from protocol import (
+    BadLength,
+    BadValue,
+    CanIds,
+    CorrectedAxis,
+    CorrectionStatus,
+    Duplicate,
+    Heartbeat,
+    Incomplete,
+    NotData,
+    OutOfOrder,
+    ProbeDirection,
+    RawAxis,
+    Superseded,
+    TemperatureSample,
+    Triplet,
+    TripletAssembler,
+    UnknownId,
+    decode_message,
+    encode_message,
+)
+from protocol.codes import Axis, DaemonState, Status, saturate_u16
+
+from .config import CanSection
+from .engine import Answer, CorrectionEngine, Reading
+from .events import EventLog
+from .metrics import Metrics
+from .state import StateBoard
+
+BusFactory = Callable[[CanSection, CanIds], can.BusABC]
+_RECV_POLL_S = 0.01
+_MAX_BACKOFF_S = 10.0
+_PROBE_MEMORY = 16
+
+
+def open_bus(cfg: CanSection, ids: CanIds) -> can.BusABC:
+    """Open the configured python-can bus, filtered to this node's block of ids."""
+    kwargs: dict[str, Any] = dict(cfg.options)
+    if cfg.bitrate:
+        kwargs["bitrate"] = cfg.bitrate
+    return can.Bus(
+        interface=cfg.interface,
+        channel=cfg.channel,
+        can_filters=ids.can_filters(),
+        fd=cfg.fd,
+        **kwargs,
+    )
+
+
+def frame_payload(msg: can.Message, channel: str) -> dict[str, Any]:
+    """The /cmm/can_rx, /cmm/can_tx payload of one frame."""
+    ts = msg.timestamp if msg.timestamp and msg.timestamp == msg.timestamp else 0.0
+    return {
+        "arbitration_id": int(msg.arbitration_id),
+        "is_extended": bool(msg.is_extended_id),
+        "dlc": int(msg.dlc),
+        "data": bytes(msg.data or b"").hex(),
+        "bus_stamp": stamp_from_ns(ns_from_can_timestamp(ts)),
+        "channel": channel,
+        "is_fd": bool(msg.is_fd),
+        "is_remote_frame": bool(msg.is_remote_frame),
+        "is_error_frame": bool(msg.is_error_frame),
+    }
+
+
+class CanEndpoint(can.Listener):
+    """Serve corrections on one CAN bus. Context manager; ``stop(timeout_s)``.
+
+    :param heartbeat: builds the current :class:`Heartbeat` (state, counters, grid id).
+    :param bus_factory: opens the bus (default :func:`open_bus`); tests inject failing buses.
+    """
+
+    def __init__(
+        self,
+        config: CanSection,
+        engine: CorrectionEngine,
+        state: StateBoard,
+        heartbeat: Callable[[], Heartbeat],
+        metrics: Metrics,
+        events: EventLog,
+        logger: Any | None = None,
+        bus_factory: BusFactory = open_bus,
+    ) -> None:
+        self.config = config
+        self.ids = CanIds(config.node_id, config.base_id)
+        self.engine = engine
+        self.state = state
+        self._heartbeat = heartbeat
+        self.metrics = metrics
+        self.events = events
+        self.logger = logger if config.log_frames else None
+        self._bus_factory = bus_factory
+        self._bus: can.BusABC | None = None
+        self._assembler: TripletAssembler[RawAxis] = TripletAssembler(window=config.window)
+        self._probe: OrderedDict[int, tuple[float, float, float]] = OrderedDict()
+        self._last_axis_s = 0.0
+        self._own_kinds = self.ids.daemon_tx_ids()
+        self._stop = threading.Event()
+        self._connected = threading.Event()
+        self._sent_state: DaemonState | None = None
+        self._next_heartbeat = 0.0
+        self.last_error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="can-endpoint", daemon=True)
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> CanEndpoint:
+        """Open the bus (errors are reported, then retried) and start the thread."""
+        self._open()
+        self._thread.start()
+        return self
+
+    def wait_connected(self, timeout_s: float) -> bool:
+        """True once the bus is open (within ``timeout_s``)."""
+        return self._connected.wait(timeout_s)
+
+    def stop(self, timeout_s: float = 2.0) -> bool:
+        """Stop the thread and shut the bus down; True if the thread ended in ``timeout_s``."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+        self._close()
+        return not self._thread.is_alive()
+
+    def __enter__(self) -> CanEndpoint:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def connected(self) -> bool:
+        """True while the bus is open."""
+        return self._bus is not None
+
+    # ------------------------------------------------------------------ can.Listener
+    def on_message_received(self, msg: can.Message) -> None:
+        """Handle one received message (any content: never raises on bad input)."""
+        self._handle(msg, time.perf_counter())
+
+    def on_error(self, exc: Exception) -> None:
+        """Every exception of the endpoint lands here: counted, logged, reflected in state."""
+        self.last_error = exc
+        self.metrics.fault("can_error")
+        self.events.emit("can_error", "error", error=repr(exc))
+
+    def stop_listener(self) -> None:  # can.Listener API
+        self.stop()
+
+    # ------------------------------------------------------------------ bus
+    def _open(self) -> bool:
+        try:
+            self._bus = self._bus_factory(self.config, self.ids)
+        except Exception as exc:
+            self._bus = None
+            self._connected.clear()
+            self.on_error(exc)
+            self.state.set_condition("can", f"cannot open {self.config.interface}: {exc}")
+            return False
+        self._connected.set()
+        self.state.set_condition("can", None)
+        self.events.emit(
+            "can_open", interface=self.config.interface, channel=str(self.config.channel)
+        )
+        self._sent_state = None  # announce ourselves on the (re)opened bus
+        return True
+
+    def _close(self) -> None:
+        bus, self._bus = self._bus, None
+        self._connected.clear()
+        if bus is not None:
+            try:
+                bus.shutdown()
+            except Exception as exc:
+                self.on_error(exc)
+
+    def _bus_failed(self, exc: Exception) -> None:
+        self.on_error(exc)
+        self.metrics.fault("bus_error")
+        self.state.set_condition("can", f"bus error: {exc}")
+        self._close()
+
+    def _run(self) -> None:
+        backoff = self.config.reconnect_s
+        while not self._stop.is_set():
+            try:
+                bus = self._bus
+                if bus is None:
+                    if self._stop.wait(backoff):
+                        break
+                    if self._open():
+                        self.metrics.count("can_reconnects")
+                        backoff = self.config.reconnect_s
+                    else:
+                        backoff = min(2 * backoff, _MAX_BACKOFF_S)
+                    continue
+                try:
+                    msg = bus.recv(_RECV_POLL_S)
+                except Exception as exc:  # bus gone, driver error: reopen
+                    self._bus_failed(exc)
+                    continue
+                if msg is not None:
+                    self._handle(msg, time.perf_counter())
+                self._housekeeping()
+            except Exception as exc:  # a bug in our own code: report and keep serving
+                self.on_error(exc)
+                self._stop.wait(0.01)
+
+    # ------------------------------------------------------------------ receive
+    def _handle(self, msg: can.Message, t_rx: float) -> None:
+        self.metrics.count("frames_rx")
+        frame = decode_message(msg, self.ids)
+        if isinstance(frame, RawAxis):
+            self._last_axis_s = t_rx
+            for event in self._assembler.feed(frame):
+                self._on_assembler(event, t_rx)
+        elif isinstance(frame, TemperatureSample):
+            self.engine.temperature(frame.sensor, frame.temp_C, frame.counter, frame.valid, "can")
+        elif isinstance(frame, ProbeDirection):
+            if frame.present:
+                self._probe[frame.seq] = frame.unit_vector
+                while len(self._probe) > _PROBE_MEMORY:
+                    self._probe.popitem(last=False)
+        elif isinstance(frame, CorrectedAxis | CorrectionStatus | Heartbeat):
+            self.metrics.count("own_frames_ignored")  # udp_multicast echoes our own frames
+        else:
+            self._on_undecodable(frame)
+        if self.logger is not None:
+            self.logger.log("/cmm/can_rx", frame_payload(msg, str(self.config.channel)))
+
+    def _on_undecodable(self, result: object) -> None:
+        if isinstance(result, UnknownId):
+            kind = "unknown_id"
+        elif isinstance(result, BadLength):
+            kind = "bad_length"
+        elif isinstance(result, BadValue):
+            kind = "bad_value"
+        elif isinstance(result, NotData):
+            kind = "error_frame" if result.reason == "error frame" else "remote_frame"
+        else:  # pragma: no cover - decode_message returns one of the above
+            kind = "undecodable"
+        self.metrics.fault(kind)
+        self.events.emit(kind, "warning", reason=getattr(result, "reason", repr(result)))
+
+    def _on_assembler(self, event: object, t_rx: float) -> None:
+        if isinstance(event, Triplet):
+            x, y, z = event.x, event.y, event.z
+            reading = Reading(
+                seq=event.seq,
+                position_nm=(x.position_nm, y.position_nm, z.position_nm),
+                directions=(x.direction.sign, y.direction.sign, z.direction.sign),
+                valid=(x.valid, y.valid, z.valid),
+                probe=self._probe.pop(event.seq, None),
+                received_s=t_rx,
+                source="can",
+            )
+            answer = self.engine.correct(reading)
+            latency_us = self._send_answer(answer, reading.received_s)
+            self.engine.record(reading, answer, latency_us)
+        elif isinstance(event, Incomplete | Superseded):
+            self._answer_incomplete(event.seq, event.reason, t_rx)
+        elif isinstance(event, Duplicate):
+            self.metrics.fault("duplicate_frame")
+            self.events.emit("duplicate_frame", "warning", reason=event.reason)
+        elif isinstance(event, OutOfOrder):
+            self.metrics.fault("out_of_order")
+            self.events.emit("out_of_order", "warning", reason=event.reason)
+
+    def _answer_incomplete(self, seq: int, reason: str, t_rx: float) -> None:
+        self.metrics.fault("incomplete_reading")
+        latency_us = (time.perf_counter() - t_rx) * 1e6
+        status = CorrectionStatus(seq, Status.INCOMPLETE_READING, latency_us=0)
+        self._send([status])
+        self.metrics.answer(Status.INCOMPLETE_READING.label, latency_us)
+        self.events.emit("answer_incomplete_reading", "warning", seq=seq, detail=reason)
+
+    # ------------------------------------------------------------------ send
+    def _send_answer(self, answer: Answer, t_rx: float) -> float:
+        seq, st = answer.seq, answer.status
+        px, py, pz = answer.position_nm
+        frames: list[Any] = [
+            CorrectedAxis(Axis.X, seq, px, st),
+            CorrectedAxis(Axis.Y, seq, py, st),
+            CorrectedAxis(Axis.Z, seq, pz, st),
+        ]
+        latency_us = (time.perf_counter() - t_rx) * 1e6
+        corr = saturate_u16(round(answer.correction_norm_um * 100))
+        frames.append(CorrectionStatus(seq, st, answer.applied, saturate_u16(latency_us), corr))
+        self._send(frames)
+        return latency_us
+
+    def _send(self, frames: list[Any]) -> None:
+        bus = self._bus
+        if bus is None:
+            self.metrics.fault("send_without_bus", len(frames))
+            return
+        msgs = [encode_message(f, self.ids) for f in frames]
+        for msg in msgs:
+            try:
+                bus.send(msg, timeout=self.config.send_timeout_s)
+            except Exception as exc:
+                self.metrics.fault("send_error")
+                self.on_error(exc)
+                return
+        self.metrics.count("frames_tx", len(msgs))
+        if self.logger is not None:
+            ch = str(self.config.channel)
+            now = time.time()
+            for msg in msgs:
+                msg.timestamp = now
+                self.logger.log("/cmm/can_tx", frame_payload(msg, ch))
+
+    # ------------------------------------------------------------------ periodic
+    def _housekeeping(self) -> None:
+        now = time.perf_counter()
+        pending = self._assembler.pending_seqs
+        if pending and now - self._last_axis_s > self.config.triplet_timeout_s:
+            timeout_ms = self.config.triplet_timeout_s * 1e3
+            for inc in self._assembler.flush(f"no axis frame for {timeout_ms:.0f} ms"):
+                self._answer_incomplete(inc.seq, inc.reason, self._last_axis_s)
+        state = self.state.state
+        if now >= self._next_heartbeat or state != self._sent_state:
+            self._next_heartbeat = now + self.config.heartbeat_s
+            self._sent_state = state
+            self._send([self._heartbeat()])

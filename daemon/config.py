@@ -1,0 +1,327 @@
+"""Daemon configuration: a TOML file (``tomllib``) whose every setting a CLI flag can override.
+
+Sections and keys mirror the dataclasses below (``examples/daemon.toml`` documents them all).
+:func:`add_override_flags` adds one ``--<section>-<key>`` flag per setting to an argparse
+parser (``--can-interface virtual``, ``--modbus-port 1502``, ``--limits-error-um 100``);
+:func:`load_config` reads the file and applies the flags given. Errors name the file, the key
+and what is allowed (:class:`ConfigError`); nothing is started on a bad configuration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, get_args, get_origin, get_type_hints
+
+TEMPERATURE_ROLES = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
+
+
+class ConfigError(ValueError):
+    """A daemon configuration file or flag is invalid (message names the key and the rule)."""
+
+
+@dataclass
+class GridSection:
+    """The correction grid (a file built by ``cmm-comp grid build``)."""
+
+    path: str = ""
+    """Grid file; empty = start without a grid (every answer says ``no_grid``)."""
+    stylus_mm: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    """Stylus tip offset used for every reading, mm (X, Y, Z)."""
+    expect_machine_sha256: str = ""
+    """If set, refuse a grid not built from this machine description."""
+
+
+@dataclass
+class CanSection:
+    """The CAN side: any python-can interface."""
+
+    enabled: bool = True
+    interface: str = "socketcan"
+    """python-can interface name: socketcan on a real host; virtual or udp_multicast in tests."""
+    channel: str = "can0"
+    bitrate: int = 0
+    """Bit rate, bit/s; 0 = leave the interface's setting alone."""
+    fd: bool = False
+    node_id: int = 0
+    base_id: int = 0x200
+    options: dict[str, Any] = field(default_factory=dict)
+    """Extra keyword arguments for ``can.Bus`` (e.g. ``port`` of udp_multicast)."""
+    triplet_timeout_s: float = 0.05
+    """Pending readings are dropped (answered ``incomplete_reading``) after this long without
+    any new axis frame, s."""
+    window: int = 4
+    """Pending readings the assembler keeps."""
+    send_timeout_s: float = 0.01
+    heartbeat_s: float = 0.1
+    reconnect_s: float = 0.5
+    """Delay before reopening the bus after a bus error, s (doubles up to 10 s)."""
+    log_frames: bool = True
+    """Log every received and sent frame to MCAP (/cmm/can_rx, /cmm/can_tx)."""
+
+
+@dataclass
+class ModbusSection:
+    """The Modbus TCP server (the daemon is the server, the controller the client)."""
+
+    enabled: bool = False
+    host: str = "127.0.0.1"
+    """Bind address; 127.0.0.1 unless the controller is on another host."""
+    port: int = 5020
+    """TCP port; 0 = any free port (tests)."""
+    device_id: int = 1
+
+
+@dataclass
+class TemperaturesSection:
+    """Temperature sensors and the checks applied to them."""
+
+    sensors: dict[str, str] = field(
+        default_factory=lambda: {"0": "T_x", "1": "T_y", "2": "T_z", "3": "T_wp"}
+    )
+    """Sensor id (as a string key) → role (T_x, T_y, T_z, T_wp, T_top, T_bottom, T_air)."""
+    required: list[str] | None = None
+    """Roles a reading needs; None = the ones the grid needs."""
+    stale_s: float = 10.0
+    """A sensor whose sample counter has not changed for this long is stale, s."""
+    plausible_C: list[float] = field(default_factory=lambda: [-10.0, 60.0])
+    """Readings outside this range are sensor faults (implausible), °C."""
+    valid_range_C: list[float] = field(default_factory=lambda: [10.0, 40.0])
+    """Range the compensation is valid for; outside it the reading is not corrected, °C."""
+    max_rate_C_per_s: float = 2.0
+    """A faster change between two samples is implausible, °C/s."""
+    on_fault: str = "reject"
+    """``reject``: answer the indicated position with the fault status; ``geometry_only``:
+    apply the geometric correction and answer ``not_thermally_corrected``."""
+
+
+@dataclass
+class LimitsSection:
+    """Bounds on the size of a correction (length of the correction vector)."""
+
+    warn_um: float = 50.0
+    """Larger corrections are applied but counted and logged as warnings, µm."""
+    error_um: float = 200.0
+    """Larger corrections are refused: answer ``correction_limit`` with the indicated position, µm."""
+
+
+@dataclass
+class McapSection:
+    """Session log (MCAP): empty path = off."""
+
+    path: str = ""
+    """A directory (rolled files ``session-…-NNN.mcap``) or one ``*.mcap`` file."""
+    roll_mb: float = 256.0
+    """Roll files at this size, MB (directories only; 0 = never)."""
+    roll_s: float = 3600.0
+    """Roll files at this age, s (directories only; 0 = never)."""
+    flush_s: float = 1.0
+    """Cut a chunk at least this often: the most a crash loses, s."""
+
+
+@dataclass
+class MetricsSection:
+    """Counters and latency histogram: Prometheus text on localhost and the MCAP status topic."""
+
+    enabled: bool = True
+    host: str = "127.0.0.1"
+    port: int = 9108
+    """HTTP port of ``/metrics``; 0 = any free port."""
+    period_s: float = 1.0
+    """Counters are published to /cmm/counters this often, s."""
+
+
+@dataclass
+class LogSection:
+    """Structured logs: one line per event on stdout."""
+
+    format: str = "json"
+    """``json`` or ``logfmt``."""
+    level: str = "info"
+    """``debug``, ``info``, ``warning`` or ``error``."""
+    max_per_s: float = 20.0
+    """Repeated events of one kind are rate-limited to this many lines per second."""
+
+
+@dataclass
+class DaemonConfig:
+    """The whole daemon configuration."""
+
+    grid: GridSection = field(default_factory=GridSection)
+    can: CanSection = field(default_factory=CanSection)
+    modbus: ModbusSection = field(default_factory=ModbusSection)
+    temperatures: TemperaturesSection = field(default_factory=TemperaturesSection)
+    limits: LimitsSection = field(default_factory=LimitsSection)
+    mcap: McapSection = field(default_factory=McapSection)
+    metrics: MetricsSection = field(default_factory=MetricsSection)
+    log: LogSection = field(default_factory=LogSection)
+    source: str = "<defaults>"
+
+    def check(self) -> DaemonConfig:
+        """Validate cross-field rules; ConfigError naming the key. Returns self."""
+        where = self.source
+        t = self.temperatures
+        for key, role in t.sensors.items():
+            if not key.isdigit() or not 0 <= int(key) <= 255:
+                raise ConfigError(f"{where}: temperatures.sensors key {key!r} must be 0..255")
+            if role not in TEMPERATURE_ROLES:
+                raise ConfigError(
+                    f"{where}: temperatures.sensors.{key} = {role!r}; allowed: {TEMPERATURE_ROLES}"
+                )
+        for role in t.required or []:
+            if role not in TEMPERATURE_ROLES:
+                raise ConfigError(f"{where}: temperatures.required has unknown role {role!r}")
+        if t.on_fault not in ("reject", "geometry_only"):
+            raise ConfigError(
+                f"{where}: temperatures.on_fault = {t.on_fault!r}; allowed: reject, geometry_only"
+            )
+        for name in ("plausible_C", "valid_range_C"):
+            lo_hi = getattr(t, name)
+            if len(lo_hi) != 2 or not lo_hi[0] < lo_hi[1]:
+                raise ConfigError(f"{where}: temperatures.{name} = {lo_hi} must be [low, high]")
+        if len(self.grid.stylus_mm) != 3:
+            raise ConfigError(f"{where}: grid.stylus_mm = {self.grid.stylus_mm} needs 3 values")
+        if not 0 < self.limits.warn_um <= self.limits.error_um:
+            raise ConfigError(
+                f"{where}: limits need 0 < warn_um <= error_um, got "
+                f"{self.limits.warn_um} and {self.limits.error_um}"
+            )
+        if self.log.format not in ("json", "logfmt"):
+            raise ConfigError(f"{where}: log.format = {self.log.format!r}; allowed: json, logfmt")
+        if self.log.level not in ("debug", "info", "warning", "error"):
+            raise ConfigError(f"{where}: log.level = {self.log.level!r}")
+        if not (self.can.enabled or self.modbus.enabled):
+            raise ConfigError(f"{where}: enable at least one of can.enabled, modbus.enabled")
+        for name in ("triplet_timeout_s", "send_timeout_s", "heartbeat_s", "reconnect_s"):
+            if getattr(self.can, name) <= 0:
+                raise ConfigError(f"{where}: can.{name} must be > 0 s")
+        if self.metrics.period_s <= 0 or self.mcap.flush_s <= 0:
+            raise ConfigError(f"{where}: metrics.period_s and mcap.flush_s must be > 0 s")
+        return self
+
+    def sensor_roles(self) -> dict[int, str]:
+        """Sensor id → role."""
+        return {int(k): v for k, v in self.temperatures.sensors.items()}
+
+
+_SECTIONS = [f.name for f in dataclasses.fields(DaemonConfig) if f.name != "source"]
+
+
+def _section_types(section: str) -> dict[str, Any]:
+    cls = type(getattr(DaemonConfig(), section))
+    return get_type_hints(cls)
+
+
+def _coerce(where: str, value: Any, hint: Any) -> Any:
+    """Check/convert a TOML or flag value to the field's type."""
+    origin = get_origin(hint)
+    args = get_args(hint)
+    if origin is not None and type(None) in args:  # X | None
+        if value is None:
+            return None
+        hint = next(a for a in args if a is not type(None))
+        origin, args = get_origin(hint), get_args(hint)
+    if hint is bool:
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"{where}: {value!r} must be true or false")
+    if hint is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise ConfigError(f"{where}: {value!r} must be an integer")
+    if hint is float:
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"{where}: {value!r} must be a number")
+    if hint is str:
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"{where}: {value!r} must be a string")
+    if origin is list:
+        if not isinstance(value, list):
+            raise ConfigError(f"{where}: {value!r} must be a list")
+        return [_coerce(f"{where}[{i}]", v, args[0]) for i, v in enumerate(value)]
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: {value!r} must be a table")
+        return {
+            str(k): (v if args[1] is Any else _coerce(f"{where}.{k}", v, args[1]))
+            for k, v in value.items()
+        }
+    return value
+
+
+def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> DaemonConfig:
+    """Build and validate a config from parsed TOML; unknown sections or keys are errors."""
+    cfg = DaemonConfig(source=source)
+    for section, table in data.items():
+        if section not in _SECTIONS:
+            raise ConfigError(f"{source}: unknown section [{section}]; allowed: {_SECTIONS}")
+        if not isinstance(table, dict):
+            raise ConfigError(f"{source}: [{section}] must be a table")
+        types = _section_types(section)
+        obj = getattr(cfg, section)
+        for key, value in table.items():
+            if key not in types:
+                raise ConfigError(
+                    f"{source}: unknown key {section}.{key}; allowed: {sorted(types)}"
+                )
+            setattr(obj, key, _coerce(f"{source}: {section}.{key}", value, types[key]))
+    return cfg.check()
+
+
+def add_override_flags(parser: argparse.ArgumentParser) -> None:
+    """Add ``--<section>-<key>`` for every setting (values in TOML syntax for lists/tables)."""
+    group = parser.add_argument_group("configuration overrides (each wins over the file)")
+    for section in _SECTIONS:
+        for key, hint in _section_types(section).items():
+            flag = f"--{section}-{key}".replace("_", "-")
+            dest = f"cfg__{section}__{key}"
+            if hint is bool:
+                group.add_argument(flag, dest=dest, action=argparse.BooleanOptionalAction)
+            else:
+                group.add_argument(flag, dest=dest, metavar="VALUE", default=None)
+
+
+def _parse_flag(text: str, hint: Any) -> Any:
+    if hint is str:
+        return text
+    if hint in (int, float) or get_origin(hint) is not None or hint is Any:
+        try:
+            return tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            if get_origin(hint) is not None:
+                try:
+                    return json.loads(text)
+                except json.JSONDecodeError:
+                    pass
+            return text
+    return text
+
+
+def load_config(path: str | Path | None, args: argparse.Namespace | None = None) -> DaemonConfig:
+    """Read ``path`` (None = defaults), then apply the override flags present in ``args``."""
+    data: dict[str, Any] = {}
+    source = "<defaults>"
+    if path is not None:
+        source = str(path)
+        try:
+            data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"{source}: configuration file not found") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    if args is not None:
+        for name, value in vars(args).items():
+            if not name.startswith("cfg__") or value is None:
+                continue
+            _, section, key = name.split("__")
+            hint = _section_types(section)[key]
+            data.setdefault(section, {})[key] = (
+                _parse_flag(value, hint) if isinstance(value, str) else value
+            )
+    return config_from_dict(data, source)

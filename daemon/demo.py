@@ -1,0 +1,148 @@
+"""The demo: simulated controller → daemon over a python-can ``virtual`` bus, in one process.
+
+Builds the grid from ``examples/machines/npl-bridge.toml`` unless one is given, starts a
+:class:`DaemonService` on a fresh virtual channel (MCAP log on), runs the ISO 10360-2 length
+test, a ball plate and random points through :class:`sim_controller.CanController`, and
+returns the summary of FORMATS.md §3 (``readings``, ``corrected``, ``e0_before_um``,
+``e0_after_um``, ``latency_us.p50/p99``) plus detail figures. Lives in ``daemon`` because it
+starts both sides (``sim_controller`` never imports ``daemon``).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+from compensation.grid import CorrectionGrid
+from compensation.machine import Machine
+from sim_controller.controller import CanController
+from sim_controller.runner import build_program, evaluate, make_readings, run_can
+from sim_controller.sim_machine import Environment, SimulatedMachine
+
+from .config import DaemonConfig
+from .service import DaemonService
+
+SUMMARY_KEYS = ("readings", "corrected", "e0_before_um", "e0_after_um", "latency_us")
+
+
+def default_machine_path() -> Path:
+    """``examples/machines/npl-bridge.toml`` of this checkout (FileNotFoundError if absent)."""
+    path = Path(__file__).resolve().parents[1] / "examples" / "machines" / "npl-bridge.toml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: demo machine not found; pass --machine MACHINE.toml")
+    return path
+
+
+def demo_config(
+    grid_path: str, channel: str, mcap_path: str, stylus_mm: list[float]
+) -> DaemonConfig:
+    """Daemon configuration of the demo: virtual CAN, no Modbus, no metrics port."""
+    cfg = DaemonConfig(source="<demo>")
+    cfg.grid.path = grid_path
+    cfg.grid.stylus_mm = list(stylus_mm)
+    cfg.can.interface = "virtual"
+    cfg.can.channel = channel
+    cfg.mcap.path = mcap_path
+    cfg.metrics.enabled = False
+    return cfg.check()
+
+
+def run_demo(
+    machine_path: str | Path | None = None,
+    grid_path: str | Path | None = None,
+    mcap_path: str | Path | None = None,
+    n_random: int = 500,
+    seed: int = 0,
+    noise_um: float | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run the demo; return the summary (FORMATS.md §3 keys first, then details)."""
+    say = progress or (lambda _msg: None)
+    t_start = time.perf_counter()
+    machine = Machine.from_toml(machine_path or default_machine_path())
+    stylus = [float(v) for v in machine.probe.offset_mm]
+    with tempfile.TemporaryDirectory(prefix="cmm-demo-") as tmp:
+        if grid_path is None:
+            steps = machine.volume.steps or (19, 23, 16)
+            say(f"building grid for {machine.name} ({steps[0]}×{steps[1]}×{steps[2]} nodes)…")
+            grid = CorrectionGrid.build(machine, steps=steps)
+            grid_path = Path(tmp) / f"{machine.name}.grid"
+            grid.save(grid_path)
+        mcap = Path(mcap_path) if mcap_path is not None else Path(tmp) / "demo.mcap"
+        if mcap.exists():
+            mcap.unlink()
+        channel = f"cmm-demo-{uuid.uuid4().hex[:8]}"
+        cfg = demo_config(str(grid_path), channel, str(mcap), stylus)
+        rng = np.random.default_rng(seed)
+        program = build_program(machine.volume.lower_mm, machine.volume.upper_mm, rng, n_random)
+        env = Environment()
+        sim = SimulatedMachine(machine, stylus, noise_um, rng)
+        say(f"simulating {len(program.points)} probe points on the true machine…")
+        indicated, readings = make_readings(sim, env, program.points)
+        with DaemonService(cfg, events_stream=None) as daemon:
+            bus = can.Bus(interface="virtual", channel=channel)
+            try:
+                with CanController(bus) as ctl:
+                    say(f"daemon ready ({daemon.state.state.label}); probing over virtual CAN…")
+                    answers = run_can(
+                        ctl,
+                        readings,
+                        env,
+                        progress=lambda i, n: say(f"  {i}/{n} readings answered"),
+                    )
+                    errors = list(ctl.errors)
+            finally:
+                bus.shutdown()
+        result = evaluate(program, indicated, answers)
+        result["controller_errors"] = [repr(e) for e in errors]
+        result["mcap"] = str(mcap) if mcap_path is not None else ""
+        result["grid"] = str(grid_path)
+        result["elapsed_s"] = time.perf_counter() - t_start
+    return result
+
+
+def summary_json(result: dict[str, Any]) -> dict[str, Any]:
+    """Exactly the FORMATS.md §3 keys."""
+    return {
+        "readings": int(result["readings"]),
+        "corrected": int(result["corrected"]),
+        "e0_before_um": round(float(result["e0_before_um"]), 4),
+        "e0_after_um": round(float(result["e0_after_um"]), 4),
+        "latency_us": {
+            "p50": round(float(result["latency_us"]["p50"]), 1),
+            "p99": round(float(result["latency_us"]["p99"]), 1),
+        },
+    }
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """Human-readable summary table."""
+    rows = [
+        ("readings", f"{result['readings']}"),
+        ("corrected (status ok)", f"{result['corrected']}"),
+        ("E0 before compensation", f"{result['e0_before_um']:.2f} µm"),
+        ("E0 after compensation", f"{result['e0_after_um']:.2f} µm"),
+    ]
+    if "ball_plate_max_um" in result:
+        bp = result["ball_plate_max_um"]
+        rows.append(
+            ("ball plate, max distance error", f"{bp['before']:.2f} → {bp['after']:.2f} µm")
+        )
+    if "random_rms_um" in result:
+        rr = result["random_rms_um"]
+        rows.append(("random points, RMS 3-D error", f"{rr['before']:.2f} → {rr['after']:.2f} µm"))
+    lat = result["latency_us"]
+    rows.append(("latency p50 / p99", f"{lat['p50']:.0f} / {lat['p99']:.0f} µs"))
+    rows.append(("statuses", ", ".join(f"{k}={v}" for k, v in sorted(result["statuses"].items()))))
+    if result.get("mcap"):
+        rows.append(("session log (MCAP)", result["mcap"]))
+    rows.append(("elapsed", f"{result['elapsed_s']:.1f} s"))
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

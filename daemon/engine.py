@@ -1,0 +1,263 @@
+"""Correct one reading: transport-independent core shared by the CAN and Modbus endpoints.
+
+:meth:`CorrectionEngine.correct` turns a :class:`Reading` (indicated position in nm, travel
+directions, valid flags, optional probing direction) into an :class:`Answer` with the status
+that says exactly what was applied. Whenever the status is not ``ok``,
+``not_thermally_corrected`` or ``missing_direction``, the answer carries the indicated position
+unchanged: never a silently wrong coordinate. It never raises: an unexpected exception becomes
+``internal_error`` (counted and logged).
+
+The endpoints reply first and then call :meth:`CorrectionEngine.record` (metrics, MCAP, events)
+so logging never adds to the reply latency.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocol.codes import NM_PER_MM, Applied, Status
+
+from .config import DaemonConfig
+from .events import EventLog
+from .grid_slot import GridSlot, LoadedGrid
+from .metrics import Metrics
+from .temperatures import TemperatureTable
+
+_GRID_STATUS = {
+    "ok": Status.OK,
+    "outside_volume": Status.OUTSIDE_VOLUME,
+    "clamped_outside_volume": Status.OUTSIDE_VOLUME,
+    "no_temperature": Status.NOT_THERMALLY_CORRECTED,
+    "missing_input": Status.MISSING_DIRECTION,
+    "invalid_input": Status.INVALID_READING,
+}
+_SCALE_ROLES = frozenset({"T_x", "T_y", "T_z", "T_top", "T_bottom", "T_air"})
+_DIR_KEYS = ("dir_x", "dir_y", "dir_z")
+_PROBE_KEYS = ("nx", "ny", "nz")
+
+
+@dataclass(frozen=True, slots=True)
+class Reading:
+    """One complete raw reading, as received from any transport."""
+
+    seq: int
+    position_nm: tuple[int, int, int]
+    """Indicated X, Y, Z, nm."""
+    directions: tuple[int, int, int] = (0, 0, 0)
+    """Travel direction signs (+1, −1, 0 unknown) of X, Y, Z."""
+    valid: tuple[bool, bool, bool] = (True, True, True)
+    probe: tuple[float, float, float] | None = None
+    """Probing direction unit vector, or None."""
+    received_s: float = 0.0
+    """``time.perf_counter()`` when the last input frame of the reading arrived, s."""
+    source: str = "can"
+
+    @property
+    def position_mm(self) -> tuple[float, float, float]:
+        """Indicated X, Y, Z, mm."""
+        x, y, z = self.position_nm
+        return (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM)
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """The daemon's answer to one reading."""
+
+    seq: int
+    status: Status
+    position_nm: tuple[int, int, int]
+    """Corrected X, Y, Z, nm (the indicated ones unless the geometry was applied)."""
+    applied: Applied
+    correction_um: tuple[float, float, float]
+    """Applied correction vector (corrected − indicated), µm."""
+    detail: str = ""
+
+    @property
+    def correction_norm_um(self) -> float:
+        """Length of the applied correction, µm."""
+        return math.sqrt(sum(c * c for c in self.correction_um))
+
+
+class CorrectionEngine:
+    """Grid + temperatures + limits → answers. Thread-safe (readers share no mutable state
+    except the counters, which take their own lock)."""
+
+    def __init__(
+        self,
+        config: DaemonConfig,
+        grids: GridSlot,
+        temperatures: TemperatureTable,
+        metrics: Metrics,
+        events: EventLog,
+        logger: object | None = None,
+    ) -> None:
+        self.config = config
+        self.grids = grids
+        self.temperatures = temperatures
+        self.metrics = metrics
+        self.events = events
+        self.logger = logger
+        self._stylus = np.asarray(config.grid.stylus_mm, dtype=float)
+        self._warn_um = config.limits.warn_um
+        self._error_um = config.limits.error_um
+        self._geometry_only = config.temperatures.on_fault == "geometry_only"
+        self.last_temperature_fault: str | None = None
+
+    # ------------------------------------------------------------------ hot path
+    def _raw(self, r: Reading, status: Status, detail: str = "") -> Answer:
+        return Answer(r.seq, status, r.position_nm, Applied.NONE, (0.0, 0.0, 0.0), detail)
+
+    def correct(self, reading: Reading, now_s: float | None = None) -> Answer:
+        """Answer ``reading``; ``now_s`` is the monotonic time for staleness checks, s."""
+        try:
+            return self._correct(reading, time.monotonic() if now_s is None else now_s)
+        except Exception as exc:  # never let one reading kill the daemon
+            self.metrics.fault("internal_error")
+            self.events.emit("internal_error", "error", seq=reading.seq, error=repr(exc))
+            return self._raw(reading, Status.INTERNAL_ERROR, repr(exc))
+
+    def _correct(self, r: Reading, now_s: float) -> Answer:
+        loaded = self.grids.current
+        if loaded is None:
+            return self._raw(r, Status.NO_GRID, "no grid loaded")
+        if not all(r.valid):
+            bad = "".join(a for a, v in zip("XYZ", r.valid, strict=True) if not v)
+            return self._raw(r, Status.INVALID_READING, f"controller flagged {bad} invalid")
+        verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
+        temps: dict[str, float] | None = verdict.temps_C
+        if verdict.status is not None:
+            self.last_temperature_fault = verdict.detail
+            if not self._geometry_only:
+                return self._raw(r, verdict.status, verdict.detail)
+            temps = None  # geometry only: the grid flags the missing thermal terms
+        else:
+            self.last_temperature_fault = None
+        inputs: dict[str, float] = {}
+        for key, sign in zip(_DIR_KEYS, r.directions, strict=True):
+            if sign:
+                inputs[key] = float(sign)
+        if r.probe is not None:
+            inputs.update(zip(_PROBE_KEYS, r.probe, strict=True))
+        p_mm = np.array([r.position_nm], dtype=float) / NM_PER_MM
+        out, st = loaded.grid.correct(p_mm, self._stylus, temps, inputs or None)
+        status = _GRID_STATUS.get(str(st[0]), Status.INTERNAL_ERROR)
+        if not status.geometric_correction_applied:
+            return self._raw(r, status, f"grid status {st[0]}")
+        c = out[0]
+        if not np.all(np.isfinite(c)):
+            return self._raw(r, Status.INTERNAL_ERROR, "non-finite correction")
+        d_um = ((c - p_mm[0]) * 1000.0).tolist()
+        norm = math.sqrt(d_um[0] ** 2 + d_um[1] ** 2 + d_um[2] ** 2)
+        if norm > self._error_um:
+            detail = f"|correction| {norm:.1f} µm > error limit {self._error_um} µm"
+            return self._raw(r, Status.CORRECTION_LIMIT, detail)
+        detail = ""
+        if norm > self._warn_um:
+            detail = f"|correction| {norm:.1f} µm > warning limit {self._warn_um} µm"
+        applied = self._applied(loaded, temps, inputs, status)
+        pos = (round(c[0] * NM_PER_MM), round(c[1] * NM_PER_MM), round(c[2] * NM_PER_MM))
+        return Answer(r.seq, status, pos, applied, (d_um[0], d_um[1], d_um[2]), detail)
+
+    def required_roles(self, loaded: LoadedGrid) -> tuple[str, ...]:
+        req = self.config.temperatures.required
+        return loaded.temperature_roles if req is None else tuple(req)
+
+    @staticmethod
+    def _applied(
+        loaded: LoadedGrid, temps: dict[str, float] | None, inputs: dict[str, float], st: Status
+    ) -> Applied:
+        applied = Applied.GEOMETRY
+        if temps:
+            roles = set(loaded.temperature_roles) & set(temps)
+            if roles & _SCALE_ROLES:
+                applied |= Applied.SCALE_THERMAL
+            if "T_wp" in roles:
+                applied |= Applied.WORKPIECE_THERMAL
+        needed = set(loaded.input_signals)
+        if st != Status.MISSING_DIRECTION and needed & set(_DIR_KEYS) and set(inputs) & needed:
+            applied |= Applied.REVERSAL
+        if needed & set(_PROBE_KEYS) and set(inputs) & set(_PROBE_KEYS):
+            applied |= Applied.PROBE_DIRECTION
+        return applied
+
+    # ------------------------------------------------------------------ after the reply
+    def record(self, reading: Reading, answer: Answer, latency_us: float) -> None:
+        """Count, log to MCAP and report one answered reading (call after replying)."""
+        label = answer.status.label
+        self.metrics.count("readings")
+        self.metrics.answer(label, latency_us)
+        if answer.detail and answer.status == Status.OK:
+            self.metrics.count("correction_warnings")
+            self.events.emit("correction_warning", "warning", seq=answer.seq, detail=answer.detail)
+        elif answer.status != Status.OK:
+            self.events.emit(
+                f"answer_{label}", "warning", seq=answer.seq, status=label, detail=answer.detail
+            )
+        log = self.logger
+        if log is None:
+            return
+        x, y, z = reading.position_mm
+        raw = {
+            "seq": reading.seq,
+            "x_mm": x,
+            "y_mm": y,
+            "z_mm": z,
+            "travel_dir": list(reading.directions),
+            "valid": list(reading.valid),
+            "source": reading.source,
+            "stylus_x_mm": float(self._stylus[0]),
+            "stylus_y_mm": float(self._stylus[1]),
+            "stylus_z_mm": float(self._stylus[2]),
+        }
+        if reading.probe is not None:
+            raw["dir_x"], raw["dir_y"], raw["dir_z"] = reading.probe
+        log.log("/cmm/raw", raw)  # type: ignore[attr-defined]
+        cx, cy, cz = answer.position_nm
+        log.log(  # type: ignore[attr-defined]
+            "/cmm/corrected",
+            {
+                "seq": answer.seq,
+                "x_mm": cx / NM_PER_MM,
+                "y_mm": cy / NM_PER_MM,
+                "z_mm": cz / NM_PER_MM,
+                "status": label,
+                "dx_um": answer.correction_um[0],
+                "dy_um": answer.correction_um[1],
+                "dz_um": answer.correction_um[2],
+                "latency_us": latency_us,
+                "applied": int(answer.applied),
+                "source": reading.source,
+                **({"detail": answer.detail} if answer.detail else {}),
+            },
+        )
+
+    def temperature(
+        self, sensor: int, temp_C: float, counter: int, valid: bool, source: str
+    ) -> None:
+        """Store one temperature sample (any transport) and log it."""
+        state = self.temperatures.update(sensor, temp_C, counter, valid, time.monotonic())
+        self.metrics.count("temperature_samples")
+        if state is None:
+            self.metrics.fault("unknown_sensor")
+            self.events.emit("unknown_sensor", "warning", sensor=sensor, source=source)
+            return
+        if state.fault is not None:
+            self.metrics.fault(f"temperature_{state.fault.label}")
+            self.events.emit("temperature_fault", "warning", sensor=sensor, detail=state.detail)
+        if self.logger is not None:
+            self.logger.log(  # type: ignore[attr-defined]
+                "/cmm/temperature",
+                {
+                    "sensor": str(sensor),
+                    "role": state.role,
+                    "temp_C": temp_C,
+                    "counter": counter,
+                    "valid": valid,
+                    "fault": state.fault.label if state.fault is not None else "",
+                    "source": source,
+                },
+            )

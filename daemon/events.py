@@ -1,0 +1,84 @@
+"""Structured event log: one JSON (or logfmt) line per event on stdout, rate-limited per kind.
+
+    events = EventLog(sys.stdout, fmt="json")
+    events.emit("grid_loaded", sha256="ab12…", path="/etc/cmm/machine.grid")
+    -> {"ts":"2025-01-01T12:00:00.123456+00:00","level":"info","event":"grid_loaded",...}
+
+An event kind that repeats faster than ``max_per_s`` (e.g. a flood of unknown CAN ids) is
+suppressed; the next line of that kind carries ``suppressed=<n>``, so nothing is lost silently.
+Thread-safe; writing never raises into the caller (a broken stdout is counted, not fatal).
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from datetime import UTC, datetime
+from typing import Any, TextIO
+
+LEVELS = {"debug": 10, "info": 20, "warning": 30, "error": 40}
+
+
+def _logfmt_value(value: Any) -> str:
+    text = value if isinstance(value, str) else json.dumps(value, default=str)
+    if text == "" or any(c in text for c in ' ="\n'):
+        return json.dumps(text)
+    return text
+
+
+class EventLog:
+    """Write events as single lines to ``stream`` (None = discard).
+
+    :param fmt: ``json`` or ``logfmt``.
+    :param level: lowest level written (``debug`` … ``error``).
+    :param max_per_s: lines per second allowed for each event kind.
+    """
+
+    def __init__(
+        self,
+        stream: TextIO | None,
+        fmt: str = "json",
+        level: str = "info",
+        max_per_s: float = 20.0,
+    ) -> None:
+        if fmt not in ("json", "logfmt"):
+            raise ValueError(f"log format {fmt!r}; allowed: json, logfmt")
+        self._stream = stream
+        self._fmt = fmt
+        self._min_level = LEVELS[level]
+        self._interval_s = 1.0 / max_per_s if max_per_s > 0 else 0.0
+        self._lock = threading.Lock()
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+        self.write_errors = 0
+
+    def emit(self, event: str, level: str = "info", **fields: Any) -> None:
+        """Write one event line (unless below the level or rate-limited)."""
+        if LEVELS[level] < self._min_level or self._stream is None:
+            return
+        now = time.monotonic()
+        with self._lock:
+            last = self._last.get(event)
+            if last is not None and now - last < self._interval_s:
+                self._suppressed[event] = self._suppressed.get(event, 0) + 1
+                return
+            self._last[event] = now
+            suppressed = self._suppressed.pop(event, 0)
+            record: dict[str, Any] = {
+                "ts": datetime.now(UTC).isoformat(),
+                "level": level,
+                "event": event,
+                **fields,
+            }
+            if suppressed:
+                record["suppressed"] = suppressed
+            if self._fmt == "json":
+                line = json.dumps(record, default=str, separators=(",", ":"))
+            else:
+                line = " ".join(f"{k}={_logfmt_value(v)}" for k, v in record.items())
+            try:
+                self._stream.write(line + "\n")
+                self._stream.flush()
+            except (OSError, ValueError):
+                self.write_errors += 1

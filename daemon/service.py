@@ -1,0 +1,298 @@
+"""The compensation daemon: grid, temperatures, CAN and/or Modbus endpoints, logs, metrics.
+
+    with DaemonService(config) as daemon:     # starts everything
+        daemon.reload_grid()                  # what SIGHUP does
+    # leaving the block stops endpoints, then flushes and closes the MCAP file
+
+:meth:`DaemonService.run_forever` is the process main loop: SIGTERM/SIGINT stop cleanly
+(MCAP finished), SIGHUP reloads the grid atomically (a bad new grid is refused and the old one
+stays active). Configuration and grids change only through files on the host; nothing on the
+bus can change them. A missing or bad grid at start is not fatal: the daemon runs and every
+answer says ``no_grid`` until a good grid is loaded.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from typing import Any, TextIO
+
+from daemon.mcap_log import McapLogger
+from protocol import DaemonBlock, Heartbeat
+from protocol.codes import DaemonState, grid_id_from_sha256
+
+from .can_endpoint import BusFactory, CanEndpoint, open_bus
+from .config import DaemonConfig
+from .engine import CorrectionEngine
+from .events import EventLog
+from .grid_slot import GridLoadError, GridSlot
+from .metrics import Metrics, MetricsServer
+from .modbus_server import ModbusEndpoint
+from .state import StateBoard
+from .temperatures import TemperatureTable
+
+_TICK_S = 0.1
+
+
+class DaemonService:
+    """All daemon parts wired together. Context manager; ``stop(timeout_s)``.
+
+    :param events_stream: where the structured log lines go (stdout by default, None = off).
+    :param bus_factory: opens the CAN bus (tests inject failing buses).
+    """
+
+    def __init__(
+        self,
+        config: DaemonConfig,
+        events_stream: TextIO | None = sys.stdout,
+        bus_factory: BusFactory = open_bus,
+    ) -> None:
+        self.config = config
+        self.events = EventLog(
+            events_stream, config.log.format, config.log.level, config.log.max_per_s
+        )
+        self.metrics = Metrics()
+        self.logger: McapLogger | None = None
+        self.grids = GridSlot()
+        self.temperatures = TemperatureTable(config.temperatures, config.sensor_roles())
+        self.state = StateBoard(self._on_state_change)
+        self.engine: CorrectionEngine | None = None
+        self.can: CanEndpoint | None = None
+        self.modbus: ModbusEndpoint | None = None
+        self.metrics_server: MetricsServer | None = None
+        self._bus_factory = bus_factory
+        self._stop = threading.Event()
+        self._reload_requested = threading.Event()
+        self._housekeeper: threading.Thread | None = None
+        self._stopped = False
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> DaemonService:
+        """Start all parts; on a failure to start, stops what was started and re-raises."""
+        cfg = self.config
+        try:
+            if cfg.mcap.path:
+                directory = not cfg.mcap.path.endswith(".mcap")
+                self.logger = McapLogger(
+                    cfg.mcap.path,
+                    roll_bytes=int(cfg.mcap.roll_mb * 1e6)
+                    if directory and cfg.mcap.roll_mb
+                    else None,
+                    roll_s=cfg.mcap.roll_s if directory and cfg.mcap.roll_s else None,
+                    flush_period_s=cfg.mcap.flush_s,
+                    metadata={"config": cfg.source},
+                    on_error=self._on_mcap_error,
+                )
+            self.engine = CorrectionEngine(
+                cfg, self.grids, self.temperatures, self.metrics, self.events, self.logger
+            )
+            self.events.emit("starting", config=cfg.source)
+            self._status_log(DaemonState.STARTING, "starting")
+            if cfg.grid.path:
+                self._load_grid(cfg.grid.path)
+            self.state.set_grid(self.grids.current is not None)
+            if cfg.metrics.enabled:
+                self.metrics_server = MetricsServer(
+                    self._prometheus, cfg.metrics.host, cfg.metrics.port
+                )
+                self.events.emit("metrics_listening", url=self.metrics_server.url)
+            if cfg.modbus.enabled:
+                self.modbus = ModbusEndpoint(
+                    cfg.modbus,
+                    self.engine,
+                    self.daemon_block,
+                    self.metrics,
+                    self.events,
+                    self.logger,
+                ).start()
+            if cfg.can.enabled:
+                self.can = CanEndpoint(
+                    cfg.can,
+                    self.engine,
+                    self.state,
+                    self.heartbeat,
+                    self.metrics,
+                    self.events,
+                    self.logger,
+                    self._bus_factory,
+                ).start()
+            self._housekeeper = threading.Thread(
+                target=self._housekeeping, name="daemon-housekeeping", daemon=True
+            )
+            self._housekeeper.start()
+            self.state.set_phase(DaemonState.READY)
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def stop(self, timeout_s: float = 5.0) -> bool:
+        """Stop endpoints, the metrics server and housekeeping, then finish the MCAP file.
+
+        Returns True when every part stopped within ``timeout_s`` (s) in total. Idempotent.
+        """
+        if self._stopped:
+            return True
+        self._stopped = True
+        deadline = time.monotonic() + timeout_s
+        self.state.set_phase(DaemonState.STOPPING)
+        ok = True
+        if self.can is not None:
+            ok &= self.can.stop(max(0.1, deadline - time.monotonic()))
+        if self.modbus is not None:
+            ok &= self.modbus.stop(max(0.1, deadline - time.monotonic()))
+        if self.metrics_server is not None:
+            ok &= self.metrics_server.stop(max(0.1, deadline - time.monotonic()))
+        self._stop.set()
+        if self._housekeeper is not None:
+            self._housekeeper.join(max(0.1, deadline - time.monotonic()))
+            ok &= not self._housekeeper.is_alive()
+        self._publish_counters()
+        self.events.emit("stopped", answered=self.metrics.answered, not_ok=self.metrics.not_ok)
+        if self.logger is not None:
+            ok &= self.logger.stop(max(0.5, deadline - time.monotonic()))
+        return ok
+
+    def __enter__(self) -> DaemonService:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def run_forever(self) -> int:
+        """Process main loop (main thread): signals drive stop and reload. Returns exit code."""
+
+        def on_term(signum: int, frame: Any) -> None:
+            self._stop.set()
+
+        def on_hup(signum: int, frame: Any) -> None:
+            self._reload_requested.set()
+
+        signal.signal(signal.SIGTERM, on_term)
+        signal.signal(signal.SIGINT, on_term)
+        signal.signal(signal.SIGHUP, on_hup)
+        while not self._stop.wait(0.05):
+            if self._reload_requested.is_set():
+                self._reload_requested.clear()
+                self.reload_grid()
+        self.stop()
+        return 0
+
+    # ------------------------------------------------------------------ grid
+    def _load_grid(self, path: str) -> bool:
+        try:
+            loaded = self.grids.reload(path, self.config.grid.expect_machine_sha256)
+        except GridLoadError as exc:
+            self.metrics.fault("grid_refused")
+            old = self.grids.current
+            self.events.emit(
+                "grid_refused",
+                "error",
+                error=str(exc),
+                active=old.sha256 if old is not None else "",
+            )
+            self._status_log(self.state.state, f"grid refused: {exc}")
+            return False
+        self.metrics.count("grid_loads")
+        self.events.emit(
+            "grid_loaded",
+            path=loaded.path,
+            sha256=loaded.sha256,
+            machine=loaded.machine,
+            signals=list(loaded.temperature_roles + loaded.input_signals),
+        )
+        if self.logger is not None:
+            self.logger.log("/cmm/grid", loaded.identity())
+        self._status_log(self.state.state, f"grid loaded: {loaded.path}")
+        return True
+
+    def reload_grid(self, path: str | None = None) -> bool:
+        """Reload the grid from ``path`` (default: the configured file). On failure the old
+        grid stays active and False is returned."""
+        ok = self._load_grid(path or self.config.grid.path)
+        self.state.set_grid(self.grids.current is not None)
+        return ok
+
+    # ------------------------------------------------------------------ status
+    def _grid_sha(self) -> str:
+        g = self.grids.current
+        return g.sha256 if g is not None else ""
+
+    def heartbeat(self) -> Heartbeat:
+        """Current CAN heartbeat frame."""
+        sha = self._grid_sha()
+        return Heartbeat(
+            self.state.state,
+            self.metrics.answered & 0xFFFF,
+            self.metrics.not_ok & 0xFFFF,
+            grid_id_from_sha256(sha) if sha else 0,
+        )
+
+    def daemon_block(self) -> DaemonBlock:
+        """Current Modbus DAEMON block (heartbeat and input-error fields filled by the server)."""
+        hb = self.heartbeat()
+        return DaemonBlock(hb.state, hb.answered, hb.not_ok, hb.grid_id)
+
+    def _status_log(self, state: DaemonState, detail: str) -> None:
+        if self.logger is not None:
+            self.logger.log(
+                "/cmm/status",
+                {"state": state.label, "detail": detail, "grid_sha256": self._grid_sha()},
+            )
+
+    def _on_state_change(self, state: DaemonState, detail: str) -> None:
+        level = (
+            "info"
+            if state in (DaemonState.READY, DaemonState.STARTING, DaemonState.STOPPING)
+            else "warning"
+        )
+        self.events.emit("state", level, state=state.label, detail=detail, grid=self._grid_sha())
+        self._status_log(state, detail)
+
+    def _on_mcap_error(self, exc: BaseException) -> None:
+        self.metrics.fault("mcap_error")
+        self.events.emit("mcap_error", "error", error=repr(exc))
+
+    def _prometheus(self) -> str:
+        extra = {
+            f'cmm_comp_state{{state="{s.label}"}}': float(self.state.state == s)
+            for s in DaemonState
+        }
+        if self.logger is not None:
+            extra["cmm_comp_mcap_dropped"] = float(self.logger.stats().dropped)
+        return self.metrics.prometheus(extra)
+
+    def _publish_counters(self) -> None:
+        if self.logger is None:
+            return
+        snap = self.metrics.snapshot(reset_period=True)
+        snap["period_s"] = self.config.metrics.period_s
+        snap["counters"]["mcap_dropped"] = self.logger.stats().dropped
+        self.logger.log("/cmm/counters", snap)
+
+    def _housekeeping(self) -> None:
+        next_publish = time.monotonic() + self.config.metrics.period_s
+        while not self._stop.wait(_TICK_S):
+            try:
+                self._check_conditions()
+                if time.monotonic() >= next_publish:
+                    next_publish += self.config.metrics.period_s
+                    self._publish_counters()
+            except Exception as exc:  # reported, and the loop goes on
+                self.metrics.fault("housekeeping_error")
+                self.events.emit("housekeeping_error", "error", error=repr(exc))
+
+    def _check_conditions(self) -> None:
+        loaded = self.grids.current
+        if loaded is not None and self.engine is not None:
+            required = self.engine.required_roles(loaded)
+            verdict = self.temperatures.inputs(required, time.monotonic())
+            self.state.set_condition(
+                "temperatures", None if verdict.status is None else verdict.detail
+            )
+        if self.logger is not None and self.logger.error is not None:
+            self.state.set_condition("mcap", f"session log failed: {self.logger.error!r}")
+        if self.modbus is not None and self.modbus.error is not None:
+            self.state.set_condition("fault:modbus", repr(self.modbus.error))

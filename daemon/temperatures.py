@@ -1,0 +1,139 @@
+"""Latest temperature of each sensor and the checks that decide whether it may be used.
+
+A sample is usable when its sensor reports it valid, it is within the plausible range (a
+sensor fault otherwise), it did not jump faster than ``max_rate_C_per_s`` from the previous
+sample, it is within the range the compensation is valid for, and its sample counter changed
+within ``stale_s`` (a repeated counter means the controller re-sent an old value). Time is a
+monotonic clock in s supplied by the caller, so tests can step it.
+
+:meth:`TemperatureTable.inputs` returns the ``temps_C`` mapping for the grid and, when a
+required role is not usable, the status that says why (first reason in the order of roles).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+from protocol.codes import Status
+
+from .config import TemperaturesSection
+
+
+@dataclass(frozen=True, slots=True)
+class SensorState:
+    """What the daemon knows about one sensor."""
+
+    sensor: int
+    role: str
+    temp_C: float
+    counter: int
+    valid: bool
+    received_s: float
+    """Monotonic time the last frame arrived, s."""
+    changed_s: float
+    """Monotonic time the counter last changed, s."""
+    fault: Status | None
+    """Why this sample is unusable (apart from staleness), or None."""
+    detail: str
+
+
+@dataclass(frozen=True, slots=True)
+class TemperatureVerdict:
+    """Outcome of checking the temperatures one reading needs."""
+
+    temps_C: dict[str, float]
+    """Usable temperatures by role (°C)."""
+    status: Status | None
+    """None when every required role is usable; else the first fault."""
+    detail: str
+
+
+class TemperatureTable:
+    """Sensor id → latest sample, with the configured checks. Thread-safe."""
+
+    def __init__(self, config: TemperaturesSection, roles: dict[int, str]) -> None:
+        self.config = config
+        self.roles = dict(roles)
+        self._lock = threading.Lock()
+        self._sensors: dict[int, SensorState] = {}
+        self._by_role: dict[str, int] = {role: sid for sid, role in self.roles.items()}
+
+    def update(
+        self, sensor: int, temp_C: float, counter: int, valid: bool, now_s: float
+    ) -> SensorState | None:
+        """Store a sample; return its state (None for a sensor id not in the configuration)."""
+        role = self.roles.get(sensor)
+        if role is None:
+            return None
+        cfg = self.config
+        with self._lock:
+            prev = self._sensors.get(sensor)
+            changed_s = now_s if prev is None or prev.counter != counter else prev.changed_s
+            fault: Status | None = None
+            detail = ""
+            if not valid:
+                fault, detail = Status.NO_TEMPERATURE, f"sensor {sensor} ({role}) reports invalid"
+            elif not cfg.plausible_C[0] <= temp_C <= cfg.plausible_C[1]:
+                fault = Status.IMPLAUSIBLE_TEMPERATURE
+                detail = (
+                    f"sensor {sensor} ({role}) {temp_C:.3f} °C outside plausible "
+                    f"{cfg.plausible_C[0]}..{cfg.plausible_C[1]} °C"
+                )
+            elif (
+                prev is not None
+                and prev.valid
+                and prev.counter != counter
+                and now_s > prev.received_s
+                and abs(temp_C - prev.temp_C) / (now_s - prev.received_s) > cfg.max_rate_C_per_s
+            ):
+                rate = abs(temp_C - prev.temp_C) / (now_s - prev.received_s)
+                fault = Status.IMPLAUSIBLE_TEMPERATURE
+                detail = (
+                    f"sensor {sensor} ({role}) jumped {prev.temp_C:.3f} → {temp_C:.3f} °C "
+                    f"({rate:.2f} °C/s > {cfg.max_rate_C_per_s} °C/s)"
+                )
+            elif not cfg.valid_range_C[0] <= temp_C <= cfg.valid_range_C[1]:
+                fault = Status.IMPLAUSIBLE_TEMPERATURE
+                detail = (
+                    f"sensor {sensor} ({role}) {temp_C:.3f} °C outside the compensated range "
+                    f"{cfg.valid_range_C[0]}..{cfg.valid_range_C[1]} °C"
+                )
+            state = SensorState(
+                sensor, role, temp_C, counter, valid, now_s, changed_s, fault, detail
+            )
+            self._sensors[sensor] = state
+            return state
+
+    def inputs(self, required: tuple[str, ...], now_s: float) -> TemperatureVerdict:
+        """Usable temperatures and the first fault among ``required`` roles at ``now_s``."""
+        temps: dict[str, float] = {}
+        status: Status | None = None
+        detail = ""
+        stale_s = self.config.stale_s
+        with self._lock:
+            for role in required:
+                sid = self._by_role.get(role)
+                state = self._sensors.get(sid) if sid is not None else None
+                if state is None:
+                    why: Status | None = Status.NO_TEMPERATURE
+                    text = f"no sample for {role}" + ("" if sid is not None else " (no sensor)")
+                elif state.fault is not None:
+                    why, text = state.fault, state.detail
+                elif now_s - state.changed_s > stale_s:
+                    why = Status.STALE_TEMPERATURE
+                    text = (
+                        f"sensor {state.sensor} ({role}) unchanged for "
+                        f"{now_s - state.changed_s:.1f} s > {stale_s} s"
+                    )
+                else:
+                    temps[role] = state.temp_C
+                    continue
+                if status is None:
+                    status, detail = why, text
+        return TemperatureVerdict(temps, status, detail)
+
+    def snapshot(self) -> list[SensorState]:
+        """All sensor states, by sensor id."""
+        with self._lock:
+            return [self._sensors[k] for k in sorted(self._sensors)]
