@@ -6,8 +6,10 @@ neighbours, and the translation (µm) at stylus offset 0. Between nodes
 
 * rotations are interpolated by **Squad**, tensor-product: along x on the 4×4 neighbouring
   node lines (control points precomputed at the nodes), then along y on the 4 results, then
-  along z (control points computed from the interpolated neighbours); boundary rule
-  ``s_0 = q_0``, ``s_{n-1} = q_{n-1}`` (:mod:`compensation.squad`);
+  along z (control points computed from the interpolated neighbours); at the edges of the
+  volume the ``"quadratic"`` boundary rule of :mod:`compensation.squad` (a parabola through
+  the last three nodes sets the end control point: third-order accurate like the interior,
+  where ``s_0 = q_0`` would be second-order only);
 * translations by a **C² tricubic B-spline** (not-a-knot, the tensor product of
   ``scipy.interpolate.make_interp_spline`` along each axis) that interpolates the nodes.
 
@@ -381,7 +383,7 @@ class CorrectionGrid:
     def _prepare(self) -> None:
         """Precompute Squad control data along x and the tensor spline coefficients."""
         q = self.q_work_stylus
-        sx = squad_control_points(q, axis=0)
+        sx = squad_control_points(q, axis=0, boundary="quadratic")
         wq = np.zeros((*self.steps, 3))
         ws = np.zeros((*self.steps, 3))
         wq[:-1] = qt.log(qt.multiply(qt.conjugate(q[:-1]), q[1:]))
@@ -757,7 +759,7 @@ class CorrectionGrid:
                 "error = true - indicated"
             ),
             "interpolation": {
-                "rotation": "tensor-product Squad x, y, z; s_0 = q_0, s_n-1 = q_n-1",
+                "rotation": "tensor-product Squad x, y, z; quadratic end control points",
                 "translation": "tricubic not-a-knot B-spline (C2)",
             },
             "signals": [

@@ -113,7 +113,8 @@ def _squad4(buf, lo_ok, hi_ok, h):  # type: ignore[no-untyped-def]
 
     Shares the logarithms: with L12 = log(Q1⁻¹Q2), log(Q2⁻¹Q1) = −L12 (unit quaternions),
     s1 = Q1·exp(−(L12 + log(Q1⁻¹Q0))/4), s2 = Q2·exp(−(log(Q2⁻¹Q3) − L12)/4) and
-    Slerp(Q1, Q2, h) = Q1·exp(h·L12). Boundary rule: s1 = Q1 / s2 = Q2 without a neighbour.
+    Slerp(Q1, Q2, h) = Q1·exp(h·L12). Without an outer neighbour the quadratic boundary rule
+    of :mod:`compensation.squad` is used (needs ≥ 4 nodes per axis, which the grid enforces).
     """
     q1w, q1x, q1y, q1z = buf[1, 0], buf[1, 1], buf[1, 2], buf[1, 3]
     q2w, q2x, q2y, q2z = buf[2, 0], buf[2, 1], buf[2, 2], buf[2, 3]
@@ -124,15 +125,23 @@ def _squad4(buf, lo_ok, hi_ok, h):  # type: ignore[no-untyped-def]
         m = _qlog(r0[0], r0[1], r0[2], r0[3])
         e = _qexp(-0.25 * (lx + m[0]), -0.25 * (ly + m[1]), -0.25 * (lz + m[2]))
         s1 = _qmul(q1w, q1x, q1y, q1z, e[0], e[1], e[2], e[3])
-    else:
-        s1 = (q1w, q1x, q1y, q1z)
+    else:  # quadratic boundary rule: s1 = Q1·exp((2·log(Q1⁻¹Q2) − log(Q1⁻¹Q3))/4)
+        r3 = _qmul(q1w, -q1x, -q1y, -q1z, buf[3, 0], buf[3, 1], buf[3, 2], buf[3, 3])
+        v2 = _qlog(r3[0], r3[1], r3[2], r3[3])
+        e = _qexp(0.25 * (2.0 * lx - v2[0]), 0.25 * (2.0 * ly - v2[1]), 0.25 * (2.0 * lz - v2[2]))
+        s1 = _qmul(q1w, q1x, q1y, q1z, e[0], e[1], e[2], e[3])
     if hi_ok:
         r3 = _qmul(q2w, -q2x, -q2y, -q2z, buf[3, 0], buf[3, 1], buf[3, 2], buf[3, 3])
         p = _qlog(r3[0], r3[1], r3[2], r3[3])
         e = _qexp(-0.25 * (p[0] - lx), -0.25 * (p[1] - ly), -0.25 * (p[2] - lz))
         s2 = _qmul(q2w, q2x, q2y, q2z, e[0], e[1], e[2], e[3])
-    else:
-        s2 = (q2w, q2x, q2y, q2z)
+    else:  # quadratic boundary rule: s2 = Q2·exp((2·log(Q2⁻¹Q1) − log(Q2⁻¹Q0))/4)
+        r0 = _qmul(q2w, -q2x, -q2y, -q2z, buf[0, 0], buf[0, 1], buf[0, 2], buf[0, 3])
+        v2 = _qlog(r0[0], r0[1], r0[2], r0[3])
+        e = _qexp(
+            0.25 * (-2.0 * lx - v2[0]), 0.25 * (-2.0 * ly - v2[1]), 0.25 * (-2.0 * lz - v2[2])
+        )
+        s2 = _qmul(q2w, q2x, q2y, q2z, e[0], e[1], e[2], e[3])
     e = _qexp(h * lx, h * ly, h * lz)
     a = _qmul(q1w, q1x, q1y, q1z, e[0], e[1], e[2], e[3])
     b = _slerp(s1[0], s1[1], s1[2], s1[3], s2[0], s2[1], s2[2], s2[3], h)

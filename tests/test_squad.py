@@ -72,3 +72,24 @@ def test_control_points_boundary_rule_and_sign_check() -> None:
         squad_control_points(bad)
     with pytest.raises(ValueError, match=r"lie in \[0, 4\]"):
         squad(keys, [4.5])
+
+
+def test_quadratic_boundary_rule_is_more_accurate_at_the_ends() -> None:
+    # keyframes sampled from a smooth known curve; compare the end segments
+    t = np.linspace(0.0, 1.0, 9)
+    rotvec = np.c_[np.sin(2 * t), np.cos(3 * t) - 1, t**2] * 1e-3
+    keys = qt.quaternion_from_rotvec(rotvec)
+    u = np.linspace(0.0, 1.0, 50)
+    tu = u / 8.0
+    exact = qt.quaternion_from_rotvec(np.c_[np.sin(2 * tu), np.cos(3 * tu) - 1, tu**2] * 1e-3)
+    err = {}
+    for rule in ("reflect", "quadratic"):
+        q = squad(keys, u, boundary=rule)
+        err[rule] = np.abs(qt.log(qt.multiply(qt.conjugate(exact), q))).max()
+    assert err["quadratic"] < 0.2 * err["reflect"]
+    s = squad_control_points(keys, boundary="quadratic")
+    v1 = qt.log(qt.multiply(qt.conjugate(keys[0]), keys[1]))
+    v2 = qt.log(qt.multiply(qt.conjugate(keys[0]), keys[2]))
+    np.testing.assert_allclose(s[0], qt.multiply(keys[0], qt.exp((2 * v1 - v2) / 4)), atol=1e-16)
+    with pytest.raises(ValueError, match="boundary must be"):
+        squad_control_points(keys, boundary="natural")
