@@ -97,7 +97,7 @@ def read_grid_file(path: str | Path) -> tuple[dict[str, Any], dict[str, NDArray[
     if not source.is_file():
         raise GridFileError(f"{source}: no such grid file")
     try:
-        with np.load(source, allow_pickle=False) as npz:
+        with open(source, "rb") as fh, np.load(fh, allow_pickle=False) as npz:
             names = set(npz.files)
             missing = [n for n in ("header", "sha256", *PAYLOAD_ARRAYS) if n not in names]
             if missing:
@@ -109,7 +109,15 @@ def read_grid_file(path: str | Path) -> tuple[dict[str, Any], dict[str, NDArray[
             arrays = {name: np.asarray(npz[name]) for name in PAYLOAD_ARRAYS}
     except GridFileError:
         raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
+    except (
+        OSError,
+        ValueError,
+        EOFError,
+        TypeError,
+        AttributeError,
+        zipfile.BadZipFile,
+        KeyError,
+    ) as exc:
         raise GridFileError(
             f"{source}: not a readable grid file (truncated or corrupt: {exc})"
         ) from None
