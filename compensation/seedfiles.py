@@ -427,8 +427,8 @@ def _single_value(f: _SeedFile, *, nonnegative: bool = False) -> float:
         line, value = f.header["VALUE"][0], values[0]
     else:
         if len(f.rows) != 1 or len(f.rows[0][1]) != 1:
-            line = f.rows[1][0] if len(f.rows) > 1 else (f.rows[0][0] if f.rows else None)
-            raise f.fail(line, "expected exactly one value (a single number or VALUE v)")
+            bad = f.rows[1][0] if len(f.rows) > 1 else (f.rows[0][0] if f.rows else None)
+            raise f.fail(bad, "expected exactly one value (a single number or VALUE v)")
         line, value = f.rows[0][0], f.rows[0][1][0]
     if nonnegative and value < 0:
         raise f.fail(line, f"a random part must be ≥ 0, got {value}")
