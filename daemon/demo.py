@@ -73,7 +73,9 @@ def run_demo(
             steps = machine.volume.steps or (19, 23, 16)
             say(f"building grid for {machine.name} ({steps[0]}×{steps[1]}×{steps[2]} nodes)…")
             grid = CorrectionGrid.build(machine, steps=steps)
-            grid_path = Path(tmp) / f"{machine.name}.grid"
+            # next to the session log, so ``cmm-comp replay`` finds it; else temporary
+            keep = Path(mcap_path).with_suffix(".grid") if mcap_path is not None else None
+            grid_path = keep or Path(tmp) / f"{machine.name}.grid"
             grid.save(grid_path)
         mcap = Path(mcap_path) if mcap_path is not None else Path(tmp) / "demo.mcap"
         if mcap.exists():

@@ -1,0 +1,184 @@
+"""CLI handlers ``cmm-comp daemon``, ``cmm-comp demo``, ``cmm-comp replay``.
+
+``add_parsers(subparsers)`` registers the three subcommands (each sets ``handler``);
+``daemon/cli.py`` calls it. Handlers return the exit code: 0 success, 1 run-time failure,
+2 bad input (the message names the file or flag; never a traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def add_parsers(subparsers: Any) -> None:
+    """Register ``daemon``, ``demo`` and ``replay`` on an argparse subparsers object."""
+    from .config import add_override_flags
+
+    p = subparsers.add_parser(
+        "daemon",
+        help="run the compensation daemon (CAN and/or Modbus TCP)",
+        description="Correct readings from a CMM controller over CAN and/or Modbus TCP. "
+        "Every configuration key can be overridden by --<section>-<key>. "
+        "SIGHUP reloads the grid; SIGTERM stops cleanly.",
+    )
+    p.add_argument("--config", help="daemon.toml (see examples/daemon.toml)")
+    p.add_argument(
+        "--check", action="store_true", help="validate the configuration and grid, then exit"
+    )
+    add_override_flags(p)
+    p.set_defaults(handler=cmd_daemon)
+
+    p = subparsers.add_parser(
+        "demo",
+        help="simulated controller → daemon over a virtual CAN bus; E0 before/after",
+        description="Run the ISO 10360-2 length test, a ball plate and random points on a "
+        "simulated machine through the daemon (python-can virtual bus, one process).",
+    )
+    p.add_argument("--mcap", metavar="PATH", help="write the session log here (overwritten)")
+    p.add_argument("--json", metavar="SUMMARY", help="write the summary JSON here")
+    p.add_argument("--machine", help="machine.toml (default examples/machines/npl-bridge.toml)")
+    p.add_argument("--grid", help="use this grid instead of building one from the machine")
+    p.add_argument("--random", type=int, default=500, help="random points (default 500)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(handler=cmd_demo)
+
+    p = subparsers.add_parser(
+        "replay",
+        help="re-correct a logged session offline, or re-send it to a running daemon",
+    )
+    p.add_argument("session", metavar="SESSION", help="session .mcap file, directory or glob")
+    p.add_argument("--grid", help="re-correct with this grid (default: the session's grid)")
+    p.add_argument("--json", metavar="OUT", help="write the report as JSON")
+    p.add_argument(
+        "--to-bus", action="store_true", help="re-send the raw stream at the recorded pace"
+    )
+    p.add_argument("--interface", default="socketcan", help="python-can interface (--to-bus)")
+    p.add_argument("--channel", default="can0", help="python-can channel (--to-bus)")
+    p.add_argument(
+        "--bus-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra can.Bus argument, e.g. port=43113 (--to-bus; repeatable)",
+    )
+    p.add_argument("--speed", type=float, default=1.0, help="pace factor; 0 = flat out")
+    p.set_defaults(handler=cmd_replay)
+
+
+def _err(msg: str) -> int:
+    print(f"cmm-comp: {msg}", file=sys.stderr)
+    return 2
+
+
+def cmd_daemon(args: argparse.Namespace) -> int:
+    """Run the daemon until SIGTERM/SIGINT."""
+    from .config import ConfigError, load_config
+    from .grid_slot import GridLoadError, load_grid
+    from .service import DaemonService
+
+    try:
+        config = load_config(args.config, args)
+    except ConfigError as exc:
+        return _err(str(exc))
+    if args.check:
+        if config.grid.path:
+            try:
+                loaded = load_grid(config.grid.path, config.grid.expect_machine_sha256)
+            except GridLoadError as exc:
+                return _err(str(exc))
+            print(f"{config.source}: ok; grid {loaded.path} sha256 {loaded.sha256}")
+        else:
+            print(f"{config.source}: ok; no grid configured")
+        return 0
+    # Shorter GIL switch interval: the reply thread gets the interpreter back sooner from
+    # the MCAP writer thread (tail latency); process-wide, so only in the daemon's own process.
+    sys.setswitchinterval(0.0005)
+    service = DaemonService(config)
+    try:
+        service.start()
+    except (OSError, RuntimeError) as exc:
+        print(f"cmm-comp daemon: cannot start: {exc}", file=sys.stderr)
+        return 1
+    return service.run_forever()
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Run the demo, print the summary table, write the JSON summary."""
+    from compensation.errors import CmmCompError
+
+    from .demo import format_table, run_demo, summary_json
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"[demo] {msg}", file=sys.stderr, flush=True)
+
+    try:
+        result = run_demo(
+            machine_path=args.machine,
+            grid_path=args.grid,
+            mcap_path=args.mcap,
+            n_random=args.random,
+            seed=args.seed,
+            progress=progress,
+        )
+    except (CmmCompError, FileNotFoundError, ValueError) as exc:
+        return _err(str(exc))
+    print(format_table(result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(summary_json(result), indent=2) + "\n")
+    if result["controller_errors"]:
+        print(f"controller errors: {result['controller_errors']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _bus_options(items: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--bus-option {item!r} must be KEY=VALUE")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Re-correct a session (default) or re-send it to a bus (``--to-bus``)."""
+    import can
+
+    from .replay import ReplayError, replay_offline, replay_to_bus
+
+    try:
+        if args.to_bus:
+            opts = _bus_options(args.bus_option)
+            with can.Bus(interface=args.interface, channel=args.channel, **opts) as bus:
+                n = replay_to_bus(args.session, bus, args.speed)
+            print(f"re-sent {n} frames to {args.interface}:{args.channel}")
+            return 0
+        report = replay_offline(args.session, args.grid)
+    except (ReplayError, ValueError, can.CanError) as exc:
+        return _err(str(exc))
+    rows = [
+        ("session", ", ".join(report.session) + (" (cut by a crash)" if report.truncated else "")),
+        ("grid", f"{report.grid_path} ({report.grid_sha256[:12]})"),
+        ("session grid", report.session_grid_sha256[:12] or "-"),
+        ("readings", str(report.readings)),
+        ("compared (both corrected)", str(report.compared)),
+        ("max |replayed − sent|", f"{report.max_abs_diff_um:.4f} µm"),
+        ("RMS 3-D difference", f"{report.rms_diff_um:.4f} µm"),
+        ("status agrees", f"{report.status_agree}/{report.readings}"),
+    ]
+    rows += [(f"  status {k}", str(v)) for k, v in sorted(report.status_differ.items())]
+    width = max(len(k) for k, _ in rows)
+    print("\n".join(f"{k:<{width}}  {v}" for k, v in rows))
+    if args.json:
+        Path(args.json).write_text(json.dumps(report.as_dict(), indent=2) + "\n")
+    return 0
