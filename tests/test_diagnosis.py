@@ -1,0 +1,161 @@
+"""Diagnosis against hidden truths: the simulated machine hides a cause; the diagnosis must name it
+(cause and component/axis), bring the held-out residual to the noise, and say ``none`` on clean
+data. The big rate study is benchmarks/bench_discovery.py (docs/discovery.md)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from compensation.diagnosis import compute_residuals, diagnose, length_error_e0_um
+from compensation.diagnosis.candidates import all_candidates, effect_displacement_um
+from compensation.machine import Machine
+from compensation.measurements import write_measurements
+from sim_controller.sessions import true_error_um
+from sim_controller.true_machine import HIDDEN_CAUSES, simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
+KEYS = ("cause", "component", "axis", "varies_with")
+
+
+def _ids(entries) -> list[tuple]:
+    return sorted(tuple(e.get(k) for k in KEYS) for e in entries)
+
+
+@pytest.fixture(scope="module")
+def npl() -> Machine:
+    return Machine.from_toml(NPL)
+
+
+def test_candidate_designs_equal_the_extended_machine(npl) -> None:
+    """Fit and forward model agree: each candidate's design column is what the machine extended
+    by that effect adds (exact chain vs first order: second-order small)."""
+    _, data = simulate(npl, [], [], seed=3, n_points=120)
+    res = compute_residuals(npl, data)
+    for cand in all_candidates(res):
+        theta = cand.thetas[len(cand.thetas) // 2]
+        amps = [0.7 + 0.1 * j for j in range(cand.n_params)]
+        eff = cand.build(amps, theta)
+        via_machine = true_error_um(npl.with_effects([eff]), data) - true_error_um(npl, data)
+        via_design = cand.design(res, theta) @ np.asarray(amps)
+        scale = max(1.0, float(np.max(np.abs(via_machine))))
+        np.testing.assert_allclose(via_design, via_machine, atol=2e-3 * scale, err_msg=cand.label)
+        if cand.cause != "thermal_lag":  # the lag acts on the machine's own thermal terms
+            np.testing.assert_allclose(
+                effect_displacement_um(res, eff), via_design, atol=1e-3 * scale
+            )
+
+
+def test_e0_hand_value() -> None:
+    ref = np.array([[0.0, 0, 0], [100.0, 0, 0], [0.0, 50, 0]])
+    r = np.array([[0.0, 0, 0], [3.0, 0, 0], [0.0, -1.0, 0]])
+    # pairs: (0,1) 3 µm along x; (0,2) −1 along y; (1,2): dr = (−3,−1), dp = (−100,50)/|…|
+    expect = max(3.0, 1.0, abs((300 - 50) / np.hypot(100, 50)))
+    assert length_error_e0_um(ref, r, np.array(["a", "a", "a"])) == pytest.approx(expect)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("cause", HIDDEN_CAUSES)
+def test_names_the_hidden_cause(npl, cause, seed) -> None:
+    size = (0.5, 3.0)[seed]  # both ends of the required range
+    truth, data = simulate(npl, [cause], [size], seed=100 + seed)
+    d = diagnose(npl, data)
+    assert d.verdict == "found"
+    assert _ids(d.entries) == _ids([e.describe() for e in truth.hidden])
+    assert d.summary["heldout_rms_um"]["after"] <= 1.5 * truth.noise_rms_3d_um
+    assert d.summary["heldout_rms_um"]["after"] < d.summary["heldout_rms_um"]["before"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "causes",
+    [
+        ("periodic", "reversal"),
+        ("scale_expansion", "thermal_gradient"),
+        ("coupling", "probe_lobing"),
+    ],
+)
+def test_names_two_hidden_causes(npl, causes) -> None:
+    truth, data = simulate(npl, list(causes), [1.0, 2.0], seed=11)
+    d = diagnose(npl, data)
+    assert _ids(d.entries) == _ids([e.describe() for e in truth.hidden])
+    assert d.summary["heldout_rms_um"]["after"] <= 1.5 * truth.noise_rms_3d_um
+
+
+@pytest.mark.slow
+def test_no_false_alarm_on_clean_sessions(npl) -> None:
+    alarms = []
+    for seed in range(20):
+        _, data = simulate(npl, [], [], seed=5000 + seed)
+        d = diagnose(npl, data)
+        if d.verdict != "none":
+            alarms.append((seed, [e.get("label", e["cause"]) for e in d.entries]))
+    assert not alarms
+
+
+def test_end_to_end_extend_reproduces_truth(npl, tmp_path) -> None:
+    """sim machine with a hidden effect → CLI diagnose → CLI extend → the extended TOML's
+    volumetric_error is closer to the truth than the original model (on fresh points)."""
+    from compensation.diagnosis_cli import main
+
+    truth, data = simulate(npl, ["coupling"], [2.0], seed=42)
+    csv = write_measurements(tmp_path / "m.csv", data)
+    assert (
+        main(
+            [
+                "diagnose",
+                str(NPL),
+                str(csv),
+                "--json",
+                str(tmp_path / "d.json"),
+                "--report",
+                str(tmp_path / "rep"),
+            ]
+        )
+        == 0
+    )
+    out = json.loads((tmp_path / "d.json").read_text())
+    assert out["verdict"] == "found" and out["effects"][0]["cause"] == "coupling"
+    for key in ("residual_rms_um", "heldout_rms_um"):
+        assert set(out[key]) >= {"before", "after"} and out[key]["after"] < out[key]["before"]
+    assert 0 < out["effects"][0]["explained_fraction"] <= 1
+    html = (tmp_path / "rep" / "index.html").read_text()
+    assert (
+        "residual_vs_position_x.png" in html
+        and (tmp_path / "rep" / "residual_vs_position_x.png").exists()
+    )
+    assert main(["extend", str(NPL), str(csv), "-o", str(tmp_path / "ext.toml")]) == 0
+    extended = Machine.from_toml(tmp_path / "ext.toml")
+    assert [e.cause for e in extended.effects] == ["coupling"]
+    _, fresh = simulate(npl, [], [], seed=43)
+    t = true_error_um(truth.machine, fresh)
+    before = np.sqrt(np.mean((t - true_error_um(npl, fresh)) ** 2))
+    after = np.sqrt(np.mean((t - true_error_um(extended, fresh)) ** 2))
+    assert after < 0.2 * before
+
+
+def test_clean_machine_says_none_exit_zero(npl, tmp_path) -> None:
+    from compensation.diagnosis_cli import main
+
+    _, data = simulate(npl, [], [], seed=77)
+    csv = write_measurements(tmp_path / "m.csv", data)
+    assert main(["diagnose", str(NPL), str(csv), "--json", str(tmp_path / "d.json")]) == 0
+    out = json.loads((tmp_path / "d.json").read_text())
+    assert out["verdict"] == "none" and out["effects"] == []
+    assert out["residual_rms_um"]["after"] == pytest.approx(out["residual_rms_um"]["before"])
+
+
+def test_unexplained_structure_is_reported(npl) -> None:
+    """A residual no cause can produce (dz oscillating in time, unrelated to any temperature)
+    → ``unexplained``."""
+    _, data = simulate(npl, [], [], seed=8)
+    bump = 3.0 * np.sin(2 * np.pi * data.t_s / 5000.0)
+    data.reference_mm = data.reference_mm + np.column_stack([0 * bump, 0 * bump, bump]) / 1000
+    d = diagnose(npl, data)
+    assert d.verdict == "found"
+    assert "unexplained" in [e["cause"] for e in d.entries]
