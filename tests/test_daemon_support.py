@@ -1,0 +1,95 @@
+"""Helpers shared by the daemon, sim, integration and replay tests (no tests in here).
+
+The grid of ``examples/machines/npl-bridge.toml`` is built once per test process (~0.3 s) into
+a temporary directory removed at exit.
+"""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import shutil
+import socket
+import tempfile
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import can
+
+from compensation.grid import CorrectionGrid
+from compensation.machine import Machine
+from daemon.config import DaemonConfig
+from daemon.service import DaemonService
+from sim_controller.controller import CanController
+
+ROOT = Path(__file__).resolve().parents[1]
+NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
+STYLUS = [0.0, 0.0, -120.0]
+MCAST_GROUP = "ff11:7079:7468:6f6e:6465:6d6f:6d63:6173"
+CENTRE_MM = (450.0, 575.0, 200.0)
+
+
+@functools.cache
+def _workdir() -> Path:
+    path = Path(tempfile.mkdtemp(prefix="cmm-daemon-tests-"))
+    atexit.register(shutil.rmtree, path, True)
+    return path
+
+
+@functools.cache
+def npl_machine() -> Machine:
+    return Machine.from_toml(NPL)
+
+
+@functools.cache
+def npl_grid_path(steps: tuple[int, int, int] = (19, 23, 16)) -> Path:
+    """Grid file of the NPL example machine (built once)."""
+    path = _workdir() / f"npl-{steps[0]}x{steps[1]}x{steps[2]}.grid"
+    CorrectionGrid.build(npl_machine(), steps=steps).save(path)
+    return path
+
+
+def channel() -> str:
+    """A fresh virtual-bus channel name."""
+    return f"test-{uuid.uuid4().hex[:10]}"
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
+        s.bind(("::1", 0))
+        return int(s.getsockname()[1])
+
+
+def base_config(ch: str, grid: Path | None = None) -> DaemonConfig:
+    """Virtual CAN on ``ch``, NPL grid, no Modbus, metrics on a free port, no MCAP."""
+    cfg = DaemonConfig(source="<test>")
+    cfg.grid.path = str(grid if grid is not None else npl_grid_path())
+    cfg.grid.stylus_mm = list(STYLUS)
+    cfg.can.interface = "virtual"
+    cfg.can.channel = ch
+    cfg.metrics.port = 0
+    return cfg
+
+
+@contextmanager
+def daemon_and_controller(
+    cfg: DaemonConfig, **service_kwargs: object
+) -> Iterator[tuple[DaemonService, CanController, can.BusABC]]:
+    """Start a daemon on ``cfg.can.channel`` and a controller (with its raw bus) on it."""
+    cfg.check()
+    with DaemonService(
+        cfg, events_stream=service_kwargs.pop("events_stream", None), **service_kwargs
+    ) as d:  # type: ignore[arg-type]
+        bus = can.Bus(interface="virtual", channel=cfg.can.channel)
+        try:
+            with CanController(bus, answer_timeout_s=2.0) as ctl:
+                yield d, ctl, bus
+        finally:
+            bus.shutdown()
+
+
+def send_temps(ctl: CanController, temp_C: float = 20.5) -> None:
+    """One sample of each default sensor (0..3)."""
+    ctl.send_temperatures({0: temp_C, 1: temp_C, 2: temp_C, 3: temp_C})
