@@ -130,12 +130,24 @@ def _periodic_design(axis: str) -> Callable[[Residuals, Any], FloatArray]:
     return design
 
 
-def periodic_periods(span_mm: tuple[float, float]) -> tuple[tuple[float, ...], float]:
+def periodic_periods(
+    span_mm: tuple[float, float], positions_mm: FloatArray | None = None
+) -> tuple[tuple[float, ...], float]:
     """Scan grid of periods (mm) for an axis of travel L: 1.5 to 80 periods within L, spaced
-    0.1/L in spatial frequency; and the effective number of independent periods (≈ cycles span)."""
+    0.1/L in spatial frequency, and never shorter than 2.5× the typical gap between the
+    distinct positions measured (Nyquist: a few fixed targets alias short periods); and the
+    effective number of independent periods tried (≈ the span of cycles per travel)."""
     length = span_mm[1] - span_mm[0]
-    f = np.arange(1.5 / length, 80.0 / length, 0.1 / length)
-    return tuple(float(v) for v in 1.0 / f), 80.0 - 1.5
+    f_max = 80.0 / length
+    if positions_mm is not None and len(positions_mm) > 1:
+        distinct = np.unique(np.round(np.asarray(positions_mm) / (1e-3 * length)))
+        if len(distinct) > 1:
+            gap = float(np.median(np.diff(distinct))) * 1e-3 * length
+            f_max = min(
+                f_max, 1.0 / (2.5 * gap)
+            )  # margin: at 2 samples per period a sine aliases to ~0
+    f = np.arange(1.5 / length, f_max, 0.1 / length)
+    return tuple(float(v) for v in 1.0 / f), max(1.0, (f_max - 1.5 / length) * length)
 
 
 def all_candidates(res: Residuals) -> list[Candidate]:
@@ -207,7 +219,9 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     "reversal", {"axis": a}, 2, lambda p, _t, a=a, s=span: ReversalEffect(a, p, s)
                 )
             )
-        periods, n_eff = periodic_periods(_span(res, a))
+        periods, n_eff = periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])
+        if not periods:
+            continue
         out.append(
             Candidate(
                 "periodic",
