@@ -191,6 +191,34 @@ def test_printed_criterion_marks_are_straightness_only() -> None:
         assert not criterion or is_straightness(comp), (model, comp)
 
 
+def table_own_travel(
+    model: str, comp: str, u_own_mm: np.ndarray, env: dict[str, Any]
+) -> np.ndarray:
+    """The A.1 Abbe term of a moving table's own angular errors with its own travel as arm (e.g.
+    FB1 ΔX ∋ y·Ez(y)): a line measured anywhere reads it, and the loader removes it from tables
+    given with an ``offset`` (docs/seed-equations.md). Zero for tool-side axes. Oracle: the
+    printed appendix A.1 (tests/paper_a1.py), evaluated term by term."""
+    from paper_a1 import CORRECTIONS as A1_CORRECTIONS
+    from paper_a1 import PRINTED as A1
+
+    i, axis = "xyz".index(comp[1]), comp[3]
+    expr = A1[model][i]
+    if (model, i) in A1_CORRECTIONS:
+        expr = f"({expr}) + {A1_CORRECTIONS[(model, i)]}"
+    base: dict[str, Any] = dict.fromkeys(
+        [*LINEAR, *ANGULAR, "alpha", "beta1", "beta2", "phi1", "phi2"], 0.0
+    )
+    base.update(x=0.0, y=0.0, z=0.0, Xp=0.0, Yp=0.0, Zp=0.0)
+    base[axis] = u_own_mm / 1000.0
+    total = np.zeros_like(u_own_mm)
+    for e in ANGULAR:
+        if e[3] == axis:
+            one = dict(base)
+            one[e] = 1.0
+            total = total + evaluate(expr, one) * env[e]
+    return total
+
+
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("direction", AXES)
 def test_loader_applies_the_printed_rules(model: str, direction: str) -> None:
@@ -220,7 +248,9 @@ def test_loader_applies_the_printed_rules(model: str, direction: str) -> None:
                 env[e] = np.asarray(errors[e]["value"])
         rule = SLIPS.get((model, comp), PRINTED[model][comp][0])
         assert rule is not None
-        expected = evaluate(rule, env) * np.ones_like(pos)
+        expected = evaluate(rule, env) * np.ones_like(pos) - table_own_travel(
+            model, comp, pos - ref[AXIS_INDEX[comp[3]]], env
+        )
         if is_straightness(comp):
             expected = apply_criterion(pos, expected, "least_squares")
         got = machine.tables[comp].value
@@ -307,13 +337,6 @@ def test_tool_side_tables_measured_at_the_reference_are_the_model(model: str) ->
         )
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="kinematics convention: a workpiece-side axis' linear error is the error of the table "
-    "origin, so the line read at the reference point contains J(ref)·ε (e.g. FB1: y·εz(y) in "
-    "δx(y)) and the model adds it again; see docs/seed-equations-a2.md",
-)
 @pytest.mark.parametrize("model", ["FB1"])
 def test_workpiece_side_tables_measured_at_the_reference_are_the_model(model: str) -> None:
     tables = synthetic_tables(seed=12)
@@ -330,30 +353,33 @@ def test_workpiece_side_tables_measured_at_the_reference_are_the_model(model: st
 
 
 # --------------------------------------------------------------------------- 3. squareness
-def measure_squareness(machine: Machine, at_mm: np.ndarray) -> np.ndarray:
-    """(α, β1, β2) µrad from the least-squares slopes of two lines through ``at_mm``."""
+def measure_squareness(machine: Machine, at_mm: np.ndarray, nodes: int = NODES) -> np.ndarray:
+    """(α, β1, β2) µrad from the least-squares slopes of two lines through ``at_mm``, sampled at
+    the straightness tables' positions (the loader takes the lines' slopes there)."""
     out = []
     for sq in SQUARENESS_TARGETS:
         total = 0.0
         for axis, comp in SQUARENESS_LINES[sq]:
             k = AXIS_INDEX[axis]
-            q = np.linspace(0.0, UPPER_MM[k], NODES)
-            pts = np.repeat(at_mm[None, :], NODES, axis=0)
+            q = np.linspace(0.0, UPPER_MM[k], nodes)
+            pts = np.repeat(at_mm[None, :], nodes, axis=0)
             pts[:, k] = q
             total += np.polyfit(q, machine.volumetric_error(pts)[:, comp], 1)[0] * 1000.0
         out.append(-total)
     return np.array(out)
 
 
-def chain_squareness_correction(machine: Machine, at_mm: np.ndarray) -> np.ndarray:
+def chain_squareness_correction(
+    machine: Machine, at_mm: np.ndarray, nodes: int = NODES
+) -> np.ndarray:
     """The derivation: slopes of the Abbe terms of *all* axes' angular errors along both lines."""
     out = []
     for sq in SQUARENESS_TARGETS:
         total = 0.0
         for axis, comp in SQUARENESS_LINES[sq]:
             k = AXIS_INDEX[axis]
-            q = np.linspace(0.0, UPPER_MM[k], NODES)
-            pts = np.repeat(at_mm[None, :], NODES, axis=0)
+            q = np.linspace(0.0, UPPER_MM[k], nodes)
+            pts = np.repeat(at_mm[None, :], nodes, axis=0)
             pts[:, k] = q
             jac, _ = first_order_jacobian(
                 machine.chain, pts - machine.volume.reference_mm, np.zeros(3)
@@ -384,13 +410,6 @@ def test_chain_squareness_rule_recovers_the_true_squareness(model: str) -> None:
         np.testing.assert_allclose(recovered, truth.squareness_urad, atol=0.01, err_msg=str(at))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="compensation/offsets.py squareness_angular_part sums only the Abbe terms of the "
-    "line's own axis; the other axes' angular errors, whose arms grow along the line (the "
-    "paper's Ez(y), Ey(x)+Ey(y) … terms), are missing — see the report / docs",
-)
 @pytest.mark.parametrize("model", MODELS)
 def test_squareness_measured_at_an_offset_loads_to_the_true_squareness(model: str) -> None:
     truth = truth_machine(model)
