@@ -318,6 +318,9 @@ class CorrectionGrid:
                 "sha256": machine.identity_sha256(),
             },
             "source": "model",
+            "probe_offset_mm": np.asarray(
+                getattr(getattr(machine, "probe", None), "offset_mm", np.zeros(3)), float
+            ).tolist(),
             "reference_mm": np.asarray(getattr(vol, "reference_mm", lo), float).tolist(),
             "nonlinearity": nonlin,
         }

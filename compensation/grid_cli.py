@@ -1,0 +1,135 @@
+"""``cmm-comp grid build`` and ``cmm-comp correct`` (FORMATS.md §3).
+
+Register with ``add_parsers(subparsers)``; each handler takes the parsed arguments and returns
+an exit code. User-file problems raise ``ValueError`` (``GridFileError`` is one) with a message
+naming the file, line and column; nothing is written then.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from compensation.grid import CorrectionGrid
+
+__all__ = ["add_parsers", "cmd_correct", "cmd_grid_build", "read_points_csv"]
+
+SIGNAL_COLUMNS = (
+    "T_x",
+    "T_y",
+    "T_z",
+    "T_wp",
+    "T_top",
+    "T_bottom",
+    "T_air",
+    "dir_x",
+    "dir_y",
+    "dir_z",
+)
+
+
+def cmd_grid_build(args: argparse.Namespace) -> int:
+    """``cmm-comp grid build MACHINE -o GRID [--steps NX NY NZ]``."""
+    from compensation.machine import Machine
+
+    machine = Machine.from_toml(args.machine)
+
+    def progress(fraction: float, message: str) -> None:
+        if sys.stderr.isatty():
+            print(f"\rgrid build: {int(100 * fraction):3d} % {message}", end="", file=sys.stderr)
+
+    grid = CorrectionGrid.build(machine, steps=args.steps, progress=progress)
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    sha = grid.save(args.output)
+    print(
+        f"wrote {args.output}: {machine.name} ({machine.model}), steps {list(grid.steps)}, "
+        f"signals {[s.name for s in grid.signals]}, sha256 {sha[:16]}…"
+    )
+    return 0
+
+
+def read_points_csv(path: Path) -> tuple[list[str], list[list[str]], dict[str, np.ndarray]]:
+    """Header, raw rows and float columns of a POINTS.csv; ValueError names file/line/column."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = [h.strip() for h in next(reader, [])]
+            rows = [row for row in reader if any(cell.strip() for cell in row)]
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+    for name in ("x", "y", "z"):
+        if name not in header:
+            raise ValueError(f"{path}: missing column {name!r} (required: x, y, z)")
+    wanted = [c for c in ("x", "y", "z", "px", "py", "pz", *SIGNAL_COLUMNS) if c in header]
+    cols = {c: np.empty(len(rows)) for c in wanted}
+    for line, row in enumerate(rows, start=2):
+        if len(row) != len(header):
+            raise ValueError(f"{path}:{line}: {len(row)} cells, the header has {len(header)}")
+        for c in wanted:
+            cell = row[header.index(c)].strip()
+            try:
+                cols[c][line - 2] = float(cell) if cell else math.nan
+            except ValueError:
+                raise ValueError(f"{path}:{line}: column {c!r}: not a number: {cell!r}") from None
+    return header, rows, cols
+
+
+def cmd_correct(args: argparse.Namespace) -> int:
+    """``cmm-comp correct GRID --in POINTS.csv --out OUT.csv``."""
+    grid = CorrectionGrid.load(args.grid)
+    header, rows, cols = read_points_csv(Path(args.input))
+    pts = np.c_[cols["x"], cols["y"], cols["z"]]
+    if all(c in cols for c in ("px", "py", "pz")):
+        stylus = np.c_[cols["px"], cols["py"], cols["pz"]]
+    else:
+        stylus = np.asarray(grid.metadata.get("probe_offset_mm", [0.0, 0.0, 0.0]), float)
+    signals = {c: cols[c] for c in SIGNAL_COLUMNS if c in cols}
+    temps = {k: v for k, v in signals.items() if k.startswith("T_")}
+    inputs = {k: v for k, v in signals.items() if not k.startswith("T_")}
+    corrected, status = grid.correct(pts, stylus, temps or None, inputs or None)
+    out = Path(args.output)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent or Path("."))
+    try:
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
+            writer = csv.writer(fh)
+            writer.writerow([*header, "cx", "cy", "cz", "status"])
+            for row, c, st in zip(rows, corrected, status, strict=True):
+                cells = ["" if math.isnan(v) else f"{v:.6f}" for v in c]
+                writer.writerow([*row, *cells, st])
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    n_ok = int(np.sum(status == "ok"))
+    print(f"wrote {out}: {len(rows)} points, {n_ok} ok, {len(rows) - n_ok} flagged")
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``grid build`` and ``correct`` to the ``cmm-comp`` subcommands."""
+    p = sub.add_parser("grid", help="correction grid files")
+    grid_sub = p.add_subparsers(dest="grid_command", required=True)
+    b = grid_sub.add_parser("build", help="evaluate the model at every node and write a grid file")
+    b.add_argument("machine", type=Path, help="machine description (machine.toml)")
+    b.add_argument("-o", "--output", type=Path, required=True, help="grid file to write")
+    b.add_argument(
+        "--steps",
+        nargs=3,
+        type=int,
+        metavar=("NX", "NY", "NZ"),
+        help="nodes per axis (default: the machine's [volume] steps)",
+    )
+    b.set_defaults(handler=cmd_grid_build)
+    c = sub.add_parser("correct", help="correct indicated points with a grid (CSV in, CSV out)")
+    c.add_argument("grid", type=Path, help="grid file")
+    c.add_argument("--in", dest="input", type=Path, required=True, help="POINTS.csv")
+    c.add_argument("--out", dest="output", type=Path, required=True, help="OUT.csv")
+    c.set_defaults(handler=cmd_correct)
