@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import SimDevice
 
@@ -101,7 +102,11 @@ class ModbusEndpoint:
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop_event = asyncio.Event()
-        server = ModbusTcpServer(self._device(), address=(self.config.host, self.config.port))
+        server = ModbusTcpServer(
+            self._device(),
+            address=(self.config.host, self.config.port),
+            trace_pdu=self._trace_pdu,
+        )
         await server.serve_forever(background=True)
         try:
             sockets = getattr(server.transport, "sockets", None) or []
@@ -138,18 +143,7 @@ class ModbusEndpoint:
             result = await inner(
                 function_code, start_address, address, count, registers, set_values
             )
-            if result is not None:
-                self._input_errors += 1
-                self.metrics.fault("modbus_rejected_request")
-                self.events.emit(
-                    "modbus_rejected_request",
-                    "warning",
-                    function_code=function_code,
-                    address=address,
-                    count=count,
-                    code=int(result),
-                )
-            elif set_values is not None:
+            if result is None and set_values is not None:
                 self._temperatures(start_address, address, registers, [int(v) for v in set_values])
             if self.logger is not None:
                 self.logger.log(
@@ -168,6 +162,19 @@ class ModbusEndpoint:
             return result
 
         return SimDevice(base.id, simdata=base.simdata, action=action)
+
+    def _trace_pdu(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU:
+        """Count every exception response the server sends (bad address, value, function)."""
+        if sending and pdu.isError():
+            self._input_errors += 1
+            self.metrics.fault("modbus_rejected_request")
+            self.events.emit(
+                "modbus_rejected_request",
+                "warning",
+                function_code=pdu.function_code & 0x7F,
+                code=int(getattr(pdu, "exception_code", 0)),
+            )
+        return pdu
 
     def _block(self) -> DaemonBlock:
         block = self._daemon_block()

@@ -1,0 +1,154 @@
+"""The daemon as a real subprocess (its CLI) on ``udp_multicast`` with the interface-local IPv6
+group: corrections, SIGHUP grid reload (a bad grid is refused), SIGTERM closes the MCAP file
+cleanly, and after kill -9 the MCAP written before the kill reads back."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import can
+import numpy as np
+from test_daemon_support import (
+    MCAST_GROUP,
+    STYLUS,
+    free_udp_port,
+    npl_grid_path,
+    npl_machine,
+)
+
+from compensation.grid import CorrectionGrid
+from daemon.mcap_read import read_messages
+from protocol.codes import DaemonState, grid_id_from_sha256
+from sim_controller.controller import CanController, RawReading
+from sim_controller.runner import build_program, evaluate, make_readings, run_can
+from sim_controller.sim_machine import Environment, SimulatedMachine
+
+
+def _write_config(tmp: Path, port: int, grid: Path, mcap: Path) -> Path:
+    cfg = tmp / "daemon.toml"
+    cfg.write_text(
+        f"""
+[grid]
+path = "{grid}"
+stylus_mm = {STYLUS}
+[can]
+interface = "udp_multicast"
+channel = "{MCAST_GROUP}"
+heartbeat_s = 0.05
+[can.options]
+port = {port}
+[mcap]
+path = "{mcap}"
+flush_s = 0.2
+[metrics]
+port = 0
+"""
+    )
+    return cfg
+
+
+@contextmanager
+def _daemon(tmp: Path, grid: Path) -> Iterator[tuple[subprocess.Popen, CanController, Path, Path]]:
+    port = free_udp_port()
+    mcap = tmp / "session.mcap"
+    cfg = _write_config(tmp, port, grid, mcap)
+    log = tmp / "daemon.log"
+    with open(log, "w") as out:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "daemon.cli", "daemon", "--config", str(cfg)],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    bus = can.Bus(interface="udp_multicast", channel=MCAST_GROUP, port=port)
+    try:
+        with CanController(bus, answer_timeout_s=2.0) as ctl:
+            t0 = time.monotonic()
+            while ctl.heartbeat is None or ctl.heartbeat.state != DaemonState.READY:
+                assert proc.poll() is None, log.read_text()
+                assert time.monotonic() - t0 < 60, f"daemon not ready: {log.read_text()}"
+                time.sleep(0.05)
+            yield proc, ctl, mcap, log
+    finally:
+        bus.shutdown()
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+
+
+def _wait(pred, timeout_s: float = 5.0) -> bool:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def test_subprocess_udp_multicast_reload_and_sigterm(tmp_path) -> None:
+    grid = tmp_path / "machine.grid"
+    grid.write_bytes(npl_grid_path().read_bytes())
+    first_id = grid_id_from_sha256(CorrectionGrid.load(grid).sha256)
+    machine = npl_machine()
+    rng = np.random.default_rng(5)
+    program = build_program(
+        machine.volume.lower_mm, machine.volume.upper_mm, rng, 20, plate=False, repetitions=1
+    )
+    env = Environment()
+    sim = SimulatedMachine(machine, STYLUS, None, rng)
+    indicated, readings = make_readings(sim, env, program.points)
+    with _daemon(tmp_path, grid) as (proc, ctl, mcap, log):
+        assert ctl.heartbeat.grid_id == first_id
+        answers = run_can(ctl, readings, env)
+        result = evaluate(program, indicated, answers)
+        assert result["corrected"] == len(readings), result["statuses"]
+        assert result["e0_after_um"] * 10 <= result["e0_before_um"]
+        assert ctl.ignored > 0  # our own frames came back and were ignored
+        # SIGHUP with a new good grid: swapped atomically
+        other = tmp_path / "other.grid"
+        CorrectionGrid.build(machine, steps=(10, 12, 8)).save(other)
+        os.replace(other, grid)
+        new_id = grid_id_from_sha256(CorrectionGrid.load(grid).sha256)
+        proc.send_signal(signal.SIGHUP)
+        assert _wait(lambda: ctl.heartbeat.grid_id == new_id), log.read_text()
+        # SIGHUP with a bad grid: refused, the good one stays active
+        grid.write_bytes(b"garbage")
+        proc.send_signal(signal.SIGHUP)
+        assert _wait(lambda: "grid_refused" in log.read_text())
+        ctl.send_temperatures(env.samples(0.0))
+        assert ctl.exchange(RawReading(999, (450.0, 575.0, 200.0))).status == "ok"
+        assert ctl.heartbeat.grid_id == new_id
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(20) == 0
+    res = read_messages(mcap)
+    assert not res.truncated and res.error is None
+    grids = [m.payload["sha256"] for m in res.messages if m.topic == "/cmm/grid"]
+    assert len(grids) == 2 and grids[0] != grids[1]
+    assert sum(m.topic == "/cmm/corrected" for m in res.messages) == len(readings) + 1
+    events = [json.loads(line) for line in log.read_text().splitlines() if line.startswith("{")]
+    assert events[-1]["event"] == "stopped"
+
+
+def test_kill_9_mcap_reads_back(tmp_path) -> None:
+    with _daemon(tmp_path, npl_grid_path()) as (proc, ctl, mcap, _log):
+        ctl.send_temperatures(Environment().samples(0.0))
+        time.sleep(0.05)
+        for seq in range(300):
+            x = 100.0 + seq
+            assert ctl.exchange(RawReading(seq, (x, 500.0, 200.0))).status == "ok"
+        time.sleep(0.6)  # > 2 flush periods: everything so far is in finished chunks
+        for seq in range(300, 320):  # these may be lost with the chunk in progress
+            ctl.exchange(RawReading(seq, (100.0, 500.0, 200.0)))
+        proc.kill()  # SIGKILL
+        assert proc.wait(10) == -signal.SIGKILL
+    res = read_messages(mcap)
+    assert res.truncated
+    seqs = [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"]
+    assert seqs[:300] == list(range(300))
