@@ -184,6 +184,33 @@ def cmd_iso230(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_import_seed(args: argparse.Namespace) -> int:
+    """Load a data set kept in the paper's file layout (NAME S/R + .CTL, .DPX …) → machine.toml."""
+    from .seedfiles import find_seed_machines, load_seed_fileset
+
+    if args.name is None:
+        names = find_seed_machines(args.directory)
+        if len(names) != 1:
+            raise ValueError(
+                f"{args.directory}: name the machine to import; found {names or 'no .CTL file'}"
+            )
+        args.name = names[0]
+    machine = load_seed_fileset(args.directory, args.name)
+    machine.to_toml(args.out)
+    print(f"{machine.name} ({machine.model}): {len(machine.tables)} tables → {args.out}")
+    return 0
+
+
+def cmd_export_seed(args: argparse.Namespace) -> int:
+    """Write a machine description as the paper's file set (for legacy tools)."""
+    from .seedfiles import write_seed_fileset
+
+    machine = Machine.from_toml(args.machine)
+    written = write_seed_fileset(machine, args.directory, args.name)
+    print(f"wrote {len(written)} files to {args.directory}")
+    return 0
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register this layer's subcommands on the top-level parser."""
     p = sub.add_parser("map", help="volumetric error at every node of the working volume (CSV)")
@@ -217,6 +244,20 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     p.add_argument("--steps", nargs=3, type=int, metavar=("NX", "NY", "NZ"))
     p.add_argument("--magnification", type=float)
     p.set_defaults(handler=cmd_report)
+
+    p = sub.add_parser(
+        "import-seed", help="convert a seed-paper file set (NAME.CTL, NAMES.DPX …) to TOML"
+    )
+    p.add_argument("directory", type=Path)
+    p.add_argument("name", nargs="?", help="machine specification name (default: the only one)")
+    p.add_argument("-o", "--out", type=Path, required=True, help="machine.toml to write")
+    p.set_defaults(handler=cmd_import_seed)
+
+    p = sub.add_parser("export-seed", help="write a machine as a seed-paper file set")
+    p.add_argument("machine", type=Path)
+    p.add_argument("directory", type=Path)
+    p.add_argument("name", help="machine specification name (≤ 7 letters/digits)")
+    p.set_defaults(handler=cmd_export_seed)
 
     p = sub.add_parser("iso230", help="evaluate an ISO 230-2 run (.dat key=value file)")
     p.add_argument("dat", type=Path)
