@@ -461,9 +461,9 @@ class CorrectionGrid:
         if parallel:
             threads = max(1, (os.cpu_count() or 1))
             chunk = max(512, math.ceil(n / (8 * threads)))
-            kern.eval_parallel(*args, chunk)
+            kern.eval_parallel(*args, chunk)  # type: ignore[call-arg]
         else:
-            kern.eval_serial(*args)
+            kern.eval_serial(*args)  # type: ignore[call-arg]
         return out, out_q, out_t
 
     def _deviations(
@@ -519,7 +519,7 @@ class CorrectionGrid:
         status = np.full(n, "ok", dtype=STATUS_DTYPE)
         bad = ~np.isfinite(pts).all(axis=1)
         sty_bad = ~np.isfinite(stylus).all(axis=1)
-        bad = bad | sty_bad if stylus.shape[0] == n else (bad | sty_bad[0])
+        bad = bad | np.broadcast_to(sty_bad, (n,))
         clamped = np.clip(pts, self.lower_mm, self.upper_mm)
         outside_mask = np.any(np.abs(clamped - pts) > VOLUME_TOL_MM, axis=1) & ~bad
         if bad.any():
@@ -585,7 +585,7 @@ class CorrectionGrid:
         sty = np.asarray(stylus_mm, dtype=np.float64)
         if sty.size != 3:
             return None
-        maps = []
+        maps: list[dict[str, Any] | None] = []
         for m in (temps_C, inputs):
             if m is None:
                 maps.append(None)
@@ -604,8 +604,8 @@ class CorrectionGrid:
 
     def correct_point(
         self,
-        point_mm: Sequence[float],
-        stylus_mm: Sequence[float] = (0.0, 0.0, 0.0),
+        point_mm: ArrayLike,
+        stylus_mm: ArrayLike = (0.0, 0.0, 0.0),
         temps_C: Mapping[str, Any] | None = None,
         inputs: Mapping[str, Any] | None = None,
         *,
@@ -617,8 +617,8 @@ class CorrectionGrid:
         it is safe but serialised across threads. ~10 µs per call after the grid's warm-up.
         """
         outside_override = outside
-        x, y, z = (float(v) for v in point_mm)
-        px, py, pz = (float(v) for v in stylus_mm)
+        x, y, z = (float(v) for v in point_mm)  # type: ignore[union-attr, arg-type]
+        px, py, pz = (float(v) for v in stylus_mm)  # type: ignore[union-attr, arg-type]
         nan = math.nan
         if not all(math.isfinite(v) for v in (x, y, z, px, py, pz)):
             return (nan, nan, nan), "invalid_input"
@@ -626,12 +626,12 @@ class CorrectionGrid:
         cx = min(max(x, lo[0]), hi[0])
         cy = min(max(y, lo[1]), hi[1])
         cz = min(max(z, lo[2]), hi[2])
-        outside = (
+        is_outside = (
             abs(cx - x) > VOLUME_TOL_MM
             or abs(cy - y) > VOLUME_TOL_MM
             or abs(cz - z) > VOLUME_TOL_MM
         )
-        if outside and (outside_override or self.outside) == "refuse":
+        if is_outside and (outside_override or self.outside) == "refuse":
             return (nan, nan, nan), "outside_volume"
         status = "ok"
         with self._lock:
@@ -657,7 +657,7 @@ class CorrectionGrid:
             p1[0, 0], p1[0, 1], p1[0, 2] = cx, cy, cz
             s1[0, 0], s1[0, 1], s1[0, 2] = px, py, pz
             ncomp = self._ncomp_all if active else 3
-            kern.eval_serial(
+            kern.eval_serial(  # type: ignore[call-arg]
                 p1, s1, dev, self._lo, self._inv_d, self._shape,
                 self._q, self._sx, self._wq, self._ws, self._node, self._small, *self._knots,
                 *self._spans, self._coef, ncomp, o1, self._dummy_q, self._dummy_t, False,
@@ -667,7 +667,7 @@ class CorrectionGrid:
                 float(o1[0, 1]) + (y - cy),
                 float(o1[0, 2]) + (z - cz),
             )
-        if outside:
+        if is_outside:
             status = "clamped_outside_volume"
         return out, status
 
