@@ -27,11 +27,12 @@ from .maps import (
     line_report,
     volumetric_map,
 )
+from .seedfiles import find_seed_machines, load_seed_fileset, write_seed_fileset
 from .straightness import CRITERIA, apply_criterion, reference_line, straightness_um
 from .tables import ErrorTable
 
 if TYPE_CHECKING:
-    from .grid import CorrectionGrid
+    from .grid import CorrectionGrid, GridFileError
 
 __all__ = [
     "ALL_COMPONENTS",
@@ -46,6 +47,7 @@ __all__ = [
     "Effect",
     "ErrorTable",
     "EvalContext",
+    "GridFileError",
     "LineReport",
     "Machine",
     "MachineFileError",
@@ -58,23 +60,26 @@ __all__ = [
     "diagonals_um",
     "effect_from_table",
     "exact_pose",
+    "find_seed_machines",
     "first_order_error",
     "first_order_jacobian",
     "known_causes",
     "length_error_um",
     "line_report",
+    "load_seed_fileset",
     "parse_component",
     "reference_line",
     "register_effect",
     "straightness_um",
     "volumetric_map",
+    "write_seed_fileset",
 ]
 
 
 def __getattr__(name: str) -> Any:
     # The grid pulls in numba; import it only when asked for.
-    if name == "CorrectionGrid":
-        from .grid import CorrectionGrid
+    if name in ("CorrectionGrid", "GridFileError"):
+        from . import grid
 
-        return CorrectionGrid
+        return getattr(grid, name)
     raise AttributeError(f"module 'compensation' has no attribute {name!r}")
