@@ -43,6 +43,8 @@ from protocol import (
     decode_message,
     encode_message,
 )
+from protocol.can_frames import AXIS_LAYOUT, CORRECTION_STATUS_LAYOUT
+from protocol.can_ids import MessageKind
 from protocol.codes import Axis, DaemonState, Status, saturate_u16
 
 from .config import CanSection
@@ -118,7 +120,12 @@ class CanEndpoint(can.Listener):
         self._assembler: TripletAssembler[RawAxis] = TripletAssembler(window=config.window)
         self._probe: OrderedDict[int, tuple[float, float, float]] = OrderedDict()
         self._last_axis_s = 0.0
-        self._own_kinds = self.ids.daemon_tx_ids()
+        self._corrected_ids = (
+            self.ids.corrected_id(Axis.X),
+            self.ids.corrected_id(Axis.Y),
+            self.ids.corrected_id(Axis.Z),
+            self.ids.id_of(MessageKind.CORRECTION_STATUS),
+        )
         self._stop = threading.Event()
         self._connected = threading.Event()
         self._sent_state: DaemonState | None = None
@@ -299,17 +306,23 @@ class CanEndpoint(can.Listener):
 
     # ------------------------------------------------------------------ send
     def _send_answer(self, answer: Answer, t_rx: float) -> float:
-        seq, st = answer.seq, answer.status
-        px, py, pz = answer.position_nm
-        frames: list[Any] = [
-            CorrectedAxis(Axis.X, seq, px, st),
-            CorrectedAxis(Axis.Y, seq, py, st),
-            CorrectedAxis(Axis.Z, seq, pz, st),
+        seq, st = answer.seq, int(answer.status)
+        ids = self._corrected_ids
+        msgs = [
+            can.Message(
+                arbitration_id=ids[k],
+                is_extended_id=False,
+                data=AXIS_LAYOUT.pack(pos.to_bytes(5, "little", signed=True), seq, k | st << 2),
+            )
+            for k, pos in enumerate(answer.position_nm)
         ]
         latency_us = (time.perf_counter() - t_rx) * 1e6
         corr = saturate_u16(round(answer.correction_norm_um * 100))
-        frames.append(CorrectionStatus(seq, st, answer.applied, saturate_u16(latency_us), corr))
-        self._send(frames)
+        status = CORRECTION_STATUS_LAYOUT.pack(
+            seq, st, int(answer.applied), saturate_u16(latency_us), corr
+        )
+        msgs.append(can.Message(arbitration_id=ids[3], is_extended_id=False, data=status))
+        self._send_msgs(msgs)
         return latency_us
 
     def _send(self, frames: list[Any]) -> None:
@@ -317,7 +330,15 @@ class CanEndpoint(can.Listener):
         if bus is None:
             self.metrics.fault("send_without_bus", len(frames))
             return
-        msgs = [encode_message(f, self.ids) for f in frames]
+        self._send_msgs([encode_message(f, self.ids) for f in frames])
+
+    def _send_msgs(self, msgs: list[can.Message]) -> None:
+        """Send answer frames (struct-packed on the hot path; equal to the frame classes'
+        ``encode()``, which a test checks)."""
+        bus = self._bus
+        if bus is None:
+            self.metrics.fault("send_without_bus", len(msgs))
+            return
         for msg in msgs:
             try:
                 bus.send(msg, timeout=self.config.send_timeout_s)

@@ -102,6 +102,8 @@ class CorrectionEngine:
         self.events = events
         self.logger = logger
         self._stylus = np.asarray(config.grid.stylus_mm, dtype=float)
+        self._stylus_t = tuple(float(v) for v in config.grid.stylus_mm)
+        self._applied_cache: dict[tuple[int, bool, bool, bool], Applied] = {}
         self._warn_um = config.limits.warn_um
         self._error_um = config.limits.error_um
         self._geometry_only = config.temperatures.on_fault == "geometry_only"
@@ -142,15 +144,20 @@ class CorrectionEngine:
                 inputs[key] = float(sign)
         if r.probe is not None:
             inputs.update(zip(_PROBE_KEYS, r.probe, strict=True))
-        p_mm = np.array([r.position_nm], dtype=float) / NM_PER_MM
-        out, st = loaded.grid.correct(p_mm, self._stylus, temps, inputs or None)
-        status = _GRID_STATUS.get(str(st[0]), Status.INTERNAL_ERROR)
+        x, y, z = r.position_nm
+        p = (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM)
+        grid = loaded.grid
+        if hasattr(grid, "correct_point"):  # the grid's single-reading fast path
+            c, label = grid.correct_point(p, self._stylus_t, temps, inputs or None)
+        else:
+            out, st = grid.correct(np.array([p]), self._stylus, temps, inputs or None)
+            c, label = tuple(out[0].tolist()), str(st[0])
+        status = _GRID_STATUS.get(label, Status.INTERNAL_ERROR)
         if not status.geometric_correction_applied:
-            return self._raw(r, status, f"grid status {st[0]}")
-        c = out[0]
-        if not np.all(np.isfinite(c)):
+            return self._raw(r, status, f"grid status {label}")
+        if not (math.isfinite(c[0]) and math.isfinite(c[1]) and math.isfinite(c[2])):
             return self._raw(r, Status.INTERNAL_ERROR, "non-finite correction")
-        d_um = ((c - p_mm[0]) * 1000.0).tolist()
+        d_um = ((c[0] - p[0]) * 1000.0, (c[1] - p[1]) * 1000.0, (c[2] - p[2]) * 1000.0)
         norm = math.sqrt(d_um[0] ** 2 + d_um[1] ** 2 + d_um[2] ** 2)
         if norm > self._error_um:
             detail = f"|correction| {norm:.1f} µm > error limit {self._error_um} µm"
@@ -160,16 +167,26 @@ class CorrectionEngine:
             detail = f"|correction| {norm:.1f} µm > warning limit {self._warn_um} µm"
         applied = self._applied(loaded, temps, inputs, status)
         pos = (round(c[0] * NM_PER_MM), round(c[1] * NM_PER_MM), round(c[2] * NM_PER_MM))
-        return Answer(r.seq, status, pos, applied, (d_um[0], d_um[1], d_um[2]), detail)
+        return Answer(r.seq, status, pos, applied, d_um, detail)
 
     def required_roles(self, loaded: LoadedGrid) -> tuple[str, ...]:
         req = self.config.temperatures.required
         return loaded.temperature_roles if req is None else tuple(req)
 
-    @staticmethod
     def _applied(
-        loaded: LoadedGrid, temps: dict[str, float] | None, inputs: dict[str, float], st: Status
+        self,
+        loaded: LoadedGrid,
+        temps: dict[str, float] | None,
+        inputs: dict[str, float],
+        st: Status,
     ) -> Applied:
+        """Terms that went into the answer (cached per grid and input pattern)."""
+        has_dir = any(k in inputs for k in _DIR_KEYS)
+        has_probe = "nx" in inputs
+        key = (id(loaded), bool(temps), has_dir and st != Status.MISSING_DIRECTION, has_probe)
+        cached = self._applied_cache.get(key)
+        if cached is not None:
+            return cached
         applied = Applied.GEOMETRY
         if temps:
             roles = set(loaded.temperature_roles) & set(temps)
@@ -178,10 +195,13 @@ class CorrectionEngine:
             if "T_wp" in roles:
                 applied |= Applied.WORKPIECE_THERMAL
         needed = set(loaded.input_signals)
-        if st != Status.MISSING_DIRECTION and needed & set(_DIR_KEYS) and set(inputs) & needed:
+        if key[2] and needed & set(_DIR_KEYS):
             applied |= Applied.REVERSAL
-        if needed & set(_PROBE_KEYS) and set(inputs) & set(_PROBE_KEYS):
+        if has_probe and needed & set(_PROBE_KEYS):
             applied |= Applied.PROBE_DIRECTION
+        if len(self._applied_cache) > 64:
+            self._applied_cache.clear()
+        self._applied_cache[key] = applied
         return applied
 
     # ------------------------------------------------------------------ after the reply
