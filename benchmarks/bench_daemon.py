@@ -155,9 +155,12 @@ def bench_virtual(grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path) -
     echo_bus.shutdown()
     for name, mcap in (("daemon_no_mcap", ""), ("daemon_mcap", str(tmp / "bench.mcap"))):
         ch = f"bench-{uuid.uuid4().hex[:8]}"
-        with DaemonService(config(grid, "virtual", ch, mcap), events_stream=None):
-            with can.Bus(interface="virtual", channel=ch) as bus, CanController(bus) as ctl:
-                out[name], out[f"{name}_lost"] = measure(ctl, rs, rate_hz)
+        with (
+            DaemonService(config(grid, "virtual", ch, mcap), events_stream=None),
+            can.Bus(interface="virtual", channel=ch) as bus,
+            CanController(bus) as ctl,
+        ):
+            out[name], out[f"{name}_lost"] = measure(ctl, rs, rate_hz)
     return out
 
 
