@@ -144,7 +144,7 @@ class CanEndpoint(can.Listener):
         """True once the bus is open (within ``timeout_s``)."""
         return self._connected.wait(timeout_s)
 
-    def stop(self, timeout_s: float = 2.0) -> bool:
+    def stop(self, timeout_s: float = 2.0) -> bool:  # type: ignore[override]
         """Stop the thread and shut the bus down; True if the thread ended in ``timeout_s``."""
         self._stop.set()
         if self._thread.is_alive():
@@ -319,7 +319,7 @@ class CanEndpoint(can.Listener):
         latency_us = (time.perf_counter() - t_rx) * 1e6
         corr = saturate_u16(round(answer.correction_norm_um * 100))
         status = CORRECTION_STATUS_LAYOUT.pack(
-            seq, st, int(answer.applied), saturate_u16(latency_us), corr
+            seq, st, int(answer.applied), saturate_u16(round(latency_us)), corr
         )
         msgs.append(can.Message(arbitration_id=ids[3], is_extended_id=False, data=status))
         self._send_msgs(msgs)

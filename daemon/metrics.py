@@ -183,7 +183,9 @@ class MetricsServer:
                 pass  # the daemon's own event log covers operations
 
         self._httpd = http.server.HTTPServer((host, port), Handler)
-        self.host, self.port = self._httpd.server_address[:2]
+        bound = self._httpd.server_address
+        self.host = bound[0].decode() if isinstance(bound[0], bytes) else str(bound[0])
+        self.port = int(bound[1])
         self._thread = threading.Thread(
             target=self._httpd.serve_forever, kwargs={"poll_interval": 0.1}, name="metrics-http"
         )

@@ -212,7 +212,7 @@ class ModbusEndpoint:
             answer.status,
             answer.position_nm,
             answer.applied,
-            saturate_u16(latency_us),
+            saturate_u16(round(latency_us)),
             saturate_u16(round(answer.correction_norm_um * 100)),
         )
         loop = self._loop

@@ -60,6 +60,7 @@ class StateBoard:
     def _evaluate(self) -> None:
         with self._lock:
             conds = dict(self._conditions)
+            state: DaemonState
             if self._phase in (DaemonState.STARTING, DaemonState.STOPPING):
                 state, detail = self._phase, self._phase.label
             elif faults := {k: v for k, v in conds.items() if k.startswith("fault:")}:

@@ -93,7 +93,7 @@ class CanController(can.Listener):
         self._thread.start()
         return self
 
-    def stop(self, timeout_s: float = 2.0) -> bool:
+    def stop(self, timeout_s: float = 2.0) -> bool:  # type: ignore[override]
         """Stop the receive thread (the bus stays open); True if it ended in ``timeout_s``."""
         self._stop.set()
         if self._thread.is_alive():
