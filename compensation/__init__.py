@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from .components import ALL_COMPONENTS, ISO_ALIASES, TABLE_COMPONENTS, Component, parse_component
+from .diagnosis import Diagnosis, diagnose
 from .effects_base import Effect, EvalContext, effect_from_table, known_causes, register_effect
 from .errors import CmmCompError, MachineFileError, MeasurementFileError
 from .kinematics import MODEL_CHAINS, Chain, exact_pose, first_order_error, first_order_jacobian
@@ -27,6 +28,7 @@ from .maps import (
     line_report,
     volumetric_map,
 )
+from .measurements import Measurements, read_measurements, write_measurements
 from .seedfiles import find_seed_machines, load_seed_fileset, write_seed_fileset
 from .straightness import CRITERIA, apply_criterion, reference_line, straightness_um
 from .tables import ErrorTable
@@ -44,6 +46,7 @@ __all__ = [
     "CmmCompError",
     "Component",
     "CorrectionGrid",
+    "Diagnosis",
     "Effect",
     "ErrorTable",
     "EvalContext",
@@ -52,10 +55,12 @@ __all__ = [
     "Machine",
     "MachineFileError",
     "MeasurementFileError",
+    "Measurements",
     "PoseError",
     "Volume",
     "VolumetricMap",
     "apply_criterion",
+    "diagnose",
     "diagonal_endpoints",
     "diagonals_um",
     "effect_from_table",
@@ -68,10 +73,12 @@ __all__ = [
     "line_report",
     "load_seed_fileset",
     "parse_component",
+    "read_measurements",
     "reference_line",
     "register_effect",
     "straightness_um",
     "volumetric_map",
+    "write_measurements",
     "write_seed_fileset",
 ]
 

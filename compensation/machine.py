@@ -164,7 +164,8 @@ class Machine:
             if table.reversal is not None:
                 out[f"dir_{table.component.axis}"] = 0.0
         for effect in self.effects:
-            out.update(effect.signals())
+            for name, neutral in effect.signals().items():
+                out.setdefault(name, neutral)  # the machine's own neutral values win
         return out
 
     # ------------------------------------------------------------------ evaluation
