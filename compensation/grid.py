@@ -38,6 +38,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -77,6 +78,7 @@ ProgressFn = Callable[[float, str], None]
 DEFAULT_STEPS = (20, 20, 10)
 MIN_STEPS_PER_AXIS = 4  # the not-a-knot cubic spline needs 4 nodes per axis
 MAX_STEPS_PER_AXIS = 1000
+_LOBE_SIGNAL = re.compile(r"lobe(\d+)_[cs]_[xyz]")
 MAX_NODES = 2_000_000  # ~0.5 GB with 4 signals; beyond this is not a sensible grid
 STATUS_DTYPE = "<U22"
 VOLUME_TOL_MM = 1e-9  # points this far outside the volume still count as inside
@@ -417,6 +419,13 @@ class CorrectionGrid:
         )
         self._shape = np.array(self.steps, dtype=np.int64)
         self._needed = np.array([s.needed for s in self.signals], dtype=bool)
+        self._derived_lobes = sorted(
+            {
+                int(m.group(1))
+                for sig in self.signals
+                if sig.needed and (m := _LOBE_SIGNAL.fullmatch(sig.name))
+            }
+        )
         self._lo_list = self.lower_mm.tolist()
         self._hi_list = self.upper_mm.tolist()
         self._p1 = np.zeros((1, 3))
@@ -550,6 +559,25 @@ class CorrectionGrid:
             status[bad] = "invalid_input"
         return out, status, q, t
 
+    def derive_inputs(self, inputs: Mapping[str, Any] | None) -> Mapping[str, Any] | None:
+        """Add derived signals the grid needs and the caller cannot know: the probe-lobing
+        signals ``lobe<n>_{c,s}_<axis>`` from the probing direction ``nx, ny, nz``
+        (:func:`compensation.effects.lobing_signals`). Anything given explicitly wins; without a
+        probing direction nothing is derived and the point is flagged ``missing_input``."""
+        if not self._derived_lobes or inputs is None:
+            return inputs
+        if not all(k in inputs and inputs[k] is not None for k in ("nx", "ny", "nz")):
+            return inputs
+        from .effects import lobing_signals
+
+        out = dict(inputs)
+        for lobes in self._derived_lobes:
+            for name, value in lobing_signals(
+                inputs["nx"], inputs["ny"], inputs["nz"], lobes
+            ).items():
+                out.setdefault(name, value)
+        return out
+
     def correct(
         self,
         points_mm: ArrayLike,
@@ -565,6 +593,7 @@ class CorrectionGrid:
         (N,) arrays (either mapping may hold any signal). ``outside`` overrides the grid's
         policy (``"refuse"`` or ``"clamp"``). See the module docstring for the status values.
         """
+        inputs = self.derive_inputs(inputs)
         pts = np.asarray(points_mm, dtype=np.float64)
         if pts.shape in ((3,), (1, 3)):
             fast = self._single(pts.reshape(3), stylus_mm, temps_C, inputs, outside)
@@ -616,6 +645,8 @@ class CorrectionGrid:
         Scalars only (temperatures as floats); uses preallocated buffers under a lock, so
         it is safe but serialised across threads. ~10 µs per call after the grid's warm-up.
         """
+        if self._derived_lobes:
+            inputs = self.derive_inputs(inputs)
         outside_override = outside
         x, y, z = (float(v) for v in point_mm)  # type: ignore[union-attr, arg-type]
         px, py, pz = (float(v) for v in stylus_mm)  # type: ignore[union-attr, arg-type]
