@@ -63,6 +63,16 @@ def _axis(value: Any, what: str = "axis") -> str:
     return str(value)
 
 
+def _required_str(table: Mapping[str, Any], key: str) -> str:
+    """``table[key]`` as a string; a missing (or null) key is a ValueError naming the key."""
+    value = table.get(key)
+    if value is None:
+        raise ValueError(f"{key} is required")
+    if not isinstance(value, str):
+        raise ValueError(f"{key} must be a string, got {value!r}")
+    return value
+
+
 def _span(value: Any, what: str) -> tuple[float, float]:
     try:
         lo, hi = (float(v) for v in value)
@@ -111,9 +121,8 @@ def legendre_shape(
     """``P_k(s(q)) − P_k(s(ref))``: Legendre polynomial of order k, zero at the reference."""
     c = np.zeros(order + 1)
     c[order] = 1.0
-    return legendre.legval(normalised(q_mm, span_mm), c) - float(
-        legendre.legval(normalised(np.array([ref_mm]), span_mm), c)[0]
-    )
+    ref = float(legendre.legval(normalised(np.array([ref_mm]), span_mm), c)[0])
+    return np.asarray(legendre.legval(normalised(q_mm, span_mm), c) - ref, dtype=float)
 
 
 def default_orders(component: str) -> list[int]:
@@ -293,7 +302,7 @@ class CouplingEffect(Effect):
     def from_table(cls, t: Mapping[str, Any]) -> CouplingEffect:
         return cls(
             str(t.get("component")),
-            t.get("varies_with"),
+            _required_str(t, "varies_with"),
             _floats(t.get("coefficients"), "coefficients", len(cls.ORDERS)),
             _span(t.get("span_mm"), "span_mm"),
             _span(t.get("span_with_mm"), "span_with_mm"),
@@ -341,7 +350,9 @@ class ThermalGradientEffect(_TemperatureEffect):
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> ThermalGradientEffect:
-        return cls(t.get("axis"), _number(t, "curvature_urad_per_m_C"))._with_reference(t)
+        return cls(_required_str(t, "axis"), _number(t, "curvature_urad_per_m_C"))._with_reference(
+            t
+        )
 
 
 def lag_filter(t_s: FloatArray, temp_C: FloatArray, time_constant_s: float) -> FloatArray:
@@ -458,7 +469,7 @@ class ScaleExpansionEffect(_TemperatureEffect):
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> ScaleExpansionEffect:
-        return cls(t.get("axis"), _number(t, "delta_expansion"))._with_reference(t)
+        return cls(_required_str(t, "axis"), _number(t, "delta_expansion"))._with_reference(t)
 
 
 class WorkpieceExpansionEffect(_TemperatureEffect):
@@ -582,7 +593,7 @@ class ReversalEffect(Effect):
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> ReversalEffect:
         return cls(
-            t.get("axis"),
+            _required_str(t, "axis"),
             _floats(t.get("half_step_um"), "half_step_um", 2),
             _span(t.get("span_mm"), "span_mm"),
         )
@@ -637,7 +648,7 @@ class PeriodicEffect(Effect):
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> PeriodicEffect:
         return cls(
-            t.get("axis"),
+            _required_str(t, "axis"),
             _number(t, "period_mm"),
             _number(t, "a_cos_um"),
             _number(t, "b_sin_um"),

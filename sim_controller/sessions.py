@@ -163,7 +163,7 @@ def true_error_um(machine: Machine, data: Measurements) -> np.ndarray:
     """(N, 3) µm: what ``machine`` (the truth) makes the indicated positions wrong by."""
     return machine.volumetric_error(
         data.indicated_mm,
-        data.stylus(machine.probe.offset_mm),
+        data.stylus(machine.probe.offset_mm.tolist()),
         data.temps_C,
         inputs=data.inputs(),
     )

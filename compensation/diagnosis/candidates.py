@@ -41,6 +41,9 @@ LAG_TIME_CONSTANTS_S: tuple[float, ...] = tuple(
 )
 LOBES: tuple[int, ...] = (2, 3, 4, 5, 6)
 
+#: ``(amplitudes, theta) → Effect``: builds a candidate's effect for fitted amplitudes.
+EffectBuilder = Callable[[list[float], Any], Effect]
+
 
 def effect_displacement_um(res: Residuals, effect: Effect) -> FloatArray:
     """(N, 3) µm that ``effect`` alone adds at the points of ``res`` (first order in the chain)."""
@@ -72,7 +75,7 @@ class Candidate:
     cause: str
     keys: dict[str, Any]
     n_params: int
-    build: Callable[[list[float], Any], Effect]  # (amplitudes, theta) → Effect
+    build: EffectBuilder  # (amplitudes, theta) → Effect
     thetas: tuple[Any, ...] = (None,)
     look_elsewhere: float = 1.0  # effective number of independent theta values tried
     design_fn: Callable[[Residuals, Any], FloatArray] | None = None
@@ -150,6 +153,24 @@ def periodic_periods(
     return tuple(float(v) for v in 1.0 / f), max(1.0, (f_max - 1.5 / length) * length)
 
 
+def _parametric_builder(comp: str, span: tuple[float, float], orders: list[int]) -> EffectBuilder:
+    return lambda a, _t: ParametricEffect(comp, a, span, orders)
+
+
+def _coupling_builder(
+    comp: str, other: str, sa: tuple[float, float], sb: tuple[float, float]
+) -> EffectBuilder:
+    return lambda a, _t: CouplingEffect(comp, other, a, sa, sb)
+
+
+def _reversal_builder(a: str, span: tuple[float, float]) -> EffectBuilder:
+    return lambda p, _t: ReversalEffect(a, p, span)
+
+
+def _periodic_builder(a: str) -> EffectBuilder:
+    return lambda p, period: PeriodicEffect(a, float(period), p[0], p[1])
+
+
 def all_candidates(res: Residuals) -> list[Candidate]:
     """Every cause of FORMATS.md §4 that the measurements can show (signals present, axis moved)."""
     m = res.machine
@@ -166,9 +187,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 "parametric",
                 {"component": comp},
                 len(orders),
-                lambda a, _t, comp=comp, span=span, orders=orders: ParametricEffect(
-                    comp, a, span, orders
-                ),
+                _parametric_builder(comp, span, orders),
             )
         )
     for comp in ANGULAR:
@@ -181,15 +200,22 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     "coupling",
                     {"component": comp, "varies_with": other},
                     2,
-                    lambda a, _t, comp=comp, other=other, sa=sa, sb=sb: CouplingEffect(
-                        comp, other, a, sa, sb
-                    ),
+                    _coupling_builder(comp, other, sa, sb),
                 )
             )
 
     def thermal(eff: Any) -> Effect:
         eff.reference_C = ref_c
         return eff
+
+    def gradient_builder(a: str) -> EffectBuilder:
+        return lambda p, _t: thermal(ThermalGradientEffect(a, p[0]))
+
+    def scale_builder(a: str) -> EffectBuilder:
+        return lambda p, _t: thermal(ScaleExpansionEffect(a, p[0]))
+
+    def squareness_drift_builder(comp: str) -> EffectBuilder:
+        return lambda p, _t: thermal(SquarenessDriftEffect(comp, p[0], "T_air"))
 
     for a in AXES:
         if not moved[a]:
@@ -200,7 +226,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     "thermal_gradient",
                     {"axis": a},
                     1,
-                    lambda p, _t, a=a: thermal(ThermalGradientEffect(a, p[0])),
+                    gradient_builder(a),
                 )
             )
         if res.has(f"T_{a}"):
@@ -209,16 +235,12 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     "scale_expansion",
                     {"axis": a},
                     1,
-                    lambda p, _t, a=a: thermal(ScaleExpansionEffect(a, p[0])),
+                    scale_builder(a),
                 )
             )
         if res.has(f"dir_{a}"):
             span = _span(res, a)
-            out.append(
-                Candidate(
-                    "reversal", {"axis": a}, 2, lambda p, _t, a=a, s=span: ReversalEffect(a, p, s)
-                )
-            )
+            out.append(Candidate("reversal", {"axis": a}, 2, _reversal_builder(a, span)))
         periods, n_eff = periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])
         if not periods:
             continue
@@ -227,7 +249,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 "periodic",
                 {"axis": a},
                 2,
-                lambda p, period, a=a: PeriodicEffect(a, float(period), p[0], p[1]),
+                _periodic_builder(a),
                 thetas=periods,
                 look_elsewhere=n_eff,
                 design_fn=_periodic_design(a),
@@ -255,7 +277,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     "squareness_drift",
                     {"component": comp},
                     1,
-                    lambda p, _t, comp=comp: thermal(SquarenessDriftEffect(comp, p[0], "T_air")),
+                    squareness_drift_builder(comp),
                 )
             )
     if (

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from .candidates import Candidate
@@ -36,7 +37,7 @@ class Problem:
 
     res: Residuals
     axes: tuple[int, ...]  # measured axes (residual not identically zero)
-    folds: list[FloatArray]  # index arrays of held-out points
+    folds: list[NDArray[np.intp]]  # index arrays of held-out points
 
     @property
     def y(self) -> FloatArray:
@@ -181,7 +182,7 @@ def cv_predictions(problem: Problem, terms: Sequence[Term], rescan: bool = True)
         beta, _, _ = fit(problem, fold_terms, train)
         x_test = problem.stacked(fold_terms, test)
         p = (x_test @ beta).reshape(len(test), len(problem.axes))
-        pred[np.ix_(test, problem.axes)] = p
+        pred[np.ix_(test, np.asarray(problem.axes, dtype=np.intp))] = p
     return pred
 
 

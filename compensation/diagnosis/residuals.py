@@ -73,7 +73,7 @@ class Residuals:
 
 def compute_residuals(machine: Machine, data: Measurements) -> Residuals:
     """Residuals of ``machine`` against ``data`` (see module docstring)."""
-    stylus = data.stylus(machine.probe.offset_mm)
+    stylus = data.stylus(machine.probe.offset_mm.tolist())
     predicted = machine.volumetric_error(
         data.indicated_mm, stylus, data.temps_C, inputs=data.inputs()
     )

@@ -189,9 +189,9 @@ def diagnose(
 
 
 def _public_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    out = []
+    out: list[dict[str, Any]] = []
     for r in rows[:15]:
-        row = {k: r[k] for k in ("label", "rss", "p_adj") if k in r}
+        row: dict[str, Any] = {k: r[k] for k in ("label", "rss", "p_adj") if k in r}
         for k in ("cv_mse", "cv_gain"):
             if k in r:
                 row[k] = r[k]

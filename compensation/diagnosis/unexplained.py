@@ -24,7 +24,7 @@ from .residuals import FloatArray, Residuals
 def _leg(s: FloatArray, k: int) -> FloatArray:
     c = np.zeros(k + 1)
     c[k] = 1.0
-    return legendre.legval(s, c)
+    return np.asarray(legendre.legval(s, c), dtype=float)
 
 
 def _norm(v: FloatArray) -> FloatArray:
