@@ -396,6 +396,17 @@ class FirstOrderLag:
         self._last = (t_s, temp_C, y)
         return y
 
+    def value_at(self, t_s: float) -> float:
+        """The lagged value at ``t_s`` (s) without a new sample: the input held at its last
+        value since then (°C). Before any sample: NaN."""
+        if self._last is None:
+            return math.nan
+        t0, x0, y0 = self._last
+        h = t_s - t0
+        if h <= 0:
+            return y0
+        return x0 + (y0 - x0) * math.exp(-h / self.time_constant_s)
+
 
 class ThermalLagEffect(Effect):
     """The structure's effective temperature follows the measured scale temperatures with a

@@ -78,6 +78,27 @@ ProgressFn = Callable[[float, str], None]
 DEFAULT_STEPS = (20, 20, 10)
 MIN_STEPS_PER_AXIS = 4  # the not-a-knot cubic spline needs 4 nodes per axis
 MAX_STEPS_PER_AXIS = 1000
+
+
+def _signal_filters(machine: Any) -> list[dict[str, Any]]:
+    """Runtime signal filters required by the machine's effects (the thermal lag)."""
+    out: list[dict[str, Any]] = []
+    for effect in getattr(machine, "effects", []):
+        if getattr(effect, "cause", "") == "thermal_lag":
+            from .effects import LAGGED_SIGNALS
+
+            table = effect.to_table()
+            out.append(
+                {
+                    "kind": "first_order_lag",
+                    "signals": list(LAGGED_SIGNALS),
+                    "time_constant_s": float(table["time_constant_s"]),
+                    "fraction": float(table.get("fraction", 1.0)),
+                }
+            )
+    return out
+
+
 _LOBE_SIGNAL = re.compile(r"lobe(\d+)_[cs]_[xyz]")
 MAX_NODES = 2_000_000  # ~0.5 GB with 4 signals; beyond this is not a sensible grid
 STATUS_DTYPE = "<U22"
@@ -325,6 +346,7 @@ class CorrectionGrid:
             ).tolist(),
             "reference_mm": np.asarray(getattr(vol, "reference_mm", lo), float).tolist(),
             "nonlinearity": nonlin,
+            "signal_filters": _signal_filters(machine),
         }
         return cls(
             lo,
@@ -767,6 +789,16 @@ class CorrectionGrid:
         cmd[~active] = np.nan
         return cmd, status
 
+    @property
+    def signal_filters(self) -> list[dict[str, Any]]:
+        """Filters a runtime user must apply to raw signals before :meth:`correct`.
+
+        Each is ``{"kind": "first_order_lag", "signals": [...], "time_constant_s": τ,
+        "fraction": w}``: feed ``T + w·(lag_τ(T) − T)`` for each listed signal, the lag being a
+        first-order filter over time (:class:`compensation.effects.FirstOrderLag`). The grid's
+        sensitivities are with respect to those effective signals (thermal-lag effect)."""
+        return list(self.metadata.get("signal_filters", []))
+
     # ------------------------------------------------------------------ file
     def header(self) -> dict[str, Any]:
         """The self-describing file header (JSON-serialisable)."""
@@ -851,6 +883,8 @@ class CorrectionGrid:
                         "machine",
                         "source",
                         "reference_mm",
+                        "probe_offset_mm",
+                        "signal_filters",
                         "nonlinearity",
                         "built_utc",
                         "library_version",

@@ -138,6 +138,9 @@ class CorrectionEngine:
             temps = None  # geometry only: the grid flags the missing thermal terms
         else:
             self.last_temperature_fault = None
+        filters = loaded.grid.signal_filters if hasattr(loaded.grid, "signal_filters") else []
+        if temps and filters:
+            temps = self.temperatures.effective(temps, filters, now_s)
         inputs: dict[str, float] = {}
         for key, sign in zip(_DIR_KEYS, r.directions, strict=True):
             if sign:

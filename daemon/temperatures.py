@@ -13,8 +13,11 @@ required role is not usable, the status that says why (first reason in the order
 from __future__ import annotations
 
 import threading
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
+from compensation.effects import FirstOrderLag
 from protocol.codes import Status
 
 from .config import TemperaturesSection
@@ -58,6 +61,7 @@ class TemperatureTable:
         self._lock = threading.Lock()
         self._sensors: dict[int, SensorState] = {}
         self._by_role: dict[str, int] = {role: sid for sid, role in self.roles.items()}
+        self._lags: dict[tuple[str, float], FirstOrderLag] = {}
 
     def update(
         self, sensor: int, temp_C: float, counter: int, valid: bool, now_s: float
@@ -103,6 +107,10 @@ class TemperatureTable:
                 sensor, role, temp_C, counter, valid, now_s, changed_s, fault, detail
             )
             self._sensors[sensor] = state
+            if fault is None:
+                for (lag_role, _tau), lag in self._lags.items():
+                    if lag_role == role:
+                        lag.update(now_s, temp_C)
             return state
 
     def inputs(self, required: tuple[str, ...], now_s: float) -> TemperatureVerdict:
@@ -132,6 +140,37 @@ class TemperatureTable:
                 if status is None:
                     status, detail = why, text
         return TemperatureVerdict(temps, status, detail)
+
+    def effective(
+        self, temps_C: Mapping[str, float], filters: Sequence[Mapping[str, Any]], now_s: float
+    ) -> dict[str, float]:
+        """Temperatures the grid expects after its signal filters (``grid.signal_filters``).
+
+        For a ``first_order_lag`` filter (the thermal-lag effect found by model discovery) each
+        listed role becomes ``T + w·(lag_τ(T) − T)``; the lag is fed with every usable sample of
+        that role from the first time it is asked for (starting in equilibrium) and held between
+        samples. Roles without a filter pass through unchanged.
+        """
+        out = dict(temps_C)
+        for spec in filters:
+            if spec.get("kind") != "first_order_lag":
+                continue
+            tau = float(spec["time_constant_s"])
+            weight = float(spec.get("fraction", 1.0))
+            for role in spec.get("signals", ()):
+                if role not in temps_C:
+                    continue
+                with self._lock:
+                    lag = self._lags.get((role, tau))
+                    if lag is None:
+                        lag = self._lags[(role, tau)] = FirstOrderLag(tau)
+                        sid = self._by_role.get(role)
+                        state = self._sensors.get(sid) if sid is not None else None
+                        t0 = state.received_s if state is not None else now_s
+                        lag.update(t0, float(temps_C[role]))
+                    lagged = lag.value_at(now_s)
+                out[role] = temps_C[role] + weight * (lagged - temps_C[role])
+        return out
 
     def snapshot(self) -> list[SensorState]:
         """All sensor states, by sensor id."""

@@ -71,3 +71,24 @@ def test_missing_probe_direction_is_flagged(extended: tuple[Machine, CorrectionG
     assert status[0] == "missing_input"
     _c, st = grid.correct_point((100.0, 100.0, 100.0), (0, 0, 0), temps, {"dir_x": 1.0})
     assert st == "missing_input"
+
+
+def test_thermal_lag_filter_travels_in_the_grid_file(tmp_path: Path) -> None:
+    base = Machine.from_toml(NPL)
+    data = dict(base.description)
+    data["effects"] = [{"cause": "thermal_lag", "time_constant_s": 1800.0, "fraction": 0.6}]
+    machine = Machine.from_dict(data)
+    grid = CorrectionGrid.build(machine, steps=(5, 5, 4))
+    assert grid.signal_filters == [
+        {
+            "kind": "first_order_lag",
+            "signals": ["T_x", "T_y", "T_z"],
+            "time_constant_s": 1800.0,
+            "fraction": 0.6,
+        }
+    ]
+    grid.save(tmp_path / "lag.grid")
+    loaded = CorrectionGrid.load(tmp_path / "lag.grid")
+    assert loaded.signal_filters == grid.signal_filters
+    np.testing.assert_allclose(loaded.metadata["probe_offset_mm"], base.probe.offset_mm)
+    assert CorrectionGrid.build(base, steps=(5, 5, 4)).signal_filters == []
