@@ -89,6 +89,9 @@ def frame_payload(msg: can.Message, channel: str) -> dict[str, Any]:
     }
 
 
+_LOG_BACKLOG_MAX = 256
+
+
 class CanEndpoint(can.Listener):
     """Serve corrections on one CAN bus. Context manager; ``stop(timeout_s)``.
 
@@ -119,6 +122,8 @@ class CanEndpoint(can.Listener):
         self._bus: can.BusABC | None = None
         self._assembler: TripletAssembler[RawAxis] = TripletAssembler(window=config.window)
         self._probe: OrderedDict[int, tuple[float, float, float]] = OrderedDict()
+        # frames to log, written after the answer is sent: logging stays off the reply path
+        self._log_backlog: list[tuple[str, can.Message]] = []
         self._last_axis_s = 0.0
         self._corrected_ids = (
             self.ids.corrected_id(Axis.X),
@@ -149,6 +154,8 @@ class CanEndpoint(can.Listener):
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout_s)
+        if not self._thread.is_alive():
+            self._flush_log()  # what was received or sent last still reaches the log
         self._close()
         return not self._thread.is_alive()
 
@@ -256,7 +263,19 @@ class CanEndpoint(can.Listener):
         else:
             self._on_undecodable(frame)
         if self.logger is not None:
-            self.logger.log("/cmm/can_rx", frame_payload(msg, str(self.config.channel)))
+            self._log_backlog.append(("/cmm/can_rx", msg))
+            # a reading's X and Y frames are logged after its answer, not before it
+            if not self._assembler.pending_seqs or len(self._log_backlog) >= _LOG_BACKLOG_MAX:
+                self._flush_log()
+
+    def _flush_log(self) -> None:
+        """Hand the frames received/sent since the last answer to the MCAP logger."""
+        if self.logger is None or not self._log_backlog:
+            return
+        ch = str(self.config.channel)
+        backlog, self._log_backlog = self._log_backlog, []
+        for topic, msg in backlog:
+            self.logger.log(topic, frame_payload(msg, ch))
 
     def _on_undecodable(self, result: object) -> None:
         if isinstance(result, UnknownId):
@@ -348,14 +367,15 @@ class CanEndpoint(can.Listener):
                 return
         self.metrics.count("frames_tx", len(msgs))
         if self.logger is not None:
-            ch = str(self.config.channel)
             now = time.time()
             for msg in msgs:
                 msg.timestamp = now
-                self.logger.log("/cmm/can_tx", frame_payload(msg, ch))
+                self._log_backlog.append(("/cmm/can_tx", msg))
 
     # ------------------------------------------------------------------ periodic
     def _housekeeping(self) -> None:
+        if not self._assembler.pending_seqs:
+            self._flush_log()
         now = time.perf_counter()
         pending = self._assembler.pending_seqs
         if pending and now - self._last_axis_s > self.config.triplet_timeout_s:

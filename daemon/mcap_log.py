@@ -60,6 +60,9 @@ def _open_exclusive(path: Path) -> IO[bytes]:
     return open(path, "xb")  # the logger owns and closes it
 
 
+_BATCH = 32  # messages per writer batch: ~0.2 ms of interpreter time at most
+
+
 class McapLogger:
     """Log JSON messages to MCAP from a hot path without blocking it.
 
@@ -297,7 +300,7 @@ class McapLogger:
         queue = self._queue
         channels = self._channels
         dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
-        while n < 256:  # bounds how far a file overshoots roll_bytes
+        while n < _BATCH:  # short batches (GIL yielded between them); bounds roll overshoot
             try:
                 topic, payload, t_ns = queue.popleft()
             except IndexError:
@@ -341,6 +344,8 @@ class McapLogger:
             while True:
                 stopping = self._stopping.is_set()
                 n = self._write_batch()
+                if n:
+                    time.sleep(0)  # yield the GIL between short batches: the reply path comes first
                 dirty = dirty or n > 0
                 now = time.monotonic()
                 if dirty and now - last_flush >= self._flush_period_s:
