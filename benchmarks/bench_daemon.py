@@ -14,7 +14,8 @@ ratios, not absolute numbers (the machine is shared):
 * Sustained readings/s over ``--sustained`` readings (virtual, unpaced, bounded in flight) and
   how many were lost.
 * Modbus TCP on 127.0.0.1: one reading = FC16 write of READING + FC3 read of ANSWER; the bare
-  baseline is the same two requests against a plain pymodbus ``SimDevice`` without any action.
+  baseline is the same two requests against a plain pymodbus ``SimDevice`` without any action,
+  served like the daemon's endpoint from its own thread and event loop.
 """
 
 from __future__ import annotations
@@ -274,7 +275,11 @@ def bench_modbus(grid: Path, n: int) -> dict[str, Any]:
         finally:
             client.close()
 
-    async def bare() -> list[float]:
+    def bare() -> list[float]:
+        """A plain pymodbus server with no action, served from its own thread and event loop —
+        the same architecture as the daemon's Modbus endpoint — and the same client."""
+        import threading
+
         dev = SimDevice(
             1,
             simdata=[
@@ -284,15 +289,29 @@ def bench_modbus(grid: Path, n: int) -> dict[str, Any]:
                 SimData(mm.OUTPUT_START, values=[0] * mm.OUTPUT_SIZE, datatype=DataType.REGISTERS),
             ],
         )
-        server = ModbusTcpServer(dev, address=("127.0.0.1", 0))
-        await server.serve_forever(background=True)
-        port = server.transport.sockets[0].getsockname()[1]
-        try:
-            return await client_loop(port, False)
-        finally:
+        ready, port_box = threading.Event(), []
+        loop = asyncio.new_event_loop()
+        stop = asyncio.Event()
+
+        async def serve() -> None:
+            server = ModbusTcpServer(dev, address=("127.0.0.1", 0))
+            await server.serve_forever(background=True)
+            port_box.append(server.transport.sockets[0].getsockname()[1])
+            ready.set()
+            await stop.wait()
             await server.shutdown()
 
-    bare_lat = asyncio.run(bare())
+        thread = threading.Thread(target=loop.run_until_complete, args=(serve(),), daemon=True)
+        thread.start()
+        ready.wait(5)
+        try:
+            return asyncio.run(client_loop(port_box[0], False))
+        finally:
+            loop.call_soon_threadsafe(stop.set)
+            thread.join(5)
+            loop.close()
+
+    bare_lat = bare()
     cfg = config(grid, "virtual", "unused")
     cfg.can.enabled = False
     cfg.modbus.enabled = True
