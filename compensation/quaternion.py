@@ -226,7 +226,11 @@ def log(q: ArrayLike) -> FloatArray:
     """
     arr = _as_quat(q)
     vec = arr[..., 1:]
-    s = np.linalg.norm(vec, axis=-1)
+    # |v| without underflow: scale by the largest component first (|v| ~ 1e-306 still has a
+    # direction, and for w < 0 it decides the axis of a rotation by ≈ 2π)
+    big = np.max(np.abs(vec), axis=-1)
+    safe = np.where(big > 0.0, big, 1.0)
+    s = big * np.linalg.norm(vec / safe[..., None], axis=-1)
     theta = np.arctan2(s, arr[..., 0])
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = np.where(s > 0.0, theta / np.where(s > 0.0, s, 1.0), 1.0)

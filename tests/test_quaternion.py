@@ -143,3 +143,10 @@ def test_properties_unit_norm_round_trips(a: np.ndarray, b: np.ndarray, h: float
 def test_property_log_inverts_exp(v: np.ndarray) -> None:
     # |v| < π/2·√3 ≈ 2.6 < π: log is the principal inverse of exp
     np.testing.assert_allclose(qt.log(qt.exp(v)), v, atol=1e-13)
+
+
+def test_log_exp_round_trip_near_minus_one_with_tiny_vector() -> None:
+    """Found by hypothesis in CI: |v| ~ 1e-306 underflowed to 0, so log forgot the axis and
+    exp(log(q)) returned +1 for q ≈ −1."""
+    q = np.array([-1.0, 1.8369361e-306, 1.8369361e-306, 1.8369361e-306])
+    np.testing.assert_allclose(qt.exp(qt.log(q)), q, atol=1e-14)
