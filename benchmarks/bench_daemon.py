@@ -10,7 +10,9 @@ ratios, not absolute numbers (the machine is shared):
   answers with 4 frames built from the raw payloads (no decoding, no correction); the daemon
   decodes, assembles, corrects with the grid, answers, then logs. Latency = last raw frame sent
   → status frame received at the controller, paced at 1 kHz, µs.
-* MCAP logging on vs off (virtual): logging must not add to the reply latency.
+* MCAP logging on vs off (virtual): logging must not add to the reply latency; with the
+  writer thread (``[mcap] writer = "thread"``) and with the child-process writer
+  (``writer = "process"``, JSON and MCAP off the daemon's GIL).
 * Sustained readings/s over ``--sustained`` readings (virtual, unpaced, bounded in flight) and
   how many were lost.
 * Modbus TCP on 127.0.0.1: one reading = FC16 write of READING + FC3 read of ANSWER; the bare
@@ -125,7 +127,9 @@ def measure(
     return pct([a.latency_us for a in answers]), lost
 
 
-def config(grid: Path, interface: str, ch: str, mcap: str = "", port: int = 0) -> DaemonConfig:
+def config(
+    grid: Path, interface: str, ch: str, mcap: str = "", port: int = 0, writer: str = "thread"
+) -> DaemonConfig:
     cfg = DaemonConfig(source="<bench>")
     cfg.grid.path = str(grid)
     cfg.grid.stylus_mm = STYLUS
@@ -135,6 +139,7 @@ def config(grid: Path, interface: str, ch: str, mcap: str = "", port: int = 0) -
     if port:
         cfg.can.options = {"port": port}
     cfg.mcap.path = mcap
+    cfg.mcap.writer = writer
     cfg.metrics.enabled = False
     cfg.temperatures.stale_s = 3600
     return cfg.check()
@@ -154,10 +159,14 @@ def bench_virtual(grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path) -
     stop.set()
     t.join()
     echo_bus.shutdown()
-    for name, mcap in (("daemon_no_mcap", ""), ("daemon_mcap", str(tmp / "bench.mcap"))):
+    for name, mcap, writer in (
+        ("daemon_no_mcap", "", "thread"),
+        ("daemon_mcap", str(tmp / "bench.mcap"), "thread"),
+        ("daemon_mcap_process", str(tmp / "bench-process.mcap"), "process"),
+    ):
         ch = f"bench-{uuid.uuid4().hex[:8]}"
         with (
-            DaemonService(config(grid, "virtual", ch, mcap), events_stream=None),
+            DaemonService(config(grid, "virtual", ch, mcap, writer=writer), events_stream=None),
             can.Bus(interface="virtual", channel=ch) as bus,
             CanController(bus) as ctl,
         ):
@@ -363,6 +372,11 @@ def main() -> int:
             "udp_p50_over_echo_us": udp["daemon"]["p50"] - udp["echo"]["p50"],
             "udp_p99_over_echo_us": udp["daemon"]["p99"] - udp["echo"]["p99"],
             "mcap_p50_cost_us": virt["daemon_mcap"]["p50"] - virt["daemon_no_mcap"]["p50"],
+            "mcap_p99_cost_us": virt["daemon_mcap"]["p99"] - virt["daemon_no_mcap"]["p99"],
+            "mcap_process_p50_cost_us": virt["daemon_mcap_process"]["p50"]
+            - virt["daemon_no_mcap"]["p50"],
+            "mcap_process_p99_cost_us": virt["daemon_mcap_process"]["p99"]
+            - virt["daemon_no_mcap"]["p99"],
             "modbus_ratio_p50": mb["ratio_p50"],
         },
     }
@@ -372,14 +386,15 @@ def main() -> int:
         ("virtual: bare echo", virt["echo"]),
         ("virtual: daemon, MCAP off", virt["daemon_no_mcap"]),
         ("virtual: daemon, MCAP on", virt["daemon_mcap"]),
+        ("virtual: daemon, MCAP on (process writer)", virt["daemon_mcap_process"]),
         ("udp_multicast: bare echo", udp["echo"]),
         ("udp_multicast: daemon (subprocess)", udp["daemon"]),
         ("Modbus TCP: bare pymodbus write+read", mb["bare"]),
         ("Modbus TCP: daemon write+read", mb["daemon"]),
     ]
-    print(f"{'case':<38} {'p50 µs':>8} {'p99 µs':>8} {'n':>6}")
+    print(f"{'case':<42} {'p50 µs':>8} {'p99 µs':>8} {'n':>6}")
     for name, r in rows:
-        print(f"{name:<38} {r['p50']:>8.0f} {r['p99']:>8.0f} {r['n']:>6}")
+        print(f"{name:<42} {r['p50']:>8.0f} {r['p99']:>8.0f} {r['n']:>6}")
     t = result["targets"]
     print(
         f"\ndaemon − echo: virtual p50 {t['virtual_p50_over_echo_us']:+.0f} µs, p99 "
@@ -387,8 +402,12 @@ def main() -> int:
         f"p99 {t['udp_p99_over_echo_us']:+.0f} µs (targets +150 / +500)"
     )
     print(
-        f"MCAP on − off, p50: {t['mcap_p50_cost_us']:+.0f} µs; Modbus daemon/bare p50: {t['modbus_ratio_p50']:.2f}× (target ≤ 2)"
+        f"MCAP(thread) on − off, p50/p99: {t['mcap_p50_cost_us']:+.0f} / "
+        f"{t['mcap_p99_cost_us']:+.0f} µs; MCAP(process) on − off, p50/p99: "
+        f"{t['mcap_process_p50_cost_us']:+.0f} / {t['mcap_process_p99_cost_us']:+.0f} µs "
+        f"(target: +0)"
     )
+    print(f"Modbus daemon/bare p50: {t['modbus_ratio_p50']:.2f}× (target ≤ 2)")
     print(
         f"sustained: {sus['readings']} readings, {sus['readings_per_s']:.0f} readings/s, "
         f"lost {sus['lost']}, MCAP dropped {sus['mcap_dropped']}"

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, get_args, get_origin, get_type_hints
 
 TEMPERATURE_ROLES = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
+MCAP_WRITERS = ("thread", "process")
 
 
 class ConfigError(ValueError):
@@ -121,6 +122,10 @@ class McapSection:
     """Roll files at this age, s (directories only; 0 = never)."""
     flush_s: float = 1.0
     """Cut a chunk at least this often: the most a crash loses, s."""
+    writer: str = "thread"
+    """Where JSON + MCAP writing runs: ``thread`` (a thread of the daemon process) or
+    ``process`` (a child process, off the reply path's GIL; also finishes the file if the
+    daemon is killed). See docs/mcap.md."""
 
 
 @dataclass
@@ -199,6 +204,10 @@ class DaemonConfig:
         for name in ("triplet_timeout_s", "send_timeout_s", "heartbeat_s", "reconnect_s"):
             if getattr(self.can, name) <= 0:
                 raise ConfigError(f"{where}: can.{name} must be > 0 s")
+        if self.mcap.writer not in MCAP_WRITERS:
+            raise ConfigError(
+                f"{where}: mcap.writer = {self.mcap.writer!r}; allowed: {', '.join(MCAP_WRITERS)}"
+            )
         if self.metrics.period_s <= 0 or self.mcap.flush_s <= 0:
             raise ConfigError(f"{where}: metrics.period_s and mcap.flush_s must be > 0 s")
         return self

@@ -20,6 +20,7 @@ import time
 from typing import Any, TextIO
 
 from daemon.mcap_log import McapLogger
+from daemon.mcap_process import McapProcessLogger
 from protocol import DaemonBlock, Heartbeat
 from protocol.codes import DaemonState, grid_id_from_sha256
 
@@ -54,7 +55,7 @@ class DaemonService:
             events_stream, config.log.format, config.log.level, config.log.max_per_s
         )
         self.metrics = Metrics()
-        self.logger: McapLogger | None = None
+        self.logger: McapLogger | McapProcessLogger | None = None
         self.grids = GridSlot()
         self.temperatures = TemperatureTable(config.temperatures, config.sensor_roles())
         self.state = StateBoard(self._on_state_change)
@@ -75,7 +76,10 @@ class DaemonService:
         try:
             if cfg.mcap.path:
                 directory = not cfg.mcap.path.endswith(".mcap")
-                self.logger = McapLogger(
+                logger_cls: type[McapLogger] | type[McapProcessLogger] = (
+                    McapProcessLogger if cfg.mcap.writer == "process" else McapLogger
+                )
+                self.logger = logger_cls(
                     cfg.mcap.path,
                     roll_bytes=int(cfg.mcap.roll_mb * 1e6)
                     if directory and cfg.mcap.roll_mb
