@@ -18,6 +18,14 @@ import numpy as np
 from .machine import Machine
 
 
+def load_machine(path: Path) -> Machine:
+    """Load a machine description and print its load warnings to stderr (one line each)."""
+    machine = Machine.from_toml(path)
+    for warning in machine.warnings:
+        print(f"cmm-comp: warning: {warning}", file=sys.stderr)
+    return machine
+
+
 def progress_printer(label: str) -> Callable[[float], None]:
     """A progress callback printing ``label: NN %`` to stderr (only on a terminal)."""
     last = [-1]
@@ -71,7 +79,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 def cmd_map(args: argparse.Namespace) -> int:
     from .maps import volumetric_map
 
-    machine = Machine.from_toml(args.machine)
+    machine = load_machine(args.machine)
     vmap = volumetric_map(
         machine, args.steps, args.probe, temps_from_args(args), progress_printer("map")
     )
@@ -90,7 +98,7 @@ def cmd_map(args: argparse.Namespace) -> int:
 def cmd_diagonals(args: argparse.Namespace) -> int:
     from .maps import diagonal_endpoints, diagonals_um
 
-    machine = Machine.from_toml(args.machine)
+    machine = load_machine(args.machine)
     diag = diagonals_um(machine, args.probe, temps_from_args(args))
     ends = diagonal_endpoints(machine)
     out = {
@@ -112,7 +120,7 @@ def cmd_diagonals(args: argparse.Namespace) -> int:
 def cmd_line(args: argparse.Namespace) -> int:
     from .maps import line_report
 
-    machine = Machine.from_toml(args.machine)
+    machine = load_machine(args.machine)
     report = line_report(
         machine, args.axis, args.through, args.samples, args.probe, temps_from_args(args)
     )
@@ -136,7 +144,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from .maps import diagonals_um, line_report, volumetric_map
     from .plots import plot_diagonals, plot_line, plot_parametric_errors, plot_vector_map
 
-    machine = Machine.from_toml(args.machine)
+    machine = load_machine(args.machine)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     temps = temps_from_args(args)
@@ -205,7 +213,7 @@ def cmd_export_seed(args: argparse.Namespace) -> int:
     """Write a machine description as the paper's file set (for legacy tools)."""
     from .seedfiles import write_seed_fileset
 
-    machine = Machine.from_toml(args.machine)
+    machine = load_machine(args.machine)
     written = write_seed_fileset(machine, args.directory, args.name)
     print(f"wrote {len(written)} files to {args.directory}")
     return 0

@@ -18,10 +18,10 @@ from .errors import CmmCompError
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
-    from .machine import Machine
+    from .cli import load_machine
     from .measurements import read_measurements
 
-    machine = Machine.from_toml(args.machine)
+    machine = load_machine(args.machine)
     data = read_measurements(args.measurements)
     return machine, data
 

@@ -37,9 +37,9 @@ SIGNAL_COLUMNS = (
 
 def cmd_grid_build(args: argparse.Namespace) -> int:
     """``cmm-comp grid build MACHINE -o GRID [--steps NX NY NZ]``."""
-    from compensation.machine import Machine
+    from compensation.cli import load_machine
 
-    machine = Machine.from_toml(args.machine)
+    machine = load_machine(args.machine)
 
     def progress(fraction: float, message: str) -> None:
         if sys.stderr.isatty():

@@ -113,6 +113,7 @@ class Machine:
     effects: list[Effect] = field(default_factory=list)
     description: dict[str, Any] = field(default_factory=dict)  # normalised TOML content
     source: str = "<memory>"
+    warnings: list[str] = field(default_factory=list)  # accepted but questionable input
 
     # ------------------------------------------------------------------ construction
     @classmethod

@@ -78,6 +78,7 @@ class _Parser:
     def __init__(self, source: str, base_dir: Path) -> None:
         self.source = source
         self.base_dir = base_dir
+        self.warnings: list[str] = []
 
     def fail(self, where: str, problem: str) -> MachineFileError:
         return MachineFileError(self.source, where, problem)
@@ -208,6 +209,7 @@ class _Parser:
             effects=effects,
             description=description,
             source=self.source,
+            warnings=self.warnings,
         )
         from .offsets import refer_to_reference
 
@@ -389,12 +391,18 @@ class _Parser:
             offset = self.vector(tbl["offset"], f"{where}.offset", 3)
             norm["offset"] = offset.tolist()
         criterion = tbl.get("criterion")
-        if criterion is not None:
-            if not comp.is_straightness:
+        if criterion is not None and not comp.is_straightness:
+            if criterion not in CRITERIA:
                 raise self.fail(
                     f"{where}.criterion",
-                    "a straightness criterion applies to straightness tables only",
+                    f"unknown criterion {criterion!r}; allowed: {', '.join(CRITERIA)}",
                 )
+            self.warnings.append(
+                f"{self.source}: {where}.criterion: a straightness criterion applies to "
+                f"straightness tables only; ignored for {canon}"
+            )
+            criterion = None
+        if criterion is not None:
             if criterion not in CRITERIA:
                 raise self.fail(
                     f"{where}.criterion",

@@ -146,9 +146,9 @@ BAD = [
     ),
     (
         MINIMAL
-        + "[errors.dx_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 2.0]\ncriterion = 'least_squares'\n",
+        + "[errors.dx_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 2.0]\ncriterion = 'flattest'\n",
         "errors.dx_x.criterion",
-        "straightness tables only",
+        "unknown criterion",
     ),
     (
         MINIMAL + "[errors.dy_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 2.0]\ncriterion = 'best'\n",
@@ -227,3 +227,44 @@ def test_straightness_criterion_removes_the_reference_line(tmp_path: Path) -> No
     resid = m.tables["dy_x"].value
     slope, icpt = np.polyfit(q, v, 1)
     np.testing.assert_allclose(resid, np.array(v) - (slope * np.array(q) + icpt), atol=1e-12)
+
+
+def test_the_formats_example_loads_with_a_warning_for_its_positional_criterion(
+    tmp_path: Path,
+) -> None:
+    """FORMATS.md §1's own example puts ``criterion`` (straightness only) on dx_x: the file loads,
+    the criterion is ignored for that table (a positional error must keep its slope: the scale
+    error) and a warning names the key."""
+    spec = ROOT.parent / "shared" / "spec" / "FORMATS.md"
+    if not spec.is_file():
+        pytest.skip(f"{spec} is absent")
+    text = spec.read_text(encoding="utf-8")
+    start = text.index("```toml") + len("```toml")
+    example = text[start : text.index("```", start)]
+    m = Machine.from_toml(write(tmp_path, example))
+    assert m.model == "MB1" and m.name == "npl-bridge"
+    assert any("errors.dx_x.criterion" in w and "ignored" in w for w in m.warnings)
+    table = m.tables["dx_x"]
+    # offset (0, 200, 100) from the reference: MB1 has no angular table here, so only the
+    # values given remain, unchanged by any line removal
+    np.testing.assert_allclose(table.value, [0.0, 1.2, 2.1])
+
+
+def test_cli_prints_load_warnings(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    text = (
+        MINIMAL
+        + "[errors.dx_x]\nposition = [0.0, 500.0]\nvalue = [0.0, 1.0]\ncriterion = 'end_points'\n"
+    )
+    path = write(tmp_path, text)
+    r = subprocess.run(
+        [sys.executable, "-m", "daemon.cli", "diagonals", str(path)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "warning" in r.stderr and "errors.dx_x.criterion" in r.stderr
