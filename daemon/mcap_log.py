@@ -63,7 +63,43 @@ def _open_exclusive(path: Path) -> IO[bytes]:
 _BATCH = 32  # messages per writer batch before yielding the GIL (bounds roll overshoot too)
 
 
-class McapLogger:
+class HotPathQueue:
+    """The never-blocking front half both loggers share: :meth:`log` only appends to a bounded
+    deque (or counts a drop); a writer thread (or a forwarder to a child process) drains it."""
+
+    _schemas: Mapping[str, Any]
+    _queue: collections.deque[tuple[str, dict[str, Any], int]]
+    _queue_size: int
+    _closed: bool
+    _enqueued: int
+    _dropped: int
+    _drop_lock: threading.Lock
+
+    def log(self, topic: str, payload: dict[str, Any], log_time_ns: int | None = None) -> bool:
+        """Enqueue one message; never blocks. Returns False when it was dropped.
+
+        :param topic: one of the configured topics (KeyError otherwise: a programming error).
+        :param payload: the JSON object; ownership passes to the logger (do not mutate it
+            afterwards). ``stamp`` is added from ``log_time_ns`` when absent.
+        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
+        """
+        if topic not in self._schemas:
+            raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(self._schemas)}")
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        if len(self._queue) >= self._queue_size or self._closed:
+            self._count_drop()
+            return False
+        self._queue.append((topic, payload, log_time_ns))
+        self._enqueued += 1
+        return True
+
+    def _count_drop(self, n: int = 1) -> None:
+        with self._drop_lock:
+            self._dropped += n
+
+
+class McapLogger(HotPathQueue):
     """Log JSON messages to MCAP from a hot path without blocking it.
 
     :param target: a directory (files ``session-YYYYmmddTHHMMSS-NNN.mcap``, UTC session start,
@@ -152,29 +188,6 @@ class McapLogger:
         self._thread.start()
 
     # ------------------------------------------------------------------ hot path
-
-    def log(self, topic: str, payload: dict[str, Any], log_time_ns: int | None = None) -> bool:
-        """Enqueue one message; never blocks. Returns False when it was dropped.
-
-        :param topic: one of the configured topics (KeyError otherwise: a programming error).
-        :param payload: the JSON object; ownership passes to the logger (do not mutate it
-            afterwards). ``stamp`` is added from ``log_time_ns`` when absent.
-        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
-        """
-        if topic not in self._schemas:
-            raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(self._schemas)}")
-        if log_time_ns is None:
-            log_time_ns = time.time_ns()
-        if len(self._queue) >= self._queue_size or self._closed:
-            self._count_drop()
-            return False
-        self._queue.append((topic, payload, log_time_ns))
-        self._enqueued += 1
-        return True
-
-    def _count_drop(self, n: int = 1) -> None:
-        with self._drop_lock:
-            self._dropped += n
 
     # ------------------------------------------------------------------ status
 

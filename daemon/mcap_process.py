@@ -42,7 +42,7 @@ from typing import Any
 
 from mcap.writer import CompressionType
 
-from daemon.mcap_log import LoggerStats, McapLogger
+from daemon.mcap_log import HotPathQueue, LoggerStats, McapLogger
 from daemon.mcap_schemas import TOPIC_SCHEMAS, TopicSchema
 
 _log = logging.getLogger(__name__)
@@ -170,7 +170,7 @@ def _child_main(conn: Connection, kwargs: dict[str, Any], parent_pid: int) -> No
 # --------------------------------------------------------------------------- parent side
 
 
-class McapProcessLogger:
+class McapProcessLogger(HotPathQueue):
     """Log JSON messages to MCAP from a hot path; the writing happens in a child process.
 
     Same interface and arguments as :class:`daemon.mcap_log.McapLogger` (see there), except
@@ -296,29 +296,6 @@ class McapProcessLogger:
         self._child = body
 
     # ------------------------------------------------------------------ hot path
-
-    def log(self, topic: str, payload: dict[str, Any], log_time_ns: int | None = None) -> bool:
-        """Enqueue one message; never blocks. Returns False when it was dropped.
-
-        :param topic: one of the configured topics (KeyError otherwise: a programming error).
-        :param payload: the JSON object; ownership passes to the logger (do not mutate it
-            afterwards). ``stamp`` is added from ``log_time_ns`` when absent.
-        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
-        """
-        if topic not in self._schemas:
-            raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(self._schemas)}")
-        if log_time_ns is None:
-            log_time_ns = time.time_ns()
-        if len(self._queue) >= self._queue_size or self._closed:
-            self._count_drop()
-            return False
-        self._queue.append((topic, payload, log_time_ns))
-        self._enqueued += 1
-        return True
-
-    def _count_drop(self, n: int = 1) -> None:
-        with self._drop_lock:
-            self._dropped += n
 
     # ------------------------------------------------------------------ status
 
