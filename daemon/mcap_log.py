@@ -187,9 +187,7 @@ class McapLogger(HotPathQueue):
         self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
         self._thread.start()
 
-    # ------------------------------------------------------------------ hot path
-
-    # ------------------------------------------------------------------ status
+    # ------------------------------------------------------------------ status (log(): HotPathQueue)
 
     @property
     def error(self) -> BaseException | None:

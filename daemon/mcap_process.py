@@ -295,9 +295,7 @@ class McapProcessLogger(HotPathQueue):
             raise body
         self._child = body
 
-    # ------------------------------------------------------------------ hot path
-
-    # ------------------------------------------------------------------ status
+    # ------------------------------------------------------------------ status (log(): HotPathQueue)
 
     @property
     def error(self) -> BaseException | None:
