@@ -222,9 +222,11 @@ class CanController(can.Listener):
             while len(pending) >= in_flight:
                 out.append(self.wait_answer(pending.pop(0)))
             if period:
-                while (now := time.perf_counter()) < next_t:
-                    if next_t - now > 0.0005:
-                        time.sleep(0.0002)
+                # sleep until the slot, never spin: a simulated controller sharing a process
+                # (and 2 cores) with the daemon must not keep a core busy while it waits
+                delay = next_t - time.perf_counter()
+                if delay > 0:
+                    time.sleep(delay)
                 next_t += period
             self.send_reading(r)
             order.append(r.seq)
