@@ -20,6 +20,38 @@ ROOT = Path(__file__).resolve().parents[1]
 REALDATA = ROOT.parent / "shared" / "realdata"
 
 
+def _child_pids() -> set[int]:
+    """Live child processes of this test process (Linux /proc; empty elsewhere)."""
+    me = os.getpid()
+    out: set[int] = set()
+    proc = Path("/proc")
+    if not proc.is_dir():
+        return out
+    for entry in proc.iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        state, ppid = fields[0], int(fields[1])
+        if ppid == me and state != "Z":
+            out.add(int(entry.name))
+    return out
+
+
+@pytest.fixture(autouse=True)
+def _no_leaked_processes() -> Iterator[None]:
+    before = _child_pids()
+    yield
+    import time
+
+    t0 = time.monotonic()
+    while (leaked := _child_pids() - before) and time.monotonic() - t0 < 5.0:
+        time.sleep(0.05)
+    assert not leaked, f"test leaked child processes: {sorted(leaked)}"
+
+
 @pytest.fixture(autouse=True)
 def _no_leaked_threads() -> Iterator[None]:
     before = {t.ident for t in threading.enumerate()}
