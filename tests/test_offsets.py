@@ -12,6 +12,7 @@ Disagreements between the paper and the chain are explained in docs/seed-equatio
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -353,9 +354,11 @@ def test_workpiece_side_tables_measured_at_the_reference_are_the_model(model: st
 
 
 # --------------------------------------------------------------------------- 3. squareness
-def measure_squareness(machine: Machine, at_mm: np.ndarray, nodes: int = NODES) -> np.ndarray:
-    """(α, β1, β2) µrad from the least-squares slopes of two lines through ``at_mm``, sampled at
-    the straightness tables' positions (the loader takes the lines' slopes there)."""
+def _squareness_slopes(
+    at_mm: np.ndarray, nodes: int, along: Callable[[np.ndarray, int], np.ndarray]
+) -> np.ndarray:
+    """Σ over the two lines of each squareness of the least-squares slope (µrad) of
+    ``along(points, component)`` along the line through ``at_mm`` (sampled at ``nodes`` points)."""
     out = []
     for sq in SQUARENESS_TARGETS:
         total = 0.0
@@ -364,31 +367,28 @@ def measure_squareness(machine: Machine, at_mm: np.ndarray, nodes: int = NODES) 
             q = np.linspace(0.0, UPPER_MM[k], nodes)
             pts = np.repeat(at_mm[None, :], nodes, axis=0)
             pts[:, k] = q
-            total += np.polyfit(q, machine.volumetric_error(pts)[:, comp], 1)[0] * 1000.0
-        out.append(-total)
+            total += np.polyfit(q, along(pts, comp), 1)[0] * 1000.0
+        out.append(total)
     return np.array(out)
+
+
+def measure_squareness(machine: Machine, at_mm: np.ndarray, nodes: int = NODES) -> np.ndarray:
+    """(α, β1, β2) µrad from the least-squares slopes of two lines through ``at_mm``, sampled at
+    the straightness tables' positions (the loader takes the lines' slopes there)."""
+    return -_squareness_slopes(at_mm, nodes, lambda pts, c: machine.volumetric_error(pts)[:, c])
 
 
 def chain_squareness_correction(
     machine: Machine, at_mm: np.ndarray, nodes: int = NODES
 ) -> np.ndarray:
     """The derivation: slopes of the Abbe terms of *all* axes' angular errors along both lines."""
-    out = []
-    for sq in SQUARENESS_TARGETS:
-        total = 0.0
-        for axis, comp in SQUARENESS_LINES[sq]:
-            k = AXIS_INDEX[axis]
-            q = np.linspace(0.0, UPPER_MM[k], nodes)
-            pts = np.repeat(at_mm[None, :], nodes, axis=0)
-            pts[:, k] = q
-            jac, _ = first_order_jacobian(
-                machine.chain, pts - machine.volume.reference_mm, np.zeros(3)
-            )
-            err = machine.parametric_errors(pts)
-            abbe = np.einsum("nas,nas->n", jac[:, comp, :, 3:], err[:, :, 3:])
-            total += np.polyfit(q, abbe, 1)[0] * 1000.0
-        out.append(total)
-    return np.array(out)
+
+    def abbe(pts: np.ndarray, comp: int) -> np.ndarray:
+        jac, _ = first_order_jacobian(machine.chain, pts - machine.volume.reference_mm, np.zeros(3))
+        err = machine.parametric_errors(pts)
+        return np.einsum("nas,nas->n", jac[:, comp, :, 3:], err[:, :, 3:])
+
+    return _squareness_slopes(at_mm, nodes, abbe)
 
 
 def truth_machine(model: str) -> Machine:
