@@ -21,7 +21,7 @@ from typing import Any
 
 import can
 
-from daemon.mcap_schemas import ns_from_can_timestamp, stamp_from_ns
+from daemon.mcap_records import FrameRecord
 from protocol import (
     BadLength,
     BadValue,
@@ -73,20 +73,20 @@ def open_bus(cfg: CanSection, ids: CanIds) -> can.BusABC:
     )
 
 
-def frame_payload(msg: can.Message, channel: str) -> dict[str, Any]:
-    """The /cmm/can_rx, /cmm/can_tx payload of one frame."""
-    ts = msg.timestamp if msg.timestamp and msg.timestamp == msg.timestamp else 0.0
-    return {
-        "arbitration_id": int(msg.arbitration_id),
-        "is_extended": bool(msg.is_extended_id),
-        "dlc": int(msg.dlc),
-        "data": bytes(msg.data or b"").hex(),
-        "bus_stamp": stamp_from_ns(ns_from_can_timestamp(ts)),
-        "channel": channel,
-        "is_fd": bool(msg.is_fd),
-        "is_remote_frame": bool(msg.is_remote_frame),
-        "is_error_frame": bool(msg.is_error_frame),
-    }
+def frame_record(msg: can.Message, channel: str) -> FrameRecord:
+    """The compact ``/cmm/can_rx`` / ``/cmm/can_tx`` record of one frame (the MCAP writer
+    builds the JSON payload from it: :func:`daemon.mcap_records.frame_payload`)."""
+    return (
+        msg.arbitration_id,
+        msg.is_extended_id,
+        msg.dlc,
+        bytes(msg.data or b""),
+        msg.timestamp or 0.0,
+        channel,
+        msg.is_fd,
+        msg.is_remote_frame,
+        msg.is_error_frame,
+    )
 
 
 _LOG_BACKLOG_MAX = 256
@@ -274,8 +274,9 @@ class CanEndpoint(can.Listener):
             return
         ch = str(self.config.channel)
         backlog, self._log_backlog = self._log_backlog, []
+        log = self.logger.log
         for topic, msg in backlog:
-            self.logger.log(topic, frame_payload(msg, ch))
+            log(topic, frame_record(msg, ch))
 
     def _on_undecodable(self, result: object) -> None:
         if isinstance(result, UnknownId):

@@ -19,6 +19,7 @@ from typing import Any, get_args, get_origin, get_type_hints
 
 TEMPERATURE_ROLES = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
 MCAP_WRITERS = ("thread", "process")
+MCAP_WRITER_PRIORITIES = ("idle", "normal")
 
 
 class ConfigError(ValueError):
@@ -122,10 +123,14 @@ class McapSection:
     """Roll files at this age, s (directories only; 0 = never)."""
     flush_s: float = 1.0
     """Cut a chunk at least this often: the most a crash loses, s."""
-    writer: str = "thread"
-    """Where JSON + MCAP writing runs: ``thread`` (a thread of the daemon process) or
-    ``process`` (a child process, off the reply path's GIL; also finishes the file if the
-    daemon is killed). See docs/mcap.md."""
+    writer: str = "process"
+    """Where JSON + MCAP writing runs: ``process`` (a child process, off the reply path's GIL
+    and CPU; also finishes the file if the daemon is killed) or ``thread`` (a thread of the
+    daemon process: shares the GIL with the reply path, adds to its p99). See docs/mcap.md."""
+    writer_priority: str = "idle"
+    """CPU priority of the ``process`` writer: ``idle`` (Linux ``SCHED_IDLE``: runs only on CPU
+    time nothing else wants, so it never delays a reply; under sustained 100 % CPU load the
+    queue fills and messages are dropped and counted) or ``normal``."""
 
 
 @dataclass
@@ -207,6 +212,11 @@ class DaemonConfig:
         if self.mcap.writer not in MCAP_WRITERS:
             raise ConfigError(
                 f"{where}: mcap.writer = {self.mcap.writer!r}; allowed: {', '.join(MCAP_WRITERS)}"
+            )
+        if self.mcap.writer_priority not in MCAP_WRITER_PRIORITIES:
+            raise ConfigError(
+                f"{where}: mcap.writer_priority = {self.mcap.writer_priority!r}; allowed: "
+                f"{', '.join(MCAP_WRITER_PRIORITIES)}"
             )
         if self.metrics.period_s <= 0 or self.mcap.flush_s <= 0:
             raise ConfigError(f"{where}: metrics.period_s and mcap.flush_s must be > 0 s")

@@ -223,39 +223,31 @@ class CorrectionEngine:
         log = self.logger
         if log is None:
             return
-        x, y, z = reading.position_mm
-        raw = {
-            "seq": reading.seq,
-            "x_mm": x,
-            "y_mm": y,
-            "z_mm": z,
-            "travel_dir": list(reading.directions),
-            "valid": list(reading.valid),
-            "source": reading.source,
-            "stylus_x_mm": float(self._stylus[0]),
-            "stylus_y_mm": float(self._stylus[1]),
-            "stylus_z_mm": float(self._stylus[2]),
-        }
-        if reading.probe is not None:
-            raw["dir_x"], raw["dir_y"], raw["dir_z"] = reading.probe
-        log.log("/cmm/raw", raw)  # type: ignore[attr-defined]
-        cx, cy, cz = answer.position_nm
+        # compact records: the MCAP writer builds the JSON (daemon.mcap_records)
+        log.log(  # type: ignore[attr-defined]
+            "/cmm/raw",
+            (
+                reading.seq,
+                *reading.position_mm,
+                reading.directions,
+                reading.valid,
+                reading.source,
+                self._stylus_t,
+                reading.probe,
+            ),
+        )
         log.log(  # type: ignore[attr-defined]
             "/cmm/corrected",
-            {
-                "seq": answer.seq,
-                "x_mm": cx / NM_PER_MM,
-                "y_mm": cy / NM_PER_MM,
-                "z_mm": cz / NM_PER_MM,
-                "status": label,
-                "dx_um": answer.correction_um[0],
-                "dy_um": answer.correction_um[1],
-                "dz_um": answer.correction_um[2],
-                "latency_us": latency_us,
-                "applied": int(answer.applied),
-                "source": reading.source,
-                **({"detail": answer.detail} if answer.detail else {}),
-            },
+            (
+                answer.seq,
+                *answer.position_nm,
+                label,
+                answer.correction_um,
+                latency_us,
+                int(answer.applied),
+                reading.source,
+                answer.detail,
+            ),
         )
 
     def temperature(

@@ -28,6 +28,7 @@ from typing import IO, Any
 
 from mcap.writer import CompressionType, Writer
 
+from daemon.mcap_records import RECORD_BUILDERS, expand
 from daemon.mcap_schemas import (
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
@@ -68,23 +69,32 @@ class HotPathQueue:
     deque (or counts a drop); a writer thread (or a forwarder to a child process) drains it."""
 
     _schemas: Mapping[str, Any]
-    _queue: collections.deque[tuple[str, dict[str, Any], int]]
+    _queue: collections.deque[tuple[str, dict[str, Any] | tuple[Any, ...], int]]
     _queue_size: int
     _closed: bool
     _enqueued: int
     _dropped: int
     _drop_lock: threading.Lock
 
-    def log(self, topic: str, payload: dict[str, Any], log_time_ns: int | None = None) -> bool:
+    def log(
+        self,
+        topic: str,
+        payload: dict[str, Any] | tuple[Any, ...],
+        log_time_ns: int | None = None,
+    ) -> bool:
         """Enqueue one message; never blocks. Returns False when it was dropped.
 
         :param topic: one of the configured topics (KeyError otherwise: a programming error).
-        :param payload: the JSON object; ownership passes to the logger (do not mutate it
-            afterwards). ``stamp`` is added from ``log_time_ns`` when absent.
+        :param payload: the JSON object, or for the topics of
+            :data:`daemon.mcap_records.RECORD_BUILDERS` a compact record tuple that the writer
+            turns into that object (cheaper on the hot path). Ownership passes to the logger
+            (do not mutate it afterwards). ``stamp`` is added from ``log_time_ns`` when absent.
         :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
         """
         if topic not in self._schemas:
             raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(self._schemas)}")
+        if type(payload) is tuple and topic not in RECORD_BUILDERS:
+            raise KeyError(f"MCAP topic {topic!r} takes a dict payload, not a record tuple")
         if log_time_ns is None:
             log_time_ns = time.time_ns()
         if len(self._queue) >= self._queue_size or self._closed:
@@ -155,7 +165,9 @@ class McapLogger(HotPathQueue):
         self._on_error = on_error
         self._schemas = dict(schemas)
         self._opener = opener
-        self._queue: collections.deque[tuple[str, dict[str, Any], int]] = collections.deque()
+        self._queue: collections.deque[tuple[str, dict[str, Any] | tuple[Any, ...], int]] = (
+            collections.deque()
+        )
         self._queue_size = int(queue_size)
         self._drop_lock = threading.Lock()
         self._dropped = 0
@@ -317,11 +329,12 @@ class McapLogger(HotPathQueue):
             except IndexError:
                 break
             n += 1
-            if "stamp" not in payload:
-                payload = {**payload, "stamp": stamp_from_ns(t_ns)}
             try:
-                data = dumps(payload).encode()
-            except (TypeError, ValueError) as exc:
+                obj = expand(topic, payload)
+                if "stamp" not in obj:
+                    obj = {**obj, "stamp": stamp_from_ns(t_ns)}
+                data = dumps(obj).encode()
+            except (TypeError, ValueError, KeyError, IndexError, OverflowError) as exc:
                 self._encode_errors += 1
                 self._count_drop()
                 self._report(ValueError(f"{topic}: payload not JSON-encodable: {exc}"))

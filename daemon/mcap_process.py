@@ -85,9 +85,28 @@ _CHILD_CODE = (
 )
 
 
+def lower_priority(priority: str) -> str:
+    """Lower this process' CPU priority (inherited by threads started later); returns what took
+    effect. ``idle``: Linux ``SCHED_IDLE`` (a woken normal task always preempts us, so the
+    writer never delays the daemon's reply path), else nice 19 where SCHED_IDLE is missing;
+    ``normal``: unchanged."""
+    if priority == "normal":
+        return "normal"
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        return "idle"
+    except (AttributeError, OSError):
+        pass
+    try:
+        os.nice(19 - os.nice(0))
+        return "nice 19"
+    except (AttributeError, OSError):
+        return "normal"
+
+
 def _child_entry(fd: int, parent_pid: int) -> None:
     """Child process entry (``python -c``): the pipe end is ``fd``; the first message on it
-    holds the McapLogger keyword arguments."""
+    holds the McapLogger keyword arguments and the CPU priority."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     conn = Connection(fd)
@@ -96,6 +115,8 @@ def _child_entry(fd: int, parent_pid: int) -> None:
     except (EOFError, OSError):
         conn.close()
         return
+    took = lower_priority(kwargs.pop("priority", "normal"))
+    kwargs["metadata"] = {**kwargs["metadata"], "writer_priority": took}
     _child_main(conn, kwargs, parent_pid)
 
 
@@ -142,7 +163,7 @@ def _child_main(conn: Connection, kwargs: dict[str, Any], parent_pid: int) -> No
                 data = conn.recv_bytes()
                 if data == _STOP:
                     break
-                batch: list[tuple[str, dict[str, Any], int]] = pickle.loads(data)
+                batch: list[tuple[str, dict[str, Any] | tuple[Any, ...], int]] = pickle.loads(data)
                 for topic, payload, t_ns in batch:
                     logger.log(topic, payload, t_ns)
                 received += len(batch)
@@ -190,6 +211,9 @@ class McapProcessLogger(HotPathQueue):
         meets (its own exception type when it pickles, else :class:`McapWriterProcessError`),
         and when the child dies unexpectedly.
     :param schemas: topic to schema; defaults to :data:`daemon.mcap_schemas.TOPIC_SCHEMAS`.
+    :param priority: the child's CPU priority, ``idle`` (default: Linux ``SCHED_IDLE``, see
+        :func:`lower_priority`) or ``normal``; what took effect is in the file's ``session``
+        metadata (``writer_priority``).
     :raises: in the caller's thread, whatever the child's ``McapLogger`` raised on opening the
         first file (bad arguments, unwritable target), or :class:`McapWriterProcessError` if
         the child did not start within 60 s.
@@ -209,11 +233,16 @@ class McapProcessLogger(HotPathQueue):
         metadata: Mapping[str, str] | None = None,
         on_error: Callable[[BaseException], None] | None = None,
         schemas: Mapping[str, TopicSchema] = TOPIC_SCHEMAS,
+        priority: str = "idle",
     ) -> None:
+        if priority not in ("idle", "normal"):
+            raise ValueError(f"priority={priority!r} must be 'idle' or 'normal'")
         if queue_size < 1:
             raise ValueError(f"queue_size={queue_size!r} must be >= 1")
         self._schemas = dict(schemas)
-        self._queue: collections.deque[tuple[str, dict[str, Any], int]] = collections.deque()
+        self._queue: collections.deque[tuple[str, dict[str, Any] | tuple[Any, ...], int]] = (
+            collections.deque()
+        )
         self._queue_size = int(queue_size)
         self._on_error = on_error
         self._drop_lock = threading.Lock()
@@ -249,6 +278,7 @@ class McapProcessLogger(HotPathQueue):
                 **dict(metadata or {}),
             },
             "schemas": self._schemas,
+            "priority": priority,
         }
         # A fresh interpreter (exec, like the "spawn" start method; never fork: the parent has
         # threads), started without multiprocessing.Process so that the parent's __main__ is
@@ -394,7 +424,7 @@ class McapProcessLogger(HotPathQueue):
 
     def _send_batch(self) -> int:
         queue = self._queue
-        batch: list[tuple[str, dict[str, Any], int]] = []
+        batch: list[tuple[str, dict[str, Any] | tuple[Any, ...], int]] = []
         try:
             while len(batch) < BATCH:
                 batch.append(queue.popleft())

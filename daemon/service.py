@@ -76,6 +76,9 @@ class DaemonService:
         try:
             if cfg.mcap.path:
                 directory = not cfg.mcap.path.endswith(".mcap")
+                extra: dict[str, Any] = (
+                    {"priority": cfg.mcap.writer_priority} if cfg.mcap.writer == "process" else {}
+                )
                 logger_cls: type[McapLogger] | type[McapProcessLogger] = (
                     McapProcessLogger if cfg.mcap.writer == "process" else McapLogger
                 )
@@ -88,6 +91,7 @@ class DaemonService:
                     flush_period_s=cfg.mcap.flush_s,
                     metadata={"config": cfg.source},
                     on_error=self._on_mcap_error,
+                    **extra,
                 )
             self.engine = CorrectionEngine(
                 cfg, self.grids, self.temperatures, self.metrics, self.events, self.logger

@@ -229,13 +229,18 @@ def test_child_finishes_the_file_when_the_parent_is_sigkilled(tmp_path: Path) ->
 
 
 def test_config_writer_key_and_flag() -> None:
-    assert config_from_dict({}).mcap.writer == "thread"
-    assert config_from_dict({"mcap": {"writer": "process"}}).mcap.writer == "process"
+    default = config_from_dict({}).mcap
+    assert (default.writer, default.writer_priority) == ("process", "idle")
+    assert config_from_dict({"mcap": {"writer": "thread"}}).mcap.writer == "thread"
     with pytest.raises(ConfigError, match=r"mcap\.writer = 'fork'; allowed: thread, process"):
         config_from_dict({"mcap": {"writer": "fork"}}, "x.toml")
+    with pytest.raises(ConfigError, match=r"mcap\.writer_priority = 'rt'; allowed: idle, normal"):
+        config_from_dict({"mcap": {"writer_priority": "rt"}}, "x.toml")
     ap = argparse.ArgumentParser()
     add_override_flags(ap)
-    assert load_config(None, ap.parse_args(["--mcap-writer", "process"])).mcap.writer == "process"
+    args = ap.parse_args(["--mcap-writer", "thread", "--mcap-writer-priority", "normal"])
+    cfg = load_config(None, args).mcap
+    assert (cfg.writer, cfg.writer_priority) == ("thread", "normal")
 
 
 def test_daemon_with_the_process_writer_logs_the_session(tmp_path: Path) -> None:
@@ -247,6 +252,8 @@ def test_daemon_with_the_process_writer_logs_the_session(tmp_path: Path) -> None
     n = 20
     with DaemonService(cfg, events_stream=None) as d:
         assert isinstance(d.logger, McapProcessLogger)
+        if hasattr(os, "SCHED_IDLE"):  # the writer never competes with the reply path
+            assert os.sched_getscheduler(d.logger.child_pid) == os.SCHED_IDLE
         bus = can.Bus(interface="virtual", channel=cfg.can.channel)
         try:
             with CanController(bus, answer_timeout_s=2.0) as ctl:
@@ -263,5 +270,15 @@ def test_daemon_with_the_process_writer_logs_the_session(tmp_path: Path) -> None
     assert not res.truncated
     topics = {m.topic for m in res.messages}
     assert {"/cmm/raw", "/cmm/corrected", "/cmm/status", "/cmm/can_rx"} <= topics
-    corrected = [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"]
-    assert corrected == list(range(n))
+    corrected = [m.payload for m in res.messages if m.topic == "/cmm/corrected"]
+    assert [p["seq"] for p in corrected] == list(range(n))
+    # the logged answers are the ones the controller decoded from the bus (to the nm)
+    for p, a in zip(corrected, answers, strict=True):
+        assert a.corrected_mm is not None and p["status"] == a.status
+        assert (p["x_mm"], p["y_mm"], p["z_mm"]) == pytest.approx(a.corrected_mm, abs=1e-9)
+    raw = [m.payload for m in res.messages if m.topic == "/cmm/raw"]
+    assert [(p["x_mm"], p["y_mm"], p["z_mm"]) for p in raw] == [r.indicated_mm for r in rs]
+    for m in res.messages:
+        check_message(m.topic, m.payload)
+    if hasattr(os, "SCHED_IDLE"):
+        assert dict(res.metadata)["session"]["writer_priority"] == "idle"
