@@ -116,16 +116,15 @@ def pct(values: list[float]) -> dict[str, float]:
     }
 
 
-def measure(
-    ctl: CanController, rs: list[RawReading], rate_hz: float
-) -> tuple[dict[str, float], int]:
+def measure(ctl: CanController, rs: list[RawReading], rate_hz: float) -> tuple[list[float], int]:
+    """Latencies (µs) of ``rs`` after a 200-reading warm-up, and how many got no answer."""
     ctl.send_temperatures(Environment().samples(0.0))
     time.sleep(0.02)
     warm = ctl.stream(rs[:200], rate_hz, in_flight=1)
     del warm
     answers = ctl.stream(rs[200:], rate_hz, in_flight=1)
     lost = sum(a.status == "timeout" for a in answers)
-    return pct([a.latency_us for a in answers]), lost
+    return [a.latency_us for a in answers], lost
 
 
 def config(
@@ -147,31 +146,58 @@ def config(
 
 
 # ----------------------------------------------------------------------------- cases
-def bench_virtual(grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path) -> dict[str, Any]:
-    out: dict[str, Any] = {}
+VIRTUAL_CASES = (  # name, MCAP on, writer
+    ("echo", False, ""),
+    ("daemon_no_mcap", False, "process"),
+    ("daemon_mcap", True, "process"),  # the default writer
+    ("daemon_mcap_thread", True, "thread"),
+)
+
+
+def _virtual_round(
+    name: str, mcap: bool, writer: str, grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path
+) -> tuple[list[float], int]:
     ch = f"bench-{uuid.uuid4().hex[:8]}"
-    # bare echo
-    stop = threading.Event()
-    echo_bus = can.Bus(interface="virtual", channel=ch)
-    t = threading.Thread(target=run_echo, args=(echo_bus, stop))
-    t.start()
-    with can.Bus(interface="virtual", channel=ch) as bus, CanController(bus) as ctl:
-        out["echo"], _ = measure(ctl, rs, rate_hz)
-    stop.set()
-    t.join()
-    echo_bus.shutdown()
-    for name, mcap, writer in (
-        ("daemon_no_mcap", "", "process"),
-        ("daemon_mcap", str(tmp / "bench.mcap"), "process"),  # the default writer
-        ("daemon_mcap_thread", str(tmp / "bench-thread.mcap"), "thread"),
+    if name == "echo":
+        stop = threading.Event()
+        echo_bus = can.Bus(interface="virtual", channel=ch)
+        t = threading.Thread(target=run_echo, args=(echo_bus, stop))
+        t.start()
+        try:
+            with can.Bus(interface="virtual", channel=ch) as bus, CanController(bus) as ctl:
+                return measure(ctl, rs, rate_hz)
+        finally:
+            stop.set()
+            t.join()
+            echo_bus.shutdown()
+    path = str(tmp / f"{ch}.mcap") if mcap else ""
+    with (
+        DaemonService(config(grid, "virtual", ch, path, writer=writer), events_stream=None),
+        can.Bus(interface="virtual", channel=ch) as bus,
+        CanController(bus) as ctl,
     ):
-        ch = f"bench-{uuid.uuid4().hex[:8]}"
-        with (
-            DaemonService(config(grid, "virtual", ch, mcap, writer=writer), events_stream=None),
-            can.Bus(interface="virtual", channel=ch) as bus,
-            CanController(bus) as ctl,
-        ):
-            out[name], out[f"{name}_lost"] = measure(ctl, rs, rate_hz)
+        return measure(ctl, rs, rate_hz)
+
+
+def bench_virtual(
+    grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path, rounds: int = 3
+) -> dict[str, Any]:
+    """Each case in ``rounds`` interleaved rounds (order rotated every round, so a drift of the
+    machine's load hits every case alike); percentiles over the pooled latencies."""
+    lat: dict[str, list[float]] = {name: [] for name, _, _ in VIRTUAL_CASES}
+    lost: dict[str, int] = dict.fromkeys(lat, 0)
+    per_round = max(1, (len(rs) - 200) // rounds)
+    for k in range(rounds):
+        chunk = rs[: 200 + per_round]
+        order = VIRTUAL_CASES[k % len(VIRTUAL_CASES) :] + VIRTUAL_CASES[: k % len(VIRTUAL_CASES)]
+        for name, mcap, writer in order:
+            values, n_lost = _virtual_round(name, mcap, writer, grid, chunk, rate_hz, tmp)
+            lat[name] += values
+            lost[name] += n_lost
+    out: dict[str, Any] = {"rounds": rounds}
+    for name in lat:
+        out[name] = pct(lat[name])
+        out[f"{name}_lost"] = lost[name]
     return out
 
 
@@ -240,7 +266,8 @@ def bench_udp(grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path) -> di
                 else:
                     while ctl.heartbeat is None and time.monotonic() - t0 < 60:
                         time.sleep(0.05)
-                out[name], out[f"{name}_lost"] = measure(ctl, rs, rate_hz)
+                values, out[f"{name}_lost"] = measure(ctl, rs, rate_hz)
+                out[name] = pct(values)
         finally:
             if name == "echo":
                 assert proc.stdin is not None
@@ -337,6 +364,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=3000, help="paced readings per latency case")
     ap.add_argument("--rate", type=float, default=1000.0, help="pace of latency cases, Hz")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the virtual cases")
     ap.add_argument("--sustained", type=int, default=100_000)
     ap.add_argument("--modbus-n", type=int, default=2000)
     ap.add_argument("--echo-server", type=int, help=argparse.SUPPRESS)
@@ -357,7 +385,7 @@ def main() -> int:
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
         rs = readings(args.n + 200, np.random.default_rng(1))
         print("virtual …", file=sys.stderr)
-        virt = bench_virtual(grid, rs, args.rate, tmp)
+        virt = bench_virtual(grid, rs, args.rate, tmp, args.rounds)
         if args.only_virtual:
             for name in ("echo", "daemon_no_mcap", "daemon_mcap", "daemon_mcap_thread"):
                 r = virt[name]

@@ -15,7 +15,7 @@ from __future__ import annotations
 import enum
 import struct
 from dataclasses import dataclass
-from typing import ClassVar, Self, TypeVar
+from typing import Any, ClassVar, Self, TypeVar
 
 from .can_ids import CORRECTED_KIND, RAW_KIND, MessageKind
 from .codes import (
@@ -101,6 +101,20 @@ def _enum(enum_cls: type[_E], name: str, code: int) -> _E:
         raise ValueError(f"{name} code {code} is not defined; allowed: {allowed}") from None
 
 
+def _raw_flags_table() -> tuple[tuple[Axis, Direction, bool] | None, ...]:
+    """Raw axis flags byte → (axis, direction, valid); None where a code is undefined."""
+    out: list[tuple[Axis, Direction, bool] | None] = []
+    for flags in range(256):
+        try:
+            out.append((Axis(flags & 0x3), Direction(flags >> 2 & 0x3), bool(flags >> 4 & 1)))
+        except ValueError:
+            out.append(None)
+    return tuple(out)
+
+
+_RAW_FLAGS = _raw_flags_table()
+
+
 @dataclass(frozen=True, slots=True)
 class RawAxis:
     """Raw scale reading of one axis, controller → daemon (RAW_X/Y/Z)."""
@@ -142,14 +156,34 @@ class RawAxis:
         """Inverse of :meth:`encode`; ValueError on bad length or codes."""
         _check_len(cls.__name__, data)
         pos, seq, flags = AXIS_LAYOUT.unpack(data)
-        direction = _enum(Direction, "direction", flags >> 2 & 0x3)
-        return cls(
-            _enum(Axis, "axis", flags & 0x3),
-            seq,
-            int.from_bytes(pos, "little", signed=True),
-            direction,
-            bool(flags >> 4 & 1),
-        )
+        fields = _RAW_FLAGS[flags]
+        if fields is None:  # name the undefined code
+            _enum(Direction, "direction", flags >> 2 & 0x3)
+            _enum(Axis, "axis", flags & 0x3)
+        assert fields is not None
+        if cls is not RawAxis:  # a subclass gets its own __init__ checks
+            return cls(fields[0], seq, int.from_bytes(pos, "little", signed=True), *fields[1:])
+        # hot path (the daemon decodes three per reading): every field is in range by
+        # construction (uint16 seq, 40-bit position, codes from the table), so the
+        # validating __init__ is skipped and the slots are set directly
+        obj = _new(cls)
+        _RAW_SET[0](obj, fields[0])
+        _RAW_SET[1](obj, seq)
+        _RAW_SET[2](obj, int.from_bytes(pos, "little", signed=True))
+        _RAW_SET[3](obj, fields[1])
+        _RAW_SET[4](obj, fields[2])
+        return obj
+
+
+_new = object.__new__
+
+
+def _slot_setters(cls: type, names: tuple[str, ...]) -> tuple[Any, ...]:
+    """The slot descriptors' ``__set__`` of ``names`` (bypass a frozen dataclass' __init__)."""
+    return tuple(cls.__dict__[n].__set__ for n in names)
+
+
+_RAW_SET = _slot_setters(RawAxis, ("axis", "seq", "position_nm", "direction", "valid"))
 
 
 @dataclass(frozen=True, slots=True)

@@ -265,3 +265,27 @@ def test_reserved_bits_are_ignored_on_decode_and_zero_on_encode() -> None:
     assert frame.encode() == bytes.fromhex("40420f0000010014")
     status = CorrectionStatus.decode(bytes.fromhex("01000083fa007b00"))
     assert status.applied == Applied.GEOMETRY | Applied.SCALE_THERMAL
+
+
+@given(pos=int40, seq=u16, flags=st.integers(0, 255))
+def test_raw_axis_fast_decode_equals_the_validating_constructor(
+    pos: int, seq: int, flags: int
+) -> None:
+    """RawAxis.decode skips __init__ on its hot path; the validating constructor (and the
+    bit layout written out here) is the oracle, for every flags byte."""
+    data = pos.to_bytes(5, "little", signed=True) + seq.to_bytes(2, "little") + bytes([flags])
+    try:
+        expected: RawAxis | str = RawAxis(
+            Axis(flags & 3), seq, pos, Direction(flags >> 2 & 3), bool(flags >> 4 & 1)
+        )
+    except ValueError:
+        expected = "ValueError"
+    try:
+        got: RawAxis | str = RawAxis.decode(data)
+    except ValueError as exc:
+        got = "ValueError"
+        assert ("direction code" if flags >> 2 & 3 == 3 else "axis code") in str(exc)
+    assert got == expected
+    if isinstance(got, RawAxis):
+        assert type(got.axis) is Axis and type(got.direction) is Direction
+        assert hash(got) == hash(expected) and got.encode() == data[:7] + bytes([flags & 0x1F])
