@@ -484,6 +484,12 @@ class CorrectionGrid:
         self._s1 = np.zeros((1, 3))
         self._o1 = np.zeros((1, 3))
         self._d1 = np.zeros((1, len(self.signals)))
+        # correct_point's view of the signals it reads: (column, name, reference, is_temperature)
+        self._needed_signals = tuple(
+            (k, sig.name, float(sig.reference), sig.is_temperature)
+            for k, sig in enumerate(self.signals)
+            if sig.needed
+        )
         self._ncomp_all = 3 + 6 * len(self.signals)
         self._lock = threading.Lock()
         self._dummy_q = np.zeros((1, 4))
@@ -700,10 +706,18 @@ class CorrectionGrid:
         if self._derived_lobes:
             inputs = self.derive_inputs(inputs)
         outside_override = outside
-        x, y, z = (float(v) for v in point_mm)  # type: ignore[union-attr, arg-type]
-        px, py, pz = (float(v) for v in stylus_mm)  # type: ignore[union-attr, arg-type]
+        x, y, z = map(float, point_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
+        px, py, pz = map(float, stylus_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
         nan = math.nan
-        if not all(math.isfinite(v) for v in (x, y, z, px, py, pz)):
+        isfinite = math.isfinite
+        if not (
+            isfinite(x)
+            and isfinite(y)
+            and isfinite(z)
+            and isfinite(px)
+            and isfinite(py)
+            and isfinite(pz)
+        ):
             return (nan, nan, nan), "invalid_input"
         lo, hi = self._lo_list, self._hi_list
         cx = min(max(x, lo[0]), hi[0])
@@ -719,23 +733,22 @@ class CorrectionGrid:
         status = "ok"
         with self._lock:
             dev = self._d1
+            row = dev[0]  # columns of signals not needed stay 0.0 forever
             active = False
-            for s, sig in enumerate(self.signals):
-                dev[0, s] = 0.0
-                if not sig.needed:
-                    continue
+            for k, name, reference, is_temperature in self._needed_signals:
                 value = None
                 if temps_C is not None:
-                    value = temps_C.get(sig.name)
+                    value = temps_C.get(name)
                 if value is None and inputs is not None:
-                    value = inputs.get(sig.name)
+                    value = inputs.get(name)
                 v = nan if value is None else float(value)
-                if not math.isfinite(v):
-                    if status == "ok" or sig.is_temperature:
-                        status = "no_temperature" if sig.is_temperature else "missing_input"
+                if not isfinite(v):
+                    row[k] = 0.0
+                    if status == "ok" or is_temperature:
+                        status = "no_temperature" if is_temperature else "missing_input"
                     continue
-                dev[0, s] = v - sig.reference
-                active = active or v != sig.reference
+                row[k] = v - reference
+                active = active or v != reference
             p1, s1, o1 = self._p1, self._s1, self._o1
             p1[0, 0], p1[0, 1], p1[0, 2] = cx, cy, cz
             s1[0, 0], s1[0, 1], s1[0, 2] = px, py, pz

@@ -2,7 +2,11 @@
 
 One supervised thread owns the bus: it receives, assembles X/Y/Z triplets
 (:class:`protocol.TripletAssembler`), corrects (:class:`daemon.engine.CorrectionEngine`),
-sends the three corrected axis frames and the correction-status frame, then logs. The same
+sends the three corrected axis frames and the correction-status frame and counts the answer.
+Everything else about an answered reading (events, MCAP records of the reading, the answer
+and every frame) waits until the bus has been quiet for ``_IDLE_S`` (or ``_DEFER_MAX``
+readings pile up), then the MCAP writer is kicked: the logging work lands in the gap between
+readings, never between a reading and its answer (nor on the peer still taking it in). The same
 thread sends the heartbeat (every ``heartbeat_s`` and on a state change), drops readings that
 stopped arriving (``triplet_timeout_s``) with an ``incomplete_reading`` status, and on a bus
 error closes the bus and reopens it with back-off, reporting the condition to the state board.
@@ -55,6 +59,10 @@ from .state import StateBoard
 
 BusFactory = Callable[[CanSection, CanIds], can.BusABC]
 _RECV_POLL_S = 0.01
+_IDLE_S = 0.0002
+"""Bookkeeping of answered readings waits until no frame came for this long, s."""
+_DEFER_MAX = 32
+"""…or until this many answered readings wait for it (a bus that never goes quiet)."""
 _MAX_BACKOFF_S = 10.0
 _PROBE_MEMORY = 16
 
@@ -122,7 +130,10 @@ class CanEndpoint(can.Listener):
         self._bus: can.BusABC | None = None
         self._assembler: TripletAssembler[RawAxis] = TripletAssembler(window=config.window)
         self._probe: OrderedDict[int, tuple[float, float, float]] = OrderedDict()
-        # frames to log, written after the answer is sent: logging stays off the reply path
+        # Bookkeeping (counters, events, MCAP records) of answered readings and the frames to
+        # log wait until the bus is quiet (or DEFER_MAX readings pile up): off the reply path,
+        # and out of the way of the peer that is still taking in the answer.
+        self._deferred: list[tuple[Reading, Answer, float]] = []
         self._log_backlog: list[tuple[str, can.Message]] = []
         self._last_axis_s = 0.0
         self._corrected_ids = (
@@ -155,7 +166,7 @@ class CanEndpoint(can.Listener):
         if self._thread.is_alive():
             self._thread.join(timeout_s)
         if not self._thread.is_alive():
-            self._flush_log()  # what was received or sent last still reaches the log
+            self._bookkeeping()  # what was received or sent last still reaches the log
         self._close()
         return not self._thread.is_alive()
 
@@ -174,6 +185,7 @@ class CanEndpoint(can.Listener):
     def on_message_received(self, msg: can.Message) -> None:
         """Handle one received message (any content: never raises on bad input)."""
         self._handle(msg, time.perf_counter())
+        self._bookkeeping()  # driven by a Notifier: no idle detection, book at once
 
     def on_error(self, exc: Exception) -> None:
         """Every exception of the endpoint lands here: counted, logged, reflected in state."""
@@ -231,13 +243,18 @@ class CanEndpoint(can.Listener):
                     else:
                         backoff = min(2 * backoff, _MAX_BACKOFF_S)
                     continue
+                busy = bool(self._deferred or self._log_backlog)
                 try:
-                    msg = bus.recv(_RECV_POLL_S)
+                    msg = bus.recv(_IDLE_S if busy else _RECV_POLL_S)
                 except Exception as exc:  # bus gone, driver error: reopen
                     self._bus_failed(exc)
                     continue
                 if msg is not None:
                     self._handle(msg, time.perf_counter())
+                    if len(self._deferred) >= _DEFER_MAX:
+                        self._bookkeeping()
+                elif busy:
+                    self._bookkeeping()
                 self._housekeeping()
             except Exception as exc:  # a bug in our own code: report and keep serving
                 self.on_error(exc)
@@ -264,9 +281,18 @@ class CanEndpoint(can.Listener):
             self._on_undecodable(frame)
         if self.logger is not None:
             self._log_backlog.append(("/cmm/can_rx", msg))
-            # a reading's X and Y frames are logged after its answer, not before it
-            if not self._assembler.pending_seqs or len(self._log_backlog) >= _LOG_BACKLOG_MAX:
+            if len(self._log_backlog) >= _LOG_BACKLOG_MAX:
                 self._flush_log()
+
+    def _bookkeeping(self) -> None:
+        """Report (events, MCAP) the readings answered since the last call, then log the
+        frames; then let the MCAP writer work (the line is quiet now)."""
+        deferred, self._deferred = self._deferred, []
+        for reading, answer, latency_us in deferred:
+            self.engine.report(reading, answer, latency_us)
+        if self.logger is not None and (deferred or self._log_backlog):
+            self._flush_log()
+            self.logger.kick()
 
     def _flush_log(self) -> None:
         """Hand the frames received/sent since the last answer to the MCAP logger."""
@@ -306,10 +332,8 @@ class CanEndpoint(can.Listener):
             )
             answer = self.engine.correct(reading)
             latency_us = self._send_answer(answer, reading.received_s)
-            # Hand the interpreter to whoever waits for the answer (an in-process peer on a
-            # `virtual` bus) before the bookkeeping: counting and MCAP logging never delay it.
-            time.sleep(0)
-            self.engine.record(reading, answer, latency_us)
+            self.engine.count(answer, latency_us)
+            self._deferred.append((reading, answer, latency_us))  # reported when the bus is quiet
         elif isinstance(event, Incomplete | Superseded):
             self._answer_incomplete(event.seq, event.reason, t_rx)
         elif isinstance(event, Duplicate):
@@ -378,8 +402,6 @@ class CanEndpoint(can.Listener):
 
     # ------------------------------------------------------------------ periodic
     def _housekeeping(self) -> None:
-        if not self._assembler.pending_seqs:
-            self._flush_log()
         now = time.perf_counter()
         pending = self._assembler.pending_seqs
         if pending and now - self._last_axis_s > self.config.triplet_timeout_s:

@@ -138,8 +138,7 @@ class CorrectionEngine:
             temps = None  # geometry only: the grid flags the missing thermal terms
         else:
             self.last_temperature_fault = None
-        filters = loaded.grid.signal_filters if hasattr(loaded.grid, "signal_filters") else []
-        if temps and filters:
+        if temps and (filters := getattr(loaded.grid, "signal_filters", None)):
             temps = self.temperatures.effective(temps, filters, now_s)
         inputs: dict[str, float] = {}
         for key, sign in zip(_DIR_KEYS, r.directions, strict=True):
@@ -210,11 +209,21 @@ class CorrectionEngine:
     # ------------------------------------------------------------------ after the reply
     def record(self, reading: Reading, answer: Answer, latency_us: float) -> None:
         """Count, log to MCAP and report one answered reading (call after replying)."""
-        label = answer.status.label
+        self.count(answer, latency_us)
+        self.report(reading, answer, latency_us)
+
+    def count(self, answer: Answer, latency_us: float) -> None:
+        """The counters of one answer (cheap: right after replying, so they are never behind
+        what the peer has seen)."""
         self.metrics.count("readings")
-        self.metrics.answer(label, latency_us)
+        self.metrics.answer(answer.status.label, latency_us)
         if answer.detail and answer.status == Status.OK:
             self.metrics.count("correction_warnings")
+
+    def report(self, reading: Reading, answer: Answer, latency_us: float) -> None:
+        """Events and MCAP records of one answer (may wait until the line is quiet)."""
+        label = answer.status.label
+        if answer.detail and answer.status == Status.OK:
             self.events.emit("correction_warning", "warning", seq=answer.seq, detail=answer.detail)
         elif answer.status != Status.OK:
             self.events.emit(

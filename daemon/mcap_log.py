@@ -75,6 +75,7 @@ class HotPathQueue:
     _enqueued: int
     _dropped: int
     _drop_lock: threading.Lock
+    _wake: threading.Event
 
     def log(
         self,
@@ -107,6 +108,12 @@ class HotPathQueue:
     def _count_drop(self, n: int = 1) -> None:
         with self._drop_lock:
             self._dropped += n
+
+    def kick(self) -> None:
+        """Tell the writer (or forwarder) to work now rather than at its next poll: called by a
+        producer when it goes idle (the CAN endpoint after its bookkeeping), so the logging
+        work lands in the gap between readings, not on top of the next one."""
+        self._wake.set()
 
 
 class McapLogger(HotPathQueue):
@@ -177,6 +184,7 @@ class McapLogger(HotPathQueue):
         self._files: list[Path] = []
         self._error: BaseException | None = None
         self._stopping = threading.Event()
+        self._wake = threading.Event()
         self._closed = False
         self._started_utc = datetime.now(UTC)
         self._session_tag = self._started_utc.strftime("%Y%m%dT%H%M%S")
@@ -237,6 +245,7 @@ class McapLogger(HotPathQueue):
         """
         self._closed = True
         self._stopping.set()
+        self._wake.set()
         if threading.current_thread() is not self._thread:
             self._thread.join(timeout_s)
         return not self._thread.is_alive()
@@ -382,7 +391,8 @@ class McapLogger(HotPathQueue):
                 if stopping and not self._queue:
                     break
                 if n == 0:
-                    self._stopping.wait(poll_s)
+                    self._wake.wait(poll_s)
+                    self._wake.clear()
             self._finish_current()
             self._count_drop(len(self._queue))  # raced past stop(): counted, never lost silently
         except BaseException as exc:

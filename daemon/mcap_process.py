@@ -261,6 +261,7 @@ class McapProcessLogger(HotPathQueue):
         self._error: BaseException | None = None
         self._closed = False
         self._stopping = threading.Event()
+        self._wake = threading.Event()
         self._done = False
         self._deadline = float("inf")
         kwargs: dict[str, Any] = {
@@ -377,6 +378,7 @@ class McapProcessLogger(HotPathQueue):
         self._deadline = min(self._deadline, time.monotonic() + timeout_s)
         self._stopping.set()  # before _closed: the forwarder then forwards, not drops
         self._closed = True
+        self._wake.set()
         if threading.current_thread() is not self._thread:
             self._thread.join(max(0.0, self._deadline - time.monotonic()) + 2.0)
         return self._done and not self._thread.is_alive()
@@ -449,7 +451,8 @@ class McapProcessLogger(HotPathQueue):
                 if n >= BATCH:
                     time.sleep(0)  # yield the GIL between batches: the reply path comes first
                 elif n == 0:
-                    self._stopping.wait(_POLL_S)
+                    self._wake.wait(_POLL_S)
+                    self._wake.clear()
             self._conn.send_bytes(_STOP)
             while not self._done:
                 left = self._deadline - time.monotonic()

@@ -273,3 +273,31 @@ def test_config_must_enable_a_transport() -> None:
     cfg.can.enabled = False
     with pytest.raises(ValueError, match="enable at least one"):
         cfg.check()
+
+
+def test_a_slow_mcap_logger_never_delays_an_answer(tmp_path) -> None:
+    """Every log() call takes 5 ms here: an answer that waited for any of them would show it.
+    Bookkeeping (events, MCAP records) runs only once the bus is quiet; nothing is lost."""
+    from daemon.mcap_read import read_messages
+
+    cfg = base_config(channel())
+    cfg.mcap.path = str(tmp_path / "s.mcap")
+    n = 8
+    with daemon_and_controller(cfg) as (d, ctl, _bus):
+        assert d.logger is not None
+        fast_log = d.logger.log
+
+        def slow_log(*args, **kw):
+            time.sleep(0.005)
+            return fast_log(*args, **kw)
+
+        d.logger.log = slow_log  # type: ignore[method-assign]
+        send_temps(ctl)
+        time.sleep(0.2)
+        answers = ctl.stream([_reading(seq) for seq in range(n)], 5.0, in_flight=1)
+        assert [a.status for a in answers] == ["ok"] * n
+        assert max(a.latency_us for a in answers) < 5000, [a.latency_us for a in answers]
+    res = read_messages(cfg.mcap.path)
+    corrected = [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"]
+    assert corrected == list(range(n))
+    assert sum(m.topic == "/cmm/can_tx" for m in res.messages) >= 4 * n

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import can
 import numpy as np
+import pytest
 from test_daemon_support import (
     MCAST_GROUP,
     STYLUS,
@@ -32,7 +33,7 @@ from sim_controller.runner import build_program, evaluate, make_readings, run_ca
 from sim_controller.sim_machine import Environment, SimulatedMachine
 
 
-def _write_config(tmp: Path, port: int, grid: Path, mcap: Path) -> Path:
+def _write_config(tmp: Path, port: int, grid: Path, mcap: Path, writer: str = "process") -> Path:
     cfg = tmp / "daemon.toml"
     cfg.write_text(
         f"""
@@ -48,6 +49,7 @@ port = {port}
 [mcap]
 path = "{mcap}"
 flush_s = 0.2
+writer = "{writer}"
 [metrics]
 port = 0
 """
@@ -56,10 +58,12 @@ port = 0
 
 
 @contextmanager
-def _daemon(tmp: Path, grid: Path) -> Iterator[tuple[subprocess.Popen, CanController, Path, Path]]:
+def _daemon(
+    tmp: Path, grid: Path, writer: str = "process"
+) -> Iterator[tuple[subprocess.Popen, CanController, Path, Path]]:
     port = free_udp_port()
     mcap = tmp / "session.mcap"
-    cfg = _write_config(tmp, port, grid, mcap)
+    cfg = _write_config(tmp, port, grid, mcap, writer)
     log = tmp / "daemon.log"
     with open(log, "w") as out:
         proc = subprocess.Popen(
@@ -136,8 +140,11 @@ def test_subprocess_udp_multicast_reload_and_sigterm(tmp_path) -> None:
     assert events[-1]["event"] == "stopped"
 
 
-def test_kill_9_mcap_reads_back(tmp_path) -> None:
-    with _daemon(tmp_path, npl_grid_path()) as (proc, ctl, mcap, _log):
+@pytest.mark.parametrize("writer", ["thread", "process"])
+def test_kill_9_mcap_reads_back(tmp_path, writer: str) -> None:
+    """kill -9 of the daemon: with the thread writer the file is cut and reads back up to the
+    last finished chunk; the child-process writer (default) outlives the daemon and finishes it."""
+    with _daemon(tmp_path, npl_grid_path(), writer) as (proc, ctl, mcap, _log):
         ctl.send_temperatures(Environment().samples(0.0))
         time.sleep(0.05)
         for seq in range(300):
@@ -148,7 +155,9 @@ def test_kill_9_mcap_reads_back(tmp_path) -> None:
             ctl.exchange(RawReading(seq, (100.0, 500.0, 200.0)))
         proc.kill()  # SIGKILL
         assert proc.wait(10) == -signal.SIGKILL
+    if writer == "process":  # the orphaned child finishes the file (summary and all)
+        assert _wait(lambda: "session_end" in dict(read_messages(mcap).metadata), 20.0)
     res = read_messages(mcap)
-    assert res.truncated
+    assert res.truncated == (writer == "thread")
     seqs = [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"]
     assert seqs[:300] == list(range(300))
