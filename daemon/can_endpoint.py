@@ -63,6 +63,8 @@ _IDLE_S = 0.0002
 """Bookkeeping of answered readings waits until no frame came for this long, s."""
 _DEFER_MAX = 32
 """…or until this many answered readings wait for it (a bus that never goes quiet)."""
+_HOUSEKEEPING_S = 0.001
+"""While frames keep coming, heartbeat/timeout checks run at most this often, s."""
 _MAX_BACKOFF_S = 10.0
 _PROBE_MEMORY = 16
 
@@ -136,6 +138,8 @@ class CanEndpoint(can.Listener):
         self._deferred: list[tuple[Reading, Answer, float]] = []
         self._log_backlog: list[tuple[str, can.Message]] = []
         self._last_axis_s = 0.0
+        self._frames_rx = 0  # folded into the metrics by the housekeeping
+        self._next_housekeeping_s = 0.0
         self._corrected_ids = (
             self.ids.corrected_id(Axis.X),
             self.ids.corrected_id(Axis.Y),
@@ -167,6 +171,7 @@ class CanEndpoint(can.Listener):
             self._thread.join(timeout_s)
         if not self._thread.is_alive():
             self._bookkeeping()  # what was received or sent last still reaches the log
+            self._count_frames()
         self._close()
         return not self._thread.is_alive()
 
@@ -186,6 +191,7 @@ class CanEndpoint(can.Listener):
         """Handle one received message (any content: never raises on bad input)."""
         self._handle(msg, time.perf_counter())
         self._bookkeeping()  # driven by a Notifier: no idle detection, book at once
+        self._count_frames()
 
     def on_error(self, exc: Exception) -> None:
         """Every exception of the endpoint lands here: counted, logged, reflected in state."""
@@ -250,19 +256,23 @@ class CanEndpoint(can.Listener):
                     self._bus_failed(exc)
                     continue
                 if msg is not None:
-                    self._handle(msg, time.perf_counter())
+                    t_rx = time.perf_counter()
+                    self._handle(msg, t_rx)
                     if len(self._deferred) >= _DEFER_MAX:
                         self._bookkeeping()
-                elif busy:
-                    self._bookkeeping()
-                self._housekeeping()
+                    if t_rx >= self._next_housekeeping_s:
+                        self._housekeeping()
+                else:
+                    if busy:
+                        self._bookkeeping()
+                    self._housekeeping()
             except Exception as exc:  # a bug in our own code: report and keep serving
                 self.on_error(exc)
                 self._stop.wait(0.01)
 
     # ------------------------------------------------------------------ receive
     def _handle(self, msg: can.Message, t_rx: float) -> None:
-        self.metrics.count("frames_rx")
+        self._frames_rx += 1
         frame = decode_message(msg, self.ids)
         if isinstance(frame, RawAxis):
             self._last_axis_s = t_rx
@@ -401,8 +411,15 @@ class CanEndpoint(can.Listener):
                 self._log_backlog.append(("/cmm/can_tx", msg))
 
     # ------------------------------------------------------------------ periodic
+    def _count_frames(self) -> None:
+        n, self._frames_rx = self._frames_rx, 0
+        if n:
+            self.metrics.count("frames_rx", n)
+
     def _housekeeping(self) -> None:
+        self._count_frames()
         now = time.perf_counter()
+        self._next_housekeeping_s = now + _HOUSEKEEPING_S
         pending = self._assembler.pending_seqs
         if pending and now - self._last_axis_s > self.config.triplet_timeout_s:
             timeout_ms = self.config.triplet_timeout_s * 1e3

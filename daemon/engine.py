@@ -215,10 +215,8 @@ class CorrectionEngine:
     def count(self, answer: Answer, latency_us: float) -> None:
         """The counters of one answer (cheap: right after replying, so they are never behind
         what the peer has seen)."""
-        self.metrics.count("readings")
-        self.metrics.answer(answer.status.label, latency_us)
-        if answer.detail and answer.status == Status.OK:
-            self.metrics.count("correction_warnings")
+        warning = bool(answer.detail) and answer.status == Status.OK
+        self.metrics.reading_answered(answer.status.label, latency_us, warning)
 
     def report(self, reading: Reading, answer: Answer, latency_us: float) -> None:
         """Events and MCAP records of one answer (may wait until the line is quiet)."""

@@ -87,6 +87,18 @@ class Metrics:
             self.latency.add(latency_us)
             self._period.add(latency_us)
 
+    def reading_answered(self, status_label: str, latency_us: float, warning: bool) -> None:
+        """One answered reading, under one lock: counts ``readings``, the answer with its
+        status and latency (µs) and, if ``warning``, ``correction_warnings``."""
+        with self._lock:
+            c = self.counters
+            c["readings"] = c.get("readings", 0) + 1
+            if warning:
+                c["correction_warnings"] = c.get("correction_warnings", 0) + 1
+            self.answers[status_label] = self.answers.get(status_label, 0) + 1
+            self.latency.add(latency_us)
+            self._period.add(latency_us)
+
     def get(self, name: str) -> int:
         """Counter value (0 if never counted)."""
         return self.counters.get(name, 0)

@@ -62,6 +62,9 @@ class TemperatureTable:
         self._sensors: dict[int, SensorState] = {}
         self._by_role: dict[str, int] = {role: sid for sid, role in self.roles.items()}
         self._lags: dict[tuple[str, float], FirstOrderLag] = {}
+        self._version = 0  # bumped by every stored sample
+        # the last all-usable verdict: (version, required roles, usable until s, verdict)
+        self._ok_cache: tuple[int, tuple[str, ...], float, TemperatureVerdict] | None = None
 
     def update(
         self, sensor: int, temp_C: float, counter: int, valid: bool, now_s: float
@@ -107,6 +110,7 @@ class TemperatureTable:
                 sensor, role, temp_C, counter, valid, now_s, changed_s, fault, detail
             )
             self._sensors[sensor] = state
+            self._version += 1
             if fault is None:
                 for (lag_role, _tau), lag in self._lags.items():
                     if lag_role == role:
@@ -114,31 +118,47 @@ class TemperatureTable:
             return state
 
     def inputs(self, required: tuple[str, ...], now_s: float) -> TemperatureVerdict:
-        """Usable temperatures and the first fault among ``required`` roles at ``now_s``."""
+        """Usable temperatures and the first fault among ``required`` roles at ``now_s``.
+
+        The answer to the common case (every role usable) is reused until a new sample
+        arrives or the oldest of them would turn stale: do not mutate its ``temps_C``."""
+        c = self._ok_cache
+        if c is not None and c[0] == self._version and now_s <= c[2] and c[1] == required:
+            return c[3]
+        with self._lock:
+            version = self._version
+            verdict = self._check(required, now_s)
+            if verdict.status is None:
+                changed = [self._sensors[self._by_role[r]].changed_s for r in required]
+                until = min(changed, default=float("inf")) + self.config.stale_s
+                self._ok_cache = (version, tuple(required), until, verdict)
+        return verdict
+
+    def _check(self, required: tuple[str, ...], now_s: float) -> TemperatureVerdict:
+        """:meth:`inputs` without reuse (the caller holds the lock)."""
         temps: dict[str, float] = {}
         status: Status | None = None
         detail = ""
         stale_s = self.config.stale_s
-        with self._lock:
-            for role in required:
-                sid = self._by_role.get(role)
-                state = self._sensors.get(sid) if sid is not None else None
-                if state is None:
-                    why: Status | None = Status.NO_TEMPERATURE
-                    text = f"no sample for {role}" + ("" if sid is not None else " (no sensor)")
-                elif state.fault is not None:
-                    why, text = state.fault, state.detail
-                elif now_s - state.changed_s > stale_s:
-                    why = Status.STALE_TEMPERATURE
-                    text = (
-                        f"sensor {state.sensor} ({role}) unchanged for "
-                        f"{now_s - state.changed_s:.1f} s > {stale_s} s"
-                    )
-                else:
-                    temps[role] = state.temp_C
-                    continue
-                if status is None:
-                    status, detail = why, text
+        for role in required:
+            sid = self._by_role.get(role)
+            state = self._sensors.get(sid) if sid is not None else None
+            if state is None:
+                why: Status | None = Status.NO_TEMPERATURE
+                text = f"no sample for {role}" + ("" if sid is not None else " (no sensor)")
+            elif state.fault is not None:
+                why, text = state.fault, state.detail
+            elif now_s - state.changed_s > stale_s:
+                why = Status.STALE_TEMPERATURE
+                text = (
+                    f"sensor {state.sensor} ({role}) unchanged for "
+                    f"{now_s - state.changed_s:.1f} s > {stale_s} s"
+                )
+            else:
+                temps[role] = state.temp_C
+                continue
+            if status is None:
+                status, detail = why, text
         return TemperatureVerdict(temps, status, detail)
 
     def effective(

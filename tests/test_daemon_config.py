@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from test_daemon_support import ROOT
 
 from daemon.commands import add_parsers
@@ -99,3 +101,44 @@ def test_temperature_table_rules() -> None:
     assert "plausible" in table.inputs(("T_x",), 10.0).detail
     table.update(0, 20.0, 5, False, 20.0)
     assert table.inputs(("T_x",), 20.0).status == Status.NO_TEMPERATURE
+
+
+_OPS = st.lists(
+    st.one_of(
+        st.tuples(  # a sample: sensor, temperature, counter step, valid, time step
+            st.just("update"),
+            st.integers(0, 2),
+            st.floats(19.0, 21.0),
+            st.integers(0, 1),
+            st.booleans(),
+            st.floats(0.0, 0.8),
+        ),
+        st.tuples(st.just("inputs"), st.integers(0, 2), st.floats(0.0, 1.5)),
+    ),
+    max_size=40,
+)
+
+
+@given(ops=_OPS)
+def test_temperature_verdict_reuse_equals_a_fresh_check(ops) -> None:
+    """inputs() reuses its last all-usable verdict; the oracle is the same rules evaluated
+    afresh (``_check``) after every step, at every time, for every set of roles."""
+    cfg = load_config(EXAMPLE).temperatures
+    cfg.stale_s = 1.0
+    cfg.max_rate_C_per_s = 1e9
+    table = TemperatureTable(cfg, {0: "T_x", 1: "T_y", 2: "T_wp"})
+    role_sets = [("T_x",), ("T_x", "T_y"), ("T_x", "T_y", "T_wp")]
+    counters = [0, 0, 0]
+    now = 0.0
+    for op in ops:
+        if op[0] == "update":
+            _, sensor, temp, step, valid, dt = op
+            now += dt
+            counters[sensor] = (counters[sensor] + step) & 0xFFFF
+            table.update(sensor, temp, counters[sensor], valid, now)
+        else:
+            _, which, dt = op
+            t = now + dt
+            required = role_sets[which]
+            got = table.inputs(required, t)
+            assert got == table._check(required, t)
