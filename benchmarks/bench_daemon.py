@@ -33,6 +33,7 @@ import tempfile
 import threading
 import time
 import uuid
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -225,6 +226,7 @@ def bench_sustained(grid: Path, n: int, tmp: Path) -> dict[str, Any]:
         "lost": n - sum(a.status != "timeout" for a in answers),
         "readings_per_s": n / dt,
         "mcap_dropped": mcap_dropped,
+        "statuses": dict(Counter(a.status for a in answers)),
     }
 
 
@@ -362,9 +364,9 @@ def bench_modbus(grid: Path, n: int) -> dict[str, Any]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--n", type=int, default=3000, help="paced readings per latency case")
+    ap.add_argument("--n", type=int, default=6000, help="paced readings per latency case")
     ap.add_argument("--rate", type=float, default=1000.0, help="pace of latency cases, Hz")
-    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the virtual cases")
+    ap.add_argument("--rounds", type=int, default=6, help="interleaved rounds of the virtual cases")
     ap.add_argument("--sustained", type=int, default=100_000)
     ap.add_argument("--modbus-n", type=int, default=2000)
     ap.add_argument("--echo-server", type=int, help=argparse.SUPPRESS)

@@ -133,6 +133,8 @@ class McapLogger(HotPathQueue):
     :param on_error: called from the writer thread with every exception it meets.
     :param schemas: topic to schema; defaults to :data:`daemon.mcap_schemas.TOPIC_SCHEMAS`.
     :param opener: creates a file's byte stream (tests use it to inject slow or failing sinks).
+    :param writer_setup: called first in the writer thread (e.g. to lower that thread's CPU
+        priority); an exception from it is logged and the thread runs on.
     """
 
     def __init__(
@@ -150,6 +152,7 @@ class McapLogger(HotPathQueue):
         on_error: Callable[[BaseException], None] | None = None,
         schemas: Mapping[str, TopicSchema] = TOPIC_SCHEMAS,
         opener: Callable[[Path], IO[bytes]] = _open_exclusive,
+        writer_setup: Callable[[], object] | None = None,
     ) -> None:
         target = Path(target)
         self._single = target.suffix == ".mcap"
@@ -172,6 +175,12 @@ class McapLogger(HotPathQueue):
         self._on_error = on_error
         self._schemas = dict(schemas)
         self._opener = opener
+        self._writer_setup = writer_setup
+        # file work (batches, flushes, rolls, finishing) happens under this lock: the writer
+        # thread does it, and drain_to() lets another thread help
+        self._io_lock = threading.RLock()
+        self._last_flush = time.monotonic()
+        self._dirty = False
         self._queue: collections.deque[tuple[str, dict[str, Any] | tuple[Any, ...], int]] = (
             collections.deque()
         )
@@ -369,39 +378,81 @@ class McapLogger(HotPathQueue):
         assert self._stream is not None
         return self._stream.tell()
 
+    @property
+    def backlog(self) -> int:
+        """Messages waiting to be written."""
+        return len(self._queue)
+
+    def drain_to(self, max_len: int) -> int:
+        """Write queued messages from the calling thread until at most ``max_len`` wait;
+        returns how many were written. For a caller with more CPU priority than the writer
+        thread: the process writer's child runs its writer thread at ``SCHED_IDLE`` and its
+        normal-priority main thread helps here when the backlog grows (a fully loaded machine
+        would otherwise starve the writer and drop messages)."""
+        written = 0
+        try:
+            while len(self._queue) > max_len:
+                with self._io_lock:
+                    if self._writer is None:
+                        break
+                    n = self._step()
+                if n == 0:
+                    break
+                written += n
+        except BaseException as exc:
+            self._fail(exc)
+        return written
+
+    def _step(self) -> int:
+        """One batch, then the periodic flush and the roll when due (under ``_io_lock``)."""
+        n = self._write_batch()
+        self._dirty = self._dirty or n > 0
+        now = time.monotonic()
+        if self._dirty and now - self._last_flush >= self._flush_period_s:
+            self._flush()
+            self._last_flush, self._dirty = now, False
+        if n and self._should_roll():
+            self._finish_current()
+            self._open_next()
+            self._last_flush, self._dirty = time.monotonic(), False
+        return n
+
+    def _fail(self, exc: BaseException) -> None:
+        """The file can no longer be written: report, drop everything queued or coming."""
+        self._report(exc)
+        # keep the hot path cheap and honest: everything still queued or coming is dropped
+        self._closed = True
+        self._count_drop(len(self._queue))
+        self._queue.clear()
+        with self._io_lock:
+            try:
+                self._finish_current()
+            except BaseException as exc2:
+                _log.error("MCAP writer: could not finish file after error: %r", exc2)
+
     def _run(self) -> None:
+        if self._writer_setup is not None:
+            try:
+                self._writer_setup()
+            except Exception:
+                _log.exception("MCAP writer: writer_setup failed (running on without it)")
         poll_s = min(0.01, self._flush_period_s / 4)
-        last_flush = time.monotonic()
-        dirty = False
         try:
             while True:
                 stopping = self._stopping.is_set()
-                n = self._write_batch()
+                with self._io_lock:
+                    if self._writer is None:  # a helper met an error and closed the file
+                        break
+                    n = self._step()
                 if n:
                     time.sleep(0)  # yield the GIL between short batches: the reply path comes first
-                dirty = dirty or n > 0
-                now = time.monotonic()
-                if dirty and now - last_flush >= self._flush_period_s:
-                    self._flush()
-                    last_flush, dirty = now, False
-                if n and self._should_roll():
-                    self._finish_current()
-                    self._open_next()
-                    last_flush, dirty = time.monotonic(), False
                 if stopping and not self._queue:
                     break
                 if n == 0:
                     self._wake.wait(poll_s)
                     self._wake.clear()
-            self._finish_current()
+            with self._io_lock:
+                self._finish_current()
             self._count_drop(len(self._queue))  # raced past stop(): counted, never lost silently
         except BaseException as exc:
-            self._report(exc)
-            # keep the hot path cheap and honest: everything still queued or coming is dropped
-            self._closed = True
-            self._count_drop(len(self._queue))
-            self._queue.clear()
-            try:
-                self._finish_current()
-            except BaseException as exc2:
-                _log.error("MCAP writer: could not finish file after error: %r", exc2)
+            self._fail(exc)

@@ -9,9 +9,12 @@ the parent has threads). The child runs an ordinary :class:`McapLogger` (its own
 the same MCAP/JSON code) and reports its counters, files and errors back over the same duplex
 pipe, so ``stats()``, ``error``, ``healthy``, ``files`` and ``on_error`` work in the parent.
 
-Why: with the thread logger, the writer's ~8 µs of JSON + MCAP per message competes for the GIL
-with the reply path of the same process. Here the parent pays ~0.4 µs per message (pickling, in
-the forwarder thread) and the rest happens in another interpreter.
+Why: with the thread logger, the writer's ~10 µs of JSON + MCAP per message competes for the
+GIL with the reply path of the same process. Here the parent pays ~0.1 µs per message (pickling
+compact record tuples, in the forwarder thread) and the rest happens in another interpreter,
+whose writer thread runs at ``SCHED_IDLE`` (``priority="idle"``): it only takes CPU time no
+other task wants, so it never delays a reply; the child's main thread (normal priority) writes
+itself when the backlog grows, so a fully loaded machine does not starve the log.
 
 Shutdown: ``stop()`` forwards what is queued, sends a sentinel, and the child drains, finishes
 the file (``session_end``, summary, indexes) and exits; the parent joins it. If the parent dies
@@ -85,11 +88,24 @@ _CHILD_CODE = (
 )
 
 
+HELP_HIGH = 8192
+"""Backlog (messages) at which the child's main thread starts writing itself…"""
+HELP_LOW = 1024
+"""…until this many are left."""
+
+
+def expected_priority(priority: str) -> str:
+    """What :func:`lower_priority` will achieve here: ``idle``, ``nice 19`` or ``normal``."""
+    if priority == "normal":
+        return "normal"
+    return "idle" if hasattr(os, "SCHED_IDLE") else "nice 19"
+
+
 def lower_priority(priority: str) -> str:
-    """Lower this process' CPU priority (inherited by threads started later); returns what took
-    effect. ``idle``: Linux ``SCHED_IDLE`` (a woken normal task always preempts us, so the
-    writer never delays the daemon's reply path), else nice 19 where SCHED_IDLE is missing;
-    ``normal``: unchanged."""
+    """Lower the calling thread's CPU priority (Linux: policy and nice are per thread);
+    returns what took effect. ``idle``: Linux ``SCHED_IDLE`` (a woken normal task always
+    preempts it, so the writer never delays the daemon's reply path), else nice 19 where
+    SCHED_IDLE is missing; ``normal``: unchanged."""
     if priority == "normal":
         return "normal"
     try:
@@ -115,17 +131,29 @@ def _child_entry(fd: int, parent_pid: int) -> None:
     except (EOFError, OSError):
         conn.close()
         return
-    took = lower_priority(kwargs.pop("priority", "normal"))
-    kwargs["metadata"] = {**kwargs["metadata"], "writer_priority": took}
-    _child_main(conn, kwargs, parent_pid)
+    priority = kwargs.pop("priority", "normal")
+    kwargs["metadata"] = {**kwargs["metadata"], "writer_priority": expected_priority(priority)}
+    _child_main(conn, kwargs, parent_pid, priority)
 
 
-def _child_main(conn: Connection, kwargs: dict[str, Any], parent_pid: int) -> None:
-    """Run a McapLogger fed from ``conn`` until the sentinel or EOF, reporting back on it."""
+def _child_main(
+    conn: Connection, kwargs: dict[str, Any], parent_pid: int, priority: str = "normal"
+) -> None:
+    """Run a McapLogger fed from ``conn`` until the sentinel or EOF, reporting back on it.
+
+    The logger's writer thread runs at ``priority``; this (main) thread keeps the normal
+    priority, takes the batches off the pipe at once, and writes itself while more than
+    :data:`HELP_HIGH` messages wait (a loaded machine can starve an idle-priority writer)."""
     errors: collections.deque[BaseException] = collections.deque()
     kwargs = {**kwargs, "metadata": {**kwargs["metadata"], "writer_pid": str(os.getpid())}}
+
+    def writer_setup() -> None:
+        took = lower_priority(priority)
+        if took != expected_priority(priority):
+            _log.warning("MCAP writer priority %r not available: %s", priority, took)
+
     try:
-        logger = McapLogger(**kwargs, on_error=errors.append)
+        logger = McapLogger(**kwargs, on_error=errors.append, writer_setup=writer_setup)
     except BaseException as exc:
         conn.send_bytes(pickle.dumps(("init_error", _portable_exc(exc))))
         conn.close()
@@ -167,6 +195,8 @@ def _child_main(conn: Connection, kwargs: dict[str, Any], parent_pid: int) -> No
                 for topic, payload, t_ns in batch:
                     logger.log(topic, payload, t_ns)
                 received += len(batch)
+                if logger.backlog > HELP_HIGH:
+                    logger.drain_to(HELP_LOW)
             elif os.getppid() != parent_pid:  # reparented: the parent died, pipe held elsewhere
                 parent_alive = False
                 break

@@ -302,3 +302,26 @@ def test_rolling_by_time(tmp_path: Path) -> None:
     assert [m.payload["seq"] for m in res.messages] == list(range(40)) and not res.truncated
     indexes = [int(meta["file_index"]) for name, meta in res.metadata if name == "session"]
     assert indexes == list(range(len(lg.files)))
+
+
+def test_drain_to_writes_from_the_callers_thread_while_the_writer_is_starved(
+    tmp_path: Path,
+) -> None:
+    """The writer thread is held (as a starved SCHED_IDLE thread would be); drain_to() writes
+    from the caller, in order, and the file still ends complete once the writer runs again."""
+    release = threading.Event()
+    path = tmp_path / "s.mcap"
+    lg = McapLogger(path, writer_setup=release.wait)
+    for i in range(1000):
+        assert lg.log("/cmm/raw", sample("/cmm/raw", i), T0_NS + i)
+    assert lg.backlog == 1000 and lg.stats().written == 0
+    assert lg.drain_to(100) >= 900
+    assert lg.backlog <= 100
+    for i in range(1000, 1100):
+        lg.log("/cmm/raw", sample("/cmm/raw", i), T0_NS + i)
+    release.set()
+    assert lg.stop()
+    assert lg.stats().written == 1100 and lg.stats().dropped == 0
+    res = read_messages(path)
+    assert not res.truncated
+    assert [m.payload["seq"] for m in res.messages] == list(range(1100))

@@ -41,6 +41,27 @@ def _gone(pid: int) -> bool:
         return True
 
 
+def _thread_policies(pid: int) -> list[int]:
+    """Scheduling policy of each thread of ``pid`` (main thread first; 0 normal, 5 SCHED_IDLE):
+    field 41 of /proc/PID/task/TID/stat."""
+    tids = sorted(int(t) for t in os.listdir(f"/proc/{pid}/task"))
+    tids.sort(key=lambda t: t != pid)
+    out = []
+    for tid in tids:
+        with open(f"/proc/{pid}/task/{tid}/stat") as f:
+            out.append(int(f.read().rsplit(")", 1)[1].split()[38]))
+    return out
+
+
+def _wait_for(pred, timeout_s: float = 5.0) -> bool:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        if pred():
+            return True
+        time.sleep(0.01)
+    return False
+
+
 def _reaped(pid: int) -> bool:
     return not Path(f"/proc/{pid}").exists()
 
@@ -253,7 +274,9 @@ def test_daemon_with_the_process_writer_logs_the_session(tmp_path: Path) -> None
     with DaemonService(cfg, events_stream=None) as d:
         assert isinstance(d.logger, McapProcessLogger)
         if hasattr(os, "SCHED_IDLE"):  # the writer never competes with the reply path
-            assert os.sched_getscheduler(d.logger.child_pid) == os.SCHED_IDLE
+            assert _wait_for(lambda: _thread_policies(d.logger.child_pid).count(5) == 1)
+            policies = _thread_policies(d.logger.child_pid)
+            assert policies[0] == 0  # the child's main thread (it reads the pipe) stays normal
         bus = can.Bus(interface="virtual", channel=cfg.can.channel)
         try:
             with CanController(bus, answer_timeout_s=2.0) as ctl:
