@@ -1,15 +1,16 @@
 """Daemon end-to-end latency and throughput vs bare transports between the same endpoints.
 
-Run: ``.venv/bin/python benchmarks/bench_daemon.py [--n 3000] [--sustained 100000]``. Prints a
-table and writes ``benchmarks/results/daemon.json``. Every comparison runs in the same process
-and the same minute against a bare peer on the same transport, so read the differences and
-ratios, not absolute numbers (the machine is shared):
+Run: ``.venv/bin/python benchmarks/bench_daemon.py [--n 6000] [--rounds 6] [--sustained 100000]``
+(``--only-virtual`` for a quick look). Prints a table and writes ``benchmarks/results/daemon.json``.
+Every comparison runs in the same process and the same minute against a bare peer on the same
+transport, so read the differences and ratios, not absolute numbers (the machine is shared):
 
-* CAN ``virtual`` (two threads, one process) and ``udp_multicast`` (two processes, the
-  interface-local IPv6 group): a reading is 3 raw frames → 4 answer frames. The bare echo
-  answers with 4 frames built from the raw payloads (no decoding, no correction); the daemon
-  decodes, assembles, corrects with the grid, answers, then logs. Latency = last raw frame sent
-  → status frame received at the controller, paced at 1 kHz, µs.
+* CAN ``virtual`` (two threads, one process; the cases in interleaved rounds) and
+  ``udp_multicast`` (two processes, the interface-local IPv6 group; the daemon logs MCAP with
+  its default writer): a reading is 3 raw frames → 4 answer frames. The bare echo answers with
+  4 frames built from the raw payloads (no decoding, no correction); the daemon decodes,
+  assembles, corrects with the grid, answers, then logs. Latency = last raw frame sent → status
+  frame received at the controller, paced at 1 kHz, µs.
 * MCAP logging on vs off (virtual): logging must not add to the reply latency; with the
   default child-process writer (``[mcap] writer = "process"``, ``writer_priority = "idle"``:
   JSON and MCAP off the daemon's GIL, at SCHED_IDLE) and with the writer thread
@@ -243,6 +244,7 @@ def bench_udp(grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path) -> di
                 f'[can]\ninterface = "udp_multicast"\nchannel = "{GROUP}"\nheartbeat_s = 0.05\n'
                 f"[can.options]\nport = {port}\n[metrics]\nenabled = false\n"
                 f"[temperatures]\nstale_s = 3600.0\n"
+                f'[mcap]\npath = "{tmp / "udp.mcap"}"\n'  # production layout: logging on
             )
             cmd = [
                 sys.executable,
