@@ -231,57 +231,96 @@ def bench_sustained(grid: Path, n: int, tmp: Path) -> dict[str, Any]:
     }
 
 
-def bench_udp(grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name in ("echo", "daemon"):
-        port = 46000 + (uuid.uuid4().int % 2000)
-        if name == "echo":
-            cmd = [sys.executable, __file__, "--echo-server", str(port)]
-        else:
-            cfgf = tmp / "udp.toml"
-            cfgf.write_text(
-                f'[grid]\npath = "{grid}"\nstylus_mm = {STYLUS}\n'
-                f'[can]\ninterface = "udp_multicast"\nchannel = "{GROUP}"\nheartbeat_s = 0.05\n'
-                f"[can.options]\nport = {port}\n[metrics]\nenabled = false\n"
-                f"[temperatures]\nstale_s = 3600.0\n"
-                f'[mcap]\npath = "{tmp / "udp.mcap"}"\n'  # production layout: logging on
-            )
-            cmd = [
-                sys.executable,
-                "-m",
-                "daemon.cli",
-                "daemon",
-                "--config",
-                str(cfgf),
-                "--log-level",
-                "error",
-            ]
-        proc = subprocess.Popen(
-            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT
-        )
-        try:
-            with (
-                can.Bus(interface="udp_multicast", channel=GROUP, port=port) as bus,
-                CanController(bus) as ctl,
-            ):
-                t0 = time.monotonic()
-                if name == "echo":
-                    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-                else:
-                    while ctl.heartbeat is None and time.monotonic() - t0 < 60:
-                        time.sleep(0.05)
-                values, out[f"{name}_lost"] = measure(ctl, rs, rate_hz)
-                out[name] = pct(values)
-        finally:
-            if name == "echo":
-                assert proc.stdin is not None
-                proc.stdin.close()
-            else:
-                proc.terminate()
-            proc.wait(20)
-            if proc.stdout is not None:
-                proc.stdout.close()
+UDP_CASES = {  # name: extra daemon config (TOML)
+    "daemon_no_mcap": "",
+    "daemon": '[mcap]\npath = "{mcap}"\n',  # the production layout: MCAP on, default writer
+}
+
+
+def bench_udp(
+    grid: Path,
+    rs: list[RawReading],
+    rate_hz: float,
+    tmp: Path,
+    cases: tuple[str, ...] = ("echo", "daemon_no_mcap", "daemon"),
+    extra: dict[str, str] | None = None,
+    rounds: int = 3,
+) -> dict[str, Any]:
+    """``echo`` and the daemon variants of :data:`UDP_CASES` (or ``extra``: name → TOML), in
+    ``rounds`` interleaved rounds (order rotated); percentiles over the pooled latencies."""
+    lat: dict[str, list[float]] = {name: [] for name in cases}
+    lost: dict[str, int] = dict.fromkeys(cases, 0)
+    per_round = max(1, (len(rs) - 200) // rounds)
+    for k in range(rounds):
+        order = cases[k % len(cases) :] + cases[: k % len(cases)]
+        for name in order:
+            values, n_lost = _udp_round(name, grid, rs[: 200 + per_round], rate_hz, tmp, extra)
+            lat[name] += values
+            lost[name] += n_lost
+    out: dict[str, Any] = {"rounds": rounds}
+    for name in cases:
+        out[name] = pct(lat[name])
+        out[f"{name}_lost"] = lost[name]
     return out
+
+
+def _udp_round(
+    name: str,
+    grid: Path,
+    rs: list[RawReading],
+    rate_hz: float,
+    tmp: Path,
+    extra: dict[str, str] | None,
+) -> tuple[list[float], int]:
+    variants = {**UDP_CASES, **(extra or {})}
+    port = 46000 + (uuid.uuid4().int % 2000)
+    if name == "echo":
+        cmd = [sys.executable, __file__, "--echo-server", str(port)]
+    else:
+        cfgf = tmp / f"udp-{port}.toml"
+        cfgf.write_text(
+            f'[grid]\npath = "{grid}"\nstylus_mm = {STYLUS}\n'
+            f'[can]\ninterface = "udp_multicast"\nchannel = "{GROUP}"\nheartbeat_s = 0.05\n'
+            f"[can.options]\nport = {port}\n[metrics]\nenabled = false\n"
+            f"[temperatures]\nstale_s = 3600.0\n"
+            + variants[name].format(mcap=tmp / f"udp-{port}.mcap")
+        )
+        cmd = [
+            sys.executable,
+            "-m",
+            "daemon.cli",
+            "daemon",
+            "--config",
+            str(cfgf),
+            "--log-level",
+            "error",
+        ]
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        with (
+            can.Bus(interface="udp_multicast", channel=GROUP, port=port) as bus,
+            CanController(bus) as ctl,
+        ):
+            t0 = time.monotonic()
+            if name == "echo":
+                assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+            else:
+                while ctl.heartbeat is None and time.monotonic() - t0 < 60:
+                    if proc.poll() is not None:
+                        raise RuntimeError(f"daemon exited with {proc.returncode} at start")
+                    time.sleep(0.05)
+                if ctl.heartbeat is None:
+                    raise RuntimeError("daemon sent no heartbeat within 60 s")
+            return measure(ctl, rs, rate_hz)
+    finally:
+        if name == "echo":
+            assert proc.stdin is not None
+            proc.stdin.close()
+        else:
+            proc.terminate()
+        proc.wait(20)
+        if proc.stdout is not None:
+            proc.stdout.close()
 
 
 def bench_modbus(grid: Path, n: int) -> dict[str, Any]:
@@ -396,7 +435,7 @@ def main() -> int:
                 print(f"{name:<22} p50 {r['p50']:7.0f}  p99 {r['p99']:7.0f}  n {r['n']}")
             return 0
         print("udp_multicast …", file=sys.stderr)
-        udp = bench_udp(grid, rs, args.rate, tmp)
+        udp = bench_udp(grid, rs, args.rate, tmp, rounds=max(1, args.rounds // 2))
         print(f"sustained {args.sustained} …", file=sys.stderr)
         sus = bench_sustained(grid, args.sustained, tmp)
         print("modbus …", file=sys.stderr)
@@ -414,6 +453,8 @@ def main() -> int:
             "virtual_p99_over_echo_us": virt["daemon_mcap"]["p99"] - virt["echo"]["p99"],
             "udp_p50_over_echo_us": udp["daemon"]["p50"] - udp["echo"]["p50"],
             "udp_p99_over_echo_us": udp["daemon"]["p99"] - udp["echo"]["p99"],
+            "udp_mcap_p50_cost_us": udp["daemon"]["p50"] - udp["daemon_no_mcap"]["p50"],
+            "udp_mcap_p99_cost_us": udp["daemon"]["p99"] - udp["daemon_no_mcap"]["p99"],
             "mcap_p50_cost_us": virt["daemon_mcap"]["p50"] - virt["daemon_no_mcap"]["p50"],
             "mcap_p99_cost_us": virt["daemon_mcap"]["p99"] - virt["daemon_no_mcap"]["p99"],
             "mcap_thread_p50_cost_us": virt["daemon_mcap_thread"]["p50"]
@@ -431,13 +472,14 @@ def main() -> int:
         ("virtual: daemon, MCAP on (default)", virt["daemon_mcap"]),
         ("virtual: daemon, MCAP on, thread writer", virt["daemon_mcap_thread"]),
         ("udp_multicast: bare echo", udp["echo"]),
-        ("udp_multicast: daemon (subprocess)", udp["daemon"]),
+        ("udp_multicast: daemon (subprocess), MCAP off", udp["daemon_no_mcap"]),
+        ("udp_multicast: daemon (subprocess), MCAP on", udp["daemon"]),
         ("Modbus TCP: bare pymodbus write+read", mb["bare"]),
         ("Modbus TCP: daemon write+read", mb["daemon"]),
     ]
-    print(f"{'case':<42} {'p50 µs':>8} {'p99 µs':>8} {'n':>6}")
+    print(f"{'case':<46} {'p50 µs':>8} {'p99 µs':>8} {'n':>6}")
     for name, r in rows:
-        print(f"{name:<42} {r['p50']:>8.0f} {r['p99']:>8.0f} {r['n']:>6}")
+        print(f"{name:<46} {r['p50']:>8.0f} {r['p99']:>8.0f} {r['n']:>6}")
     t = result["targets"]
     print(
         f"\ndaemon − echo: virtual p50 {t['virtual_p50_over_echo_us']:+.0f} µs, p99 "
@@ -448,6 +490,10 @@ def main() -> int:
         f"MCAP (process writer, default) on − off, p50/p99: {t['mcap_p50_cost_us']:+.0f} / "
         f"{t['mcap_p99_cost_us']:+.0f} µs (target: +0); thread writer: "
         f"{t['mcap_thread_p50_cost_us']:+.0f} / {t['mcap_thread_p99_cost_us']:+.0f} µs"
+    )
+    print(
+        f"MCAP on − off over udp_multicast (daemon subprocess), p50/p99: "
+        f"{t['udp_mcap_p50_cost_us']:+.0f} / {t['udp_mcap_p99_cost_us']:+.0f} µs (target: +0)"
     )
     print(f"Modbus daemon/bare p50: {t['modbus_ratio_p50']:.2f}× (target ≤ 2)")
     print(

@@ -195,6 +195,7 @@ def _child_main(
                 for topic, payload, t_ns in batch:
                     logger.log(topic, payload, t_ns)
                 received += len(batch)
+                logger.kick()  # write now, in the gap the daemon's kick announced
                 if logger.backlog > HELP_HIGH:
                     logger.drain_to(HELP_LOW)
             elif os.getppid() != parent_pid:  # reparented: the parent died, pipe held elsewhere

@@ -325,3 +325,31 @@ def test_drain_to_writes_from_the_callers_thread_while_the_writer_is_starved(
     res = read_messages(path)
     assert not res.truncated
     assert [m.payload["seq"] for m in res.messages] == list(range(1100))
+
+
+def test_sliced_file_writes_whole_buffers_in_short_system_calls(tmp_path: Path) -> None:
+    """SlicedFileIO caps each write() at WRITE_SLICE; BufferedWriter on top still writes
+    everything, in order (what the MCAP writer relies on)."""
+    import io as _io
+
+    from daemon.mcap_log import WRITE_SLICE, SlicedFileIO
+
+    path = tmp_path / "f.bin"
+    raw = SlicedFileIO(path, "xb")
+    sizes: list[int] = []
+    write = raw.write
+
+    def spy(b):  # type: ignore[no-untyped-def]
+        n = write(b)
+        sizes.append(n)
+        return n
+
+    raw.write = spy  # type: ignore[method-assign]
+    data = np.random.default_rng(3).bytes(5 * WRITE_SLICE + 123)
+    with _io.BufferedWriter(raw) as f:
+        f.write(data[:100])
+        f.write(data[100:])
+    assert path.read_bytes() == data
+    assert max(sizes) <= WRITE_SLICE and len(sizes) >= 6
+    with pytest.raises(FileExistsError):
+        SlicedFileIO(path, "xb")
