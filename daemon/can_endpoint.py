@@ -55,6 +55,7 @@ from .config import CanSection
 from .engine import Answer, CorrectionEngine, Reading
 from .events import EventLog
 from .metrics import Metrics
+from .osthread import name_os_thread
 from .state import StateBoard
 
 BusFactory = Callable[[CanSection, CanIds], can.BusABC]
@@ -236,6 +237,7 @@ class CanEndpoint(can.Listener):
         self._close()
 
     def _run(self) -> None:
+        name_os_thread()
         backoff = self.config.reconnect_s
         while not self._stop.is_set():
             try:

@@ -36,6 +36,7 @@ from daemon.mcap_schemas import (
     TopicSchema,
     stamp_from_ns,
 )
+from daemon.osthread import name_os_thread
 
 _log = logging.getLogger(__name__)
 
@@ -451,6 +452,7 @@ class McapLogger(HotPathQueue):
                 _log.error("MCAP writer: could not finish file after error: %r", exc2)
 
     def _run(self) -> None:
+        name_os_thread()
         if self._writer_setup is not None:
             try:
                 self._writer_setup()

@@ -47,6 +47,7 @@ from mcap.writer import CompressionType
 
 from daemon.mcap_log import HotPathQueue, LoggerStats, McapLogger
 from daemon.mcap_schemas import TOPIC_SCHEMAS, TopicSchema
+from daemon.osthread import name_os_thread
 
 _log = logging.getLogger(__name__)
 
@@ -78,7 +79,8 @@ def _portable_exc(exc: BaseException) -> BaseException:
 # --------------------------------------------------------------------------- child side
 
 _PKG_DIR = str(Path(__file__).resolve().parent)
-# The child imports only what it runs (mcap_process, mcap_log, mcap_schemas, mcap): an empty
+# The child imports only what it runs (mcap_process, mcap_log, mcap_records, mcap_schemas,
+# osthread, mcap): an empty
 # ``daemon`` package module stands in for daemon/__init__.py, which would import the whole
 # daemon (grid, numpy, scipy: ~1 s of start-up) for nothing.
 _CHILD_CODE = (
@@ -125,6 +127,7 @@ def _child_entry(fd: int, parent_pid: int) -> None:
     holds the McapLogger keyword arguments and the CPU priority."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    name_os_thread("mcap-child")
     conn = Connection(fd)
     try:
         kwargs = pickle.loads(conn.recv_bytes())
@@ -337,9 +340,7 @@ class McapProcessLogger(HotPathQueue):
             self._reap(5.0)
             raise
         self._proc_pid: int = self._proc.pid
-        self._thread = threading.Thread(
-            target=self._run, name="mcap-process-forwarder", daemon=True
-        )
+        self._thread = threading.Thread(target=self._run, name="mcap-forwarder", daemon=True)
         self._thread.start()
 
     def _await_ready(self) -> None:
@@ -472,6 +473,7 @@ class McapProcessLogger(HotPathQueue):
         return len(batch)
 
     def _run(self) -> None:
+        name_os_thread()
         try:
             while True:
                 stopping = self._stopping.is_set()

@@ -30,6 +30,7 @@ from .config import ModbusSection
 from .engine import CorrectionEngine, Reading
 from .events import EventLog
 from .metrics import Metrics
+from .osthread import name_os_thread
 
 
 class ModbusEndpoint:
@@ -90,6 +91,7 @@ class ModbusEndpoint:
         self.stop()
 
     def _run(self) -> None:
+        name_os_thread()
         try:
             asyncio.run(self._main())
         except BaseException as exc:  # reported, never silent

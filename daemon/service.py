@@ -31,6 +31,7 @@ from .events import EventLog
 from .grid_slot import GridLoadError, GridSlot
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
+from .osthread import name_os_thread
 from .state import StateBoard
 from .temperatures import TemperatureTable
 
@@ -127,7 +128,7 @@ class DaemonService:
                     self._bus_factory,
                 ).start()
             self._housekeeper = threading.Thread(
-                target=self._housekeeping, name="daemon-housekeeping", daemon=True
+                target=self._housekeeping, name="daemon-housekeep", daemon=True
             )
             self._housekeeper.start()
             self.state.set_phase(DaemonState.READY)
@@ -281,6 +282,7 @@ class DaemonService:
         self.logger.log("/cmm/counters", snap)
 
     def _housekeeping(self) -> None:
+        name_os_thread()
         next_publish = time.monotonic() + self.config.metrics.period_s
         while not self._stop.wait(_TICK_S):
             try:

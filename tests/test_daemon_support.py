@@ -93,3 +93,28 @@ def daemon_and_controller(
 def send_temps(ctl: CanController, temp_C: float = 20.5) -> None:
     """One sample of each default sensor (0..3)."""
     ctl.send_temperatures({0: temp_C, 1: temp_C, 2: temp_C, 3: temp_C})
+
+
+def test_os_thread_names_show_the_daemon_parts() -> None:
+    """name_os_thread() names the OS thread (what top -H and perf show) after the Python one."""
+    import sys
+    import threading
+
+    from daemon.osthread import name_os_thread
+
+    seen: list[str] = []
+
+    def run() -> None:
+        ok = name_os_thread()
+        tid = threading.get_native_id()
+        if ok:
+            with open(f"/proc/self/task/{tid}/comm") as f:
+                seen.append(f.read().strip())
+        else:
+            seen.append("")
+
+    t = threading.Thread(target=run, name="can-endpoint-and-more")
+    t.start()
+    t.join()
+    if sys.platform.startswith("linux"):
+        assert seen == ["can-endpoint-an"]  # 15 bytes: the kernel's limit
