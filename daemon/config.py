@@ -20,6 +20,7 @@ from typing import Any, get_args, get_origin, get_type_hints
 TEMPERATURE_ROLES = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
 MCAP_WRITERS = ("thread", "process")
 MCAP_WRITER_PRIORITIES = ("idle", "normal")
+MCAP_COMPRESSIONS = ("zstd", "lz4", "none")
 
 
 class ConfigError(ValueError):
@@ -131,6 +132,9 @@ class McapSection:
     """CPU priority of the ``process`` writer: ``idle`` (Linux ``SCHED_IDLE``: runs only on CPU
     time nothing else wants, so it never delays a reply; under sustained 100 % CPU load the
     queue fills and messages are dropped and counted) or ``normal``."""
+    compression: str = "zstd"
+    """Chunk compression: ``zstd`` (smallest files), ``lz4`` (faster, less CPU and cache per
+    chunk) or ``none``."""
 
 
 @dataclass
@@ -217,6 +221,11 @@ class DaemonConfig:
             raise ConfigError(
                 f"{where}: mcap.writer_priority = {self.mcap.writer_priority!r}; allowed: "
                 f"{', '.join(MCAP_WRITER_PRIORITIES)}"
+            )
+        if self.mcap.compression not in MCAP_COMPRESSIONS:
+            raise ConfigError(
+                f"{where}: mcap.compression = {self.mcap.compression!r}; allowed: "
+                f"{', '.join(MCAP_COMPRESSIONS)}"
             )
         if self.metrics.period_s <= 0 or self.mcap.flush_s <= 0:
             raise ConfigError(f"{where}: metrics.period_s and mcap.flush_s must be > 0 s")

@@ -19,6 +19,8 @@ import threading
 import time
 from typing import Any, TextIO
 
+from mcap.writer import CompressionType
+
 from daemon.mcap_log import McapLogger
 from daemon.mcap_process import McapProcessLogger
 from protocol import DaemonBlock, Heartbeat
@@ -36,6 +38,11 @@ from .state import StateBoard
 from .temperatures import TemperatureTable
 
 _TICK_S = 0.1
+_COMPRESSION = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
 
 
 class DaemonService:
@@ -92,6 +99,7 @@ class DaemonService:
                     flush_period_s=cfg.mcap.flush_s,
                     metadata={"config": cfg.source},
                     on_error=self._on_mcap_error,
+                    compression=_COMPRESSION[cfg.mcap.compression],
                     **extra,
                 )
             self.engine = CorrectionEngine(

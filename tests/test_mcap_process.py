@@ -257,6 +257,9 @@ def test_config_writer_key_and_flag() -> None:
         config_from_dict({"mcap": {"writer": "fork"}}, "x.toml")
     with pytest.raises(ConfigError, match=r"mcap\.writer_priority = 'rt'; allowed: idle, normal"):
         config_from_dict({"mcap": {"writer_priority": "rt"}}, "x.toml")
+    assert default.compression == "zstd"
+    with pytest.raises(ConfigError, match=r"mcap\.compression = 'gzip'; allowed: zstd, lz4, none"):
+        config_from_dict({"mcap": {"compression": "gzip"}}, "x.toml")
     ap = argparse.ArgumentParser()
     add_override_flags(ap)
     args = ap.parse_args(["--mcap-writer", "thread", "--mcap-writer-priority", "normal"])
@@ -305,3 +308,26 @@ def test_daemon_with_the_process_writer_logs_the_session(tmp_path: Path) -> None
         check_message(m.topic, m.payload)
     if hasattr(os, "SCHED_IDLE"):
         assert dict(res.metadata)["session"]["writer_priority"] == "idle"
+
+
+@pytest.mark.parametrize("compression", ["lz4", "none"])
+def test_daemon_mcap_compression_setting(tmp_path: Path, compression: str) -> None:
+    cfg = base_config(channel())
+    cfg.metrics.enabled = False
+    cfg.mcap.path = str(tmp_path / "session.mcap")
+    cfg.mcap.compression = compression
+    cfg.check()
+    with DaemonService(cfg, events_stream=None):
+        bus = can.Bus(interface="virtual", channel=cfg.can.channel)
+        try:
+            with CanController(bus, answer_timeout_s=2.0) as ctl:
+                send_temps(ctl)
+                time.sleep(0.05)
+                assert ctl.exchange(RawReading(1, (400.0, 500.0, 200.0))).status == "ok"
+        finally:
+            bus.shutdown()
+    with open(cfg.mcap.path, "rb") as f:  # the chunks say how they are compressed
+        chunks = [r for r in make_reader(f).get_summary().chunk_indexes]
+    assert chunks and {c.compression for c in chunks} == {"" if compression == "none" else "lz4"}
+    res = read_messages(cfg.mcap.path)
+    assert [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"] == [1]
