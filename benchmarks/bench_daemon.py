@@ -35,6 +35,7 @@ import threading
 import time
 import uuid
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -181,26 +182,37 @@ def _virtual_round(
         return measure(ctl, rs, rate_hz)
 
 
-def bench_virtual(
-    grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path, rounds: int = 3
+def interleaved(
+    cases: list[str], rounds: int, one_round: Callable[[str], tuple[list[float], int]]
 ) -> dict[str, Any]:
-    """Each case in ``rounds`` interleaved rounds (order rotated every round, so a drift of the
-    machine's load hits every case alike); percentiles over the pooled latencies."""
-    lat: dict[str, list[float]] = {name: [] for name, _, _ in VIRTUAL_CASES}
-    lost: dict[str, int] = dict.fromkeys(lat, 0)
-    per_round = max(1, (len(rs) - 200) // rounds)
+    """Run every case in ``rounds`` interleaved rounds (order rotated every round, so a drift
+    of the machine's load hits every case alike); percentiles over the pooled latencies."""
+    lat: dict[str, list[float]] = {name: [] for name in cases}
+    lost: dict[str, int] = dict.fromkeys(cases, 0)
     for k in range(rounds):
-        chunk = rs[: 200 + per_round]
-        order = VIRTUAL_CASES[k % len(VIRTUAL_CASES) :] + VIRTUAL_CASES[: k % len(VIRTUAL_CASES)]
-        for name, mcap, writer in order:
-            values, n_lost = _virtual_round(name, mcap, writer, grid, chunk, rate_hz, tmp)
+        shift = k % len(cases)
+        for name in cases[shift:] + cases[:shift]:
+            values, n_lost = one_round(name)
             lat[name] += values
             lost[name] += n_lost
     out: dict[str, Any] = {"rounds": rounds}
-    for name in lat:
+    for name in cases:
         out[name] = pct(lat[name])
         out[f"{name}_lost"] = lost[name]
     return out
+
+
+def bench_virtual(
+    grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path, rounds: int = 3
+) -> dict[str, Any]:
+    """The :data:`VIRTUAL_CASES` in interleaved rounds (:func:`interleaved`)."""
+    chunk = rs[: 200 + max(1, (len(rs) - 200) // rounds)]
+    spec = {name: (mcap, writer) for name, mcap, writer in VIRTUAL_CASES}
+    return interleaved(
+        list(spec),
+        rounds,
+        lambda name: _virtual_round(name, *spec[name], grid, chunk, rate_hz, tmp),
+    )
 
 
 def bench_sustained(grid: Path, n: int, tmp: Path) -> dict[str, Any]:
@@ -247,21 +259,13 @@ def bench_udp(
     rounds: int = 3,
 ) -> dict[str, Any]:
     """``echo`` and the daemon variants of :data:`UDP_CASES` (or ``extra``: name → TOML), in
-    ``rounds`` interleaved rounds (order rotated); percentiles over the pooled latencies."""
-    lat: dict[str, list[float]] = {name: [] for name in cases}
-    lost: dict[str, int] = dict.fromkeys(cases, 0)
-    per_round = max(1, (len(rs) - 200) // rounds)
-    for k in range(rounds):
-        order = cases[k % len(cases) :] + cases[: k % len(cases)]
-        for name in order:
-            values, n_lost = _udp_round(name, grid, rs[: 200 + per_round], rate_hz, tmp, extra)
-            lat[name] += values
-            lost[name] += n_lost
-    out: dict[str, Any] = {"rounds": rounds}
-    for name in cases:
-        out[name] = pct(lat[name])
-        out[f"{name}_lost"] = lost[name]
-    return out
+    interleaved rounds (:func:`interleaved`)."""
+    chunk = rs[: 200 + max(1, (len(rs) - 200) // rounds)]
+    return interleaved(
+        list(cases),
+        rounds,
+        lambda name: _udp_round(name, grid, chunk, rate_hz, tmp, extra),
+    )
 
 
 def _udp_round(

@@ -23,7 +23,8 @@ NM_PER_MM = 1_000_000
 
 FrameRecord = tuple[int, bool, int, bytes, float, str, bool, bool, bool]
 """``(arbitration_id, is_extended, dlc, data, timestamp_s, channel, is_fd, is_remote,
-is_error)``; ``timestamp_s`` is python-can's float seconds (0.0 when unknown)."""
+is_error)``; ``timestamp_s`` is python-can's float seconds (0.0 when unknown). The CAN
+endpoint builds it from a ``can.Message`` (:func:`daemon.can_endpoint.frame_record`)."""
 
 RawRecord = tuple[
     int,
@@ -40,31 +41,6 @@ RawRecord = tuple[
 
 CorrectedRecord = tuple[int, int, int, int, str, tuple[float, float, float], float, int, str, str]
 """``(seq, x_nm, y_nm, z_nm, status, correction_um, latency_us, applied, source, detail)``."""
-
-
-def frame_record(
-    arbitration_id: int,
-    is_extended: bool,
-    data: bytes | bytearray,
-    timestamp_s: float,
-    channel: str,
-    is_fd: bool = False,
-    is_remote: bool = False,
-    is_error: bool = False,
-    dlc: int | None = None,
-) -> FrameRecord:
-    """A :data:`FrameRecord` (``dlc`` defaults to the data length)."""
-    return (
-        arbitration_id,
-        is_extended,
-        len(data) if dlc is None else dlc,
-        bytes(data),
-        timestamp_s,
-        channel,
-        is_fd,
-        is_remote,
-        is_error,
-    )
 
 
 def frame_payload(rec: FrameRecord) -> dict[str, Any]:
