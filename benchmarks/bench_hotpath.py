@@ -1,0 +1,162 @@
+"""CPU of the daemon's CAN reply path per reading, without any bus or thread wake-ups.
+
+Run: ``.venv/bin/python benchmarks/bench_hotpath.py``. Prints a table and writes
+``benchmarks/results/hotpath.json``. A stub bus (sends are dropped, nothing is ever received) is
+handed to a real :class:`daemon.service.DaemonService`; the frames a simulated controller would
+send are fed straight to the endpoint's handler in one thread, so the figures are pure CPU of
+decoding, assembling, correcting, answering, counting and (after ``bookkeeping``) building the
+MCAP records, µs per reading (3 raw frames). The baseline in the same run is the bare
+``can.Message`` construction + ``struct`` unpack of the same frames, and the parts are timed on
+their own: ``decode_message`` per frame, ``CorrectionEngine.correct`` per reading.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import struct
+import sys
+import tempfile
+import time
+import timeit
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench_daemon import config, readings  # noqa: E402
+
+from compensation.grid import CorrectionGrid  # noqa: E402
+from compensation.machine import Machine  # noqa: E402
+from daemon.engine import Reading  # noqa: E402
+from daemon.service import DaemonService  # noqa: E402
+from protocol import CanIds, decode_message  # noqa: E402
+from sim_controller.controller import CanController  # noqa: E402
+from sim_controller.sim_machine import Environment  # noqa: E402
+
+RESULTS = ROOT / "benchmarks" / "results" / "hotpath.json"
+N = 6000
+
+
+class StubBus(can.BusABC):
+    """Drops what is sent, never receives (the endpoint's own thread just idles)."""
+
+    def __init__(self, *_: Any, **__: Any) -> None:
+        super().__init__(channel="stub")
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        pass
+
+    def _recv_internal(self, timeout: float | None) -> tuple[None, bool]:
+        time.sleep(timeout or 0.01)
+        return None, False
+
+    def shutdown(self) -> None:
+        super().shutdown()
+
+
+class CaptureBus(StubBus):
+    """Keeps what a controller sends."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.sent: list[can.Message] = []
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.sent.append(msg)
+
+
+def controller_frames(n: int) -> tuple[list[can.Message], list[can.Message]]:
+    """Temperature frames and the 3·n raw axis frames of n readings, as the controller sends."""
+    bus = CaptureBus()
+    ctl = CanController(bus)
+    ctl.send_temperatures(Environment().samples(0.0))
+    temps = list(bus.sent)
+    bus.sent.clear()
+    for r in readings(n, np.random.default_rng(1)):
+        ctl.send_reading(r)
+    bus.shutdown()
+    return temps, list(bus.sent)
+
+
+def per_reading_us(grid: Path, tmp: Path, mcap: str, writer: str = "process") -> float:
+    temps, frames = controller_frames(N)
+    cfg = config(grid, "virtual", "stub", mcap, writer=writer)
+    with DaemonService(cfg, events_stream=None, bus_factory=lambda c, i: StubBus()) as d:
+        ep = d.can
+        assert ep is not None
+        for msg in temps:
+            ep._handle(msg, time.perf_counter())
+        warm = 600
+        for msg in frames[:warm]:
+            ep._handle(msg, time.perf_counter())
+        ep._bookkeeping()
+        t0 = time.perf_counter()
+        for i, msg in enumerate(frames[warm:]):
+            ep._handle(msg, time.perf_counter())
+            if i % 3 == 2:
+                ep._bookkeeping()  # what the endpoint does once the bus is quiet
+        dt = time.perf_counter() - t0
+    return dt / ((len(frames) - warm) / 3) * 1e6
+
+
+def main() -> int:
+    sys.setswitchinterval(0.0005)
+    machine = Machine.from_toml(ROOT / "examples" / "machines" / "npl-bridge.toml")
+    _, frames = controller_frames(2000)
+    ids = CanIds()
+    unpack = struct.Struct("<5sHB").unpack
+    msg = frames[1000]
+    n = 50_000
+    base_us = timeit.timeit(lambda: unpack(bytes(msg.data)), number=n) / n * 1e6
+    decode_us = timeit.timeit(lambda: decode_message(msg, ids), number=n) / n * 1e6
+    with tempfile.TemporaryDirectory() as tmpd:
+        tmp = Path(tmpd)
+        grid = tmp / "npl.grid"
+        CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
+        off = per_reading_us(grid, tmp, "")
+        on = per_reading_us(grid, tmp, str(tmp / "p.mcap"), "process")
+        thread = per_reading_us(grid, tmp, str(tmp / "t.mcap"), "thread")
+        cfg = config(grid, "virtual", "stub", "")
+        with DaemonService(cfg, events_stream=None, bus_factory=lambda c, i: StubBus()) as d:
+            temps, _ = controller_frames(1)
+            assert d.can is not None and d.engine is not None
+            for m in temps:
+                d.can._handle(m, time.perf_counter())
+            r = Reading(1, (300_000_000, 400_000_000, 200_000_000))
+            eng = d.engine
+            assert eng.correct(r).status.label == "ok"
+            correct_us = timeit.timeit(lambda: eng.correct(r), number=20_000) / 20_000 * 1e6
+    result = {
+        "machine": platform.node(),
+        "python": platform.python_version(),
+        "struct_unpack_baseline_us": base_us,
+        "decode_message_us": decode_us,
+        "engine_correct_us": correct_us,
+        "reading_mcap_off_us": off,
+        "reading_mcap_process_us": on,
+        "reading_mcap_thread_us": thread,
+    }
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
+    rows = [
+        ("bare struct unpack of one frame (baseline)", base_us),
+        ("decode_message, one raw axis frame", decode_us),
+        ("CorrectionEngine.correct, one reading", correct_us),
+        ("reply path + bookkeeping per reading, MCAP off", off),
+        ("… MCAP on, process writer (default)", on),
+        ("… MCAP on, thread writer (writer shares the GIL)", thread),
+    ]
+    print(f"{'case':<52} {'µs':>8}")
+    for name, v in rows:
+        print(f"{name:<52} {v:>8.1f}")
+    print(f"decode / baseline: {decode_us / base_us:.1f}×; wrote {RESULTS}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
