@@ -43,16 +43,15 @@ import can
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from compensation.grid import CorrectionGrid  # noqa: E402
-from compensation.machine import Machine  # noqa: E402
-from daemon.config import DaemonConfig  # noqa: E402
-from daemon.service import DaemonService  # noqa: E402
-from protocol import CanIds  # noqa: E402
-from protocol.can_ids import MessageKind  # noqa: E402
-from sim_controller.controller import CanController, RawReading  # noqa: E402
-from sim_controller.sim_machine import Environment  # noqa: E402
+from cmm_comp.compensation.grid import CorrectionGrid  # noqa: E402
+from cmm_comp.compensation.machine import Machine  # noqa: E402
+from cmm_comp.daemon.config import DaemonConfig  # noqa: E402
+from cmm_comp.daemon.service import DaemonService  # noqa: E402
+from cmm_comp.protocol import CanIds  # noqa: E402
+from cmm_comp.protocol.can_ids import MessageKind  # noqa: E402
+from cmm_comp.sim_controller.controller import CanController, RawReading  # noqa: E402
+from cmm_comp.sim_controller.sim_machine import Environment  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results" / "daemon.json"
 GROUP = "ff11:7079:7468:6f6e:6465:6d6f:6d63:6173"
@@ -292,7 +291,7 @@ def _udp_round(
         cmd = [
             sys.executable,
             "-m",
-            "daemon.cli",
+            "cmm_comp.cli",
             "daemon",
             "--config",
             str(cfgf),
@@ -332,8 +331,8 @@ def bench_modbus(grid: Path, n: int) -> dict[str, Any]:
     from pymodbus.server import ModbusTcpServer
     from pymodbus.simulator import DataType, SimData, SimDevice
 
-    from protocol import ReadingBlock, TemperatureSlot
-    from protocol import modbus_map as mm
+    from cmm_comp.protocol import ReadingBlock, TemperatureSlot
+    from cmm_comp.protocol import modbus_map as mm
 
     async def client_loop(port: int, check_seq: bool) -> list[float]:
         client = AsyncModbusTcpClient("127.0.0.1", port=port, timeout=2)
@@ -424,7 +423,7 @@ def main() -> int:
     if args.echo_server:
         echo_main(args.echo_server)
         return 0
-    sys.setswitchinterval(0.0005)  # same as the daemon process (daemon/commands.py)
+    sys.setswitchinterval(0.0005)  # same as the daemon process (cli/daemon.py)
     machine = Machine.from_toml(ROOT / "examples" / "machines" / "npl-bridge.toml")
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from compensation.diagnosis import diagnose
-from compensation.machine import Machine
-from sim_controller.true_machine import HIDDEN_CAUSES, simulate
+from cmm_comp.compensation.diagnosis import diagnose
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.sim_controller.true_machine import HIDDEN_CAUSES, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = ROOT / "examples" / "machines" / "npl-bridge.toml"

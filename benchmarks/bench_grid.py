@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 
@@ -22,10 +21,9 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from compensation.grid import CorrectionGrid  # noqa: E402
-from compensation.machine import Machine  # noqa: E402
+from cmm_comp.compensation.grid import CorrectionGrid  # noqa: E402
+from cmm_comp.compensation.machine import Machine  # noqa: E402
 
 
 def _median_time(fn, reps: int) -> float:  # type: ignore[no-untyped-def]

@@ -26,17 +26,16 @@ import can
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from bench_daemon import config, readings  # noqa: E402
 
-from compensation.grid import CorrectionGrid  # noqa: E402
-from compensation.machine import Machine  # noqa: E402
-from daemon.engine import Reading  # noqa: E402
-from daemon.service import DaemonService  # noqa: E402
-from protocol import CanIds, decode_message  # noqa: E402
-from sim_controller.controller import CanController  # noqa: E402
-from sim_controller.sim_machine import Environment  # noqa: E402
+from cmm_comp.compensation.grid import CorrectionGrid  # noqa: E402
+from cmm_comp.compensation.machine import Machine  # noqa: E402
+from cmm_comp.daemon.engine import Reading  # noqa: E402
+from cmm_comp.daemon.service import DaemonService  # noqa: E402
+from cmm_comp.protocol import CanIds, decode_message  # noqa: E402
+from cmm_comp.sim_controller.controller import CanController  # noqa: E402
+from cmm_comp.sim_controller.sim_machine import Environment  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results" / "hotpath.json"
 N = 6000

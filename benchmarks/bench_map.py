@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from compensation.machine import Machine
-from compensation.maps import volumetric_map
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.maps import volumetric_map
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results" / "map.json"
@@ -71,7 +71,7 @@ def main() -> None:
         cmd = [
             sys.executable,
             "-m",
-            "daemon.cli",
+            "cmm_comp.cli",
             "map",
             str(ROOT / "examples" / "machines" / "npl-bridge.toml"),
             "--out",

@@ -2,7 +2,7 @@
 
 Fixed entry points (FORMATS.md §5)::
 
-    from compensation import Machine, CorrectionGrid
+    from cmm_comp.compensation import Machine, CorrectionGrid
     machine = Machine.from_toml("machine.toml")
     err_um = machine.volumetric_error(points_mm, stylus_mm=(0, 0, 0), temps_C=None)
 

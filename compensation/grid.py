@@ -49,16 +49,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import make_interp_spline
 
-from compensation import grid_kernels as kern
-from compensation import quaternion as qt
-from compensation.grid_file import (
+from cmm_comp.compensation import grid_kernels as kern
+from cmm_comp.compensation import quaternion as qt
+from cmm_comp.compensation.grid_file import (
     FORMAT_NAME,
     FORMAT_VERSION,
     GridFileError,
     read_grid_file,
     write_grid_file,
 )
-from compensation.squad import squad_control_points
+from cmm_comp.compensation.squad import squad_control_points
 
 __all__ = [
     "DEFAULT_STEPS",

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from compensation import quaternion as qt
+from cmm_comp.compensation import quaternion as qt
 
 __all__ = ["AnalyticErrorField", "AnalyticPose", "AnalyticVolume"]
 

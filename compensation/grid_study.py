@@ -26,9 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import RegularGridInterpolator
 
-from compensation import quaternion as qt
-from compensation.grid import CorrectionGrid
-from compensation.grid_field import AnalyticErrorField
+from cmm_comp.compensation import quaternion as qt
+from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.compensation.grid_field import AnalyticErrorField
 
 FloatArray = NDArray[np.float64]
 STYLUS_LEN_MM = 150.0
@@ -189,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     example = root / "examples" / "machines" / "npl-bridge.toml"
     if example.is_file():
-        from compensation.machine import Machine
+        from cmm_comp.compensation.machine import Machine
 
         machine = Machine.from_toml(example)
         temps = dict(machine.runtime_signals())

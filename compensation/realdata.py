@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from compensation.iso230 import Iso230Result, evaluate_iso230
+from cmm_comp.compensation.iso230 import Iso230Result, evaluate_iso230
 
 __all__ = [
     "ApproachPoint",

@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from compensation import quaternion as qt
-from compensation.grid import CorrectionGrid
+from cmm_comp.compensation import quaternion as qt
+from cmm_comp.compensation.grid import CorrectionGrid
 
 __all__ = [
     "SixDofLayout",

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from compensation import quaternion as qt
+from cmm_comp.compensation import quaternion as qt
 
 __all__ = ["squad", "squad_control_points", "squad_evaluate", "squad_sequence"]
 

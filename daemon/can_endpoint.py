@@ -25,8 +25,8 @@ from typing import Any
 
 import can
 
-from daemon.mcap_records import FrameRecord
-from protocol import (
+from cmm_comp.daemon.mcap_records import FrameRecord
+from cmm_comp.protocol import (
     BadLength,
     BadValue,
     CanIds,
@@ -47,9 +47,9 @@ from protocol import (
     decode_message,
     encode_message,
 )
-from protocol.can_frames import AXIS_LAYOUT, CORRECTION_STATUS_LAYOUT
-from protocol.can_ids import MessageKind
-from protocol.codes import Axis, DaemonState, Status, saturate_u16
+from cmm_comp.protocol.can_frames import AXIS_LAYOUT, CORRECTION_STATUS_LAYOUT
+from cmm_comp.protocol.can_ids import MessageKind
+from cmm_comp.protocol.codes import Axis, DaemonState, Status, saturate_u16
 
 from .config import CanSection
 from .engine import Answer, CorrectionEngine, Reading

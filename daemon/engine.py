@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.codes import NM_PER_MM, Applied, Status
+from cmm_comp.protocol.codes import NM_PER_MM, Applied, Status
 
 from .config import DaemonConfig
 from .events import EventLog

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from compensation.grid import CorrectionGrid
+from cmm_comp.compensation.grid import CorrectionGrid
 
 THERMAL_ROLES = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
 

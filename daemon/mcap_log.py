@@ -28,15 +28,15 @@ from typing import IO, Any
 
 from mcap.writer import CompressionType, Writer
 
-from daemon.mcap_records import RECORD_BUILDERS, expand
-from daemon.mcap_schemas import (
+from cmm_comp.daemon.mcap_records import RECORD_BUILDERS, expand
+from cmm_comp.daemon.mcap_schemas import (
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
     TOPIC_SCHEMAS,
     TopicSchema,
     stamp_from_ns,
 )
-from daemon.osthread import name_os_thread
+from cmm_comp.daemon.osthread import name_os_thread
 
 _log = logging.getLogger(__name__)
 

@@ -45,9 +45,9 @@ from typing import Any
 
 from mcap.writer import CompressionType
 
-from daemon.mcap_log import HotPathQueue, LoggerStats, McapLogger
-from daemon.mcap_schemas import TOPIC_SCHEMAS, TopicSchema
-from daemon.osthread import name_os_thread
+from cmm_comp.daemon.mcap_log import HotPathQueue, LoggerStats, McapLogger
+from cmm_comp.daemon.mcap_schemas import TOPIC_SCHEMAS, TopicSchema
+from cmm_comp.daemon.osthread import name_os_thread
 
 _log = logging.getLogger(__name__)
 

@@ -23,7 +23,7 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from daemon.mcap_schemas import ns_from_stamp
+from cmm_comp.daemon.mcap_schemas import ns_from_stamp
 
 _TRUNCATION_ERRORS: tuple[type[BaseException], ...] = (
     McapError,

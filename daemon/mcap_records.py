@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from daemon.mcap_schemas import ns_from_can_timestamp, stamp_from_ns
+from cmm_comp.daemon.mcap_schemas import ns_from_can_timestamp, stamp_from_ns
 
 NM_PER_MM = 1_000_000
 

@@ -22,9 +22,15 @@ from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import SimDevice
 
-from protocol import AnswerBlock, DaemonBlock, ReadingBlock, TemperatureSlot, build_sim_device
-from protocol import modbus_map as mm
-from protocol.codes import saturate_u16
+from cmm_comp.protocol import (
+    AnswerBlock,
+    DaemonBlock,
+    ReadingBlock,
+    TemperatureSlot,
+    build_sim_device,
+)
+from cmm_comp.protocol import modbus_map as mm
+from cmm_comp.protocol.codes import saturate_u16
 
 from .config import ModbusSection
 from .engine import CorrectionEngine, Reading

@@ -22,9 +22,9 @@ from typing import Any
 import can
 import numpy as np
 
-from compensation.grid import CorrectionGrid
-from daemon.mcap_read import read_messages
-from daemon.mcap_schemas import ns_from_stamp
+from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.daemon.mcap_read import read_messages
+from cmm_comp.daemon.mcap_schemas import ns_from_stamp
 
 from .grid_slot import THERMAL_ROLES
 

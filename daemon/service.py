@@ -21,10 +21,10 @@ from typing import Any, TextIO
 
 from mcap.writer import CompressionType
 
-from daemon.mcap_log import McapLogger
-from daemon.mcap_process import McapProcessLogger
-from protocol import DaemonBlock, Heartbeat
-from protocol.codes import DaemonState, grid_id_from_sha256
+from cmm_comp.daemon.mcap_log import McapLogger
+from cmm_comp.daemon.mcap_process import McapProcessLogger
+from cmm_comp.protocol import DaemonBlock, Heartbeat
+from cmm_comp.protocol.codes import DaemonState, grid_id_from_sha256
 
 from .can_endpoint import BusFactory, CanEndpoint, open_bus
 from .config import DaemonConfig

@@ -10,7 +10,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
-from protocol.codes import DaemonState
+from cmm_comp.protocol.codes import DaemonState
 
 
 class StateBoard:

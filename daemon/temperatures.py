@@ -17,8 +17,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from compensation.effects import FirstOrderLag
-from protocol.codes import Status
+from cmm_comp.compensation.effects import FirstOrderLag
+from cmm_comp.protocol.codes import Status
 
 from .config import TemperaturesSection
 

@@ -126,7 +126,7 @@ _ID_REF = re.compile(r"\b(BO_|SG_|VAL_) (\d+) ")
 
 def dbc_text(ids: CanIds | None = None) -> str:
     """Text of the shipped DBC, with its message ids shifted to ``ids`` (default: node 0)."""
-    text = resources.files("protocol").joinpath("cmm_comp.dbc").read_text(encoding="utf-8")
+    text = resources.files("cmm_comp.protocol").joinpath("cmm_comp.dbc").read_text(encoding="utf-8")
     if ids is None:
         return text
     shift = ids.block_start - DBC_BASE_ID

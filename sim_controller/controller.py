@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import can
 
-from protocol import (
+from cmm_comp.protocol import (
     CanIds,
     CorrectedAxis,
     CorrectionStatus,
@@ -34,7 +34,7 @@ from protocol import (
     decode_message,
     encode_message,
 )
-from protocol.codes import NM_PER_MM, Axis, Direction, Status
+from cmm_comp.protocol.codes import NM_PER_MM, Axis, Direction, Status
 
 
 @dataclass(frozen=True, slots=True)

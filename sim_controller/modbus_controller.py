@@ -13,8 +13,8 @@ import asyncio
 import time
 from collections.abc import Callable, Sequence
 
-from protocol import AnswerTimeoutError, ControllerClient, ReadingBlock, TemperatureSlot
-from protocol.codes import Status
+from cmm_comp.protocol import AnswerTimeoutError, ControllerClient, ReadingBlock, TemperatureSlot
+from cmm_comp.protocol.codes import Status
 
 from .controller import AnswerRecord, RawReading
 

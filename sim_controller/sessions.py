@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from compensation.machine import Machine
-from compensation.measurements import Measurements
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.measurements import Measurements
 
 __all__ = ["SessionPlan", "measure_session", "plan_session"]
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from compensation.machine import Machine
+from cmm_comp.compensation.machine import Machine
 
 FloatArray = NDArray[np.float64]
 

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from compensation.components import ANGULAR, AXES, SQUARENESS, TABLE_COMPONENTS
-from compensation.effects import (
+from cmm_comp.compensation.components import ANGULAR, AXES, SQUARENESS, TABLE_COMPONENTS
+from cmm_comp.compensation.effects import (
     CouplingEffect,
     ParametricEffect,
     PeriodicEffect,
@@ -28,9 +28,9 @@ from compensation.effects import (
     WorkpieceExpansionEffect,
     default_orders,
 )
-from compensation.effects_base import Effect, effect_from_table
-from compensation.machine import Machine
-from compensation.measurements import Measurements
+from cmm_comp.compensation.effects_base import Effect, effect_from_table
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.measurements import Measurements
 
 from .sessions import SessionPlan, measure_session, plan_session, true_error_um
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from compensation import Machine
+from cmm_comp.compensation import Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
@@ -17,7 +17,7 @@ NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "daemon.cli", *args],
+        [sys.executable, "-m", "cmm_comp.cli", *args],
         capture_output=True,
         text=True,
         cwd=ROOT,

@@ -9,10 +9,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 from test_daemon_support import ROOT
 
-from daemon.commands import add_parsers
-from daemon.config import ConfigError, load_config
-from daemon.temperatures import TemperatureTable
-from protocol.codes import Status
+from cmm_comp.cli.daemon import add_parsers
+from cmm_comp.daemon.config import ConfigError, load_config
+from cmm_comp.daemon.temperatures import TemperatureTable
+from cmm_comp.protocol.codes import Status
 
 EXAMPLE = ROOT / "examples" / "daemon.toml"
 

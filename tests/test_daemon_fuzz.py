@@ -12,9 +12,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_daemon_support import base_config, channel
 
-from daemon.can_endpoint import CanEndpoint
-from daemon.service import DaemonService
-from protocol import CanIds
+from cmm_comp.daemon.can_endpoint import CanEndpoint
+from cmm_comp.daemon.service import DaemonService
+from cmm_comp.protocol import CanIds
 
 IDS = CanIds()
 BLOCK = IDS.block_start

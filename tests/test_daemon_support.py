@@ -18,11 +18,11 @@ from pathlib import Path
 
 import can
 
-from compensation.grid import CorrectionGrid
-from compensation.machine import Machine
-from daemon.config import DaemonConfig
-from daemon.service import DaemonService
-from sim_controller.controller import CanController
+from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.daemon.config import DaemonConfig
+from cmm_comp.daemon.service import DaemonService
+from cmm_comp.sim_controller.controller import CanController
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
@@ -100,7 +100,7 @@ def test_os_thread_names_show_the_daemon_parts() -> None:
     import sys
     import threading
 
-    from daemon.osthread import name_os_thread
+    from cmm_comp.daemon.osthread import name_os_thread
 
     seen: list[str] = []
 

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from compensation.effects import FirstOrderLag, lag_filter
-from daemon.config import TemperaturesSection
-from daemon.temperatures import TemperatureTable
+from cmm_comp.compensation.effects import FirstOrderLag, lag_filter
+from cmm_comp.daemon.config import TemperaturesSection
+from cmm_comp.daemon.temperatures import TemperatureTable
 
 
 def test_value_at_holds_the_input_between_samples() -> None:

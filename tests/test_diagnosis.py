@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.diagnosis import compute_residuals, diagnose, length_error_e0_um
-from compensation.diagnosis.candidates import all_candidates, effect_displacement_um
-from compensation.machine import Machine
-from compensation.measurements import write_measurements
-from sim_controller.sessions import true_error_um
-from sim_controller.true_machine import HIDDEN_CAUSES, simulate
+from cmm_comp.compensation.diagnosis import compute_residuals, diagnose, length_error_e0_um
+from cmm_comp.compensation.diagnosis.candidates import all_candidates, effect_displacement_um
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.measurements import write_measurements
+from cmm_comp.sim_controller.sessions import true_error_um
+from cmm_comp.sim_controller.true_machine import HIDDEN_CAUSES, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
@@ -101,7 +101,7 @@ def test_no_false_alarm_on_clean_sessions(npl) -> None:
 def test_end_to_end_extend_reproduces_truth(npl, tmp_path) -> None:
     """sim machine with a hidden effect → CLI diagnose → CLI extend → the extended TOML's
     volumetric_error is closer to the truth than the original model (on fresh points)."""
-    from compensation.diagnosis_cli import main
+    from cmm_comp.cli import main
 
     truth, data = simulate(npl, ["coupling"], [2.0], seed=42)
     csv = write_measurements(tmp_path / "m.csv", data)
@@ -140,7 +140,7 @@ def test_end_to_end_extend_reproduces_truth(npl, tmp_path) -> None:
 
 
 def test_clean_machine_says_none_exit_zero(npl, tmp_path) -> None:
-    from compensation.diagnosis_cli import main
+    from cmm_comp.cli import main
 
     _, data = simulate(npl, [], [], seed=77)
     csv = write_measurements(tmp_path / "m.csv", data)

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from compensation.diagnosis import diagnose
-from compensation.machine import Machine
-from compensation.measurements import read_measurements
-from compensation.realdata import (
+from cmm_comp.compensation.diagnosis import diagnose
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.measurements import read_measurements
+from cmm_comp.compensation.realdata import (
     iso230_points_from_log,
     iso230_run_from_points,
     measurement_rows,

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from compensation import CorrectionGrid, Machine, diagnose
-from daemon.demo import run_demo
-from sim_controller.true_machine import simulate
+from cmm_comp.cli.demo import run_demo
+from cmm_comp.compensation import CorrectionGrid, Machine, diagnose
+from cmm_comp.sim_controller.true_machine import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"

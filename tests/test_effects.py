@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from compensation.effects import (
+from cmm_comp.compensation.effects import (
     CouplingEffect,
     FirstOrderLag,
     ParametricEffect,
@@ -24,8 +24,8 @@ from compensation.effects import (
     lag_filter,
     lobing_signals,
 )
-from compensation.effects_base import EvalContext, effect_from_table
-from compensation.machine import Machine
+from cmm_comp.compensation.effects_base import EvalContext, effect_from_table
+from cmm_comp.compensation.machine import Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation import Machine, diagonals_um
+from cmm_comp.compensation import Machine, diagonals_um
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.grid_cli import add_parsers
-from compensation.machine import Machine
+from cmm_comp.cli.grid import add_parsers
+from cmm_comp.compensation.machine import Machine
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "machines" / "npl-bridge.toml"
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation import CorrectionGrid, Machine
-from compensation.grid import default_steps
+from cmm_comp.compensation import CorrectionGrid, Machine
+from cmm_comp.compensation.grid import default_steps
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation import CorrectionGrid, Machine
+from cmm_comp.compensation import CorrectionGrid, Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"

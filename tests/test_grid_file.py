@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.grid import CorrectionGrid, GridFileError
-from compensation.grid_field import AnalyticErrorField
+from cmm_comp.compensation.grid import CorrectionGrid, GridFileError
+from cmm_comp.compensation.grid_field import AnalyticErrorField
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.grid import CorrectionGrid
-from compensation.machine import Machine
+from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.compensation.machine import Machine
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "machines" / "npl-bridge.toml"
 

@@ -25,12 +25,12 @@ from test_daemon_support import (
     npl_machine,
 )
 
-from compensation.grid import CorrectionGrid
-from daemon.mcap_read import read_messages
-from protocol.codes import DaemonState, grid_id_from_sha256
-from sim_controller.controller import CanController, RawReading
-from sim_controller.runner import build_program, evaluate, make_readings, run_can
-from sim_controller.sim_machine import Environment, SimulatedMachine
+from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.daemon.mcap_read import read_messages
+from cmm_comp.protocol.codes import DaemonState, grid_id_from_sha256
+from cmm_comp.sim_controller.controller import CanController, RawReading
+from cmm_comp.sim_controller.runner import build_program, evaluate, make_readings, run_can
+from cmm_comp.sim_controller.sim_machine import Environment, SimulatedMachine
 
 
 def _write_config(tmp: Path, port: int, grid: Path, mcap: Path, writer: str = "process") -> Path:
@@ -67,7 +67,7 @@ def _daemon(
     log = tmp / "daemon.log"
     with open(log, "w") as out:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "daemon.cli", "daemon", "--config", str(cfg)],
+            [sys.executable, "-m", "cmm_comp.cli", "daemon", "--config", str(cfg)],
             stdout=out,
             stderr=subprocess.STDOUT,
         )

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from test_daemon_support import ROOT, STYLUS, base_config, channel, npl_grid_path, npl_machine
 
-from daemon.demo import SUMMARY_KEYS, run_demo
-from daemon.service import DaemonService
-from protocol import ControllerClient, ModbusExceptionError
-from sim_controller.modbus_controller import ModbusController
-from sim_controller.runner import build_program, evaluate, make_readings
-from sim_controller.sim_machine import Environment, SimulatedMachine
+from cmm_comp.cli.demo import SUMMARY_KEYS, run_demo
+from cmm_comp.daemon.service import DaemonService
+from cmm_comp.protocol import ControllerClient, ModbusExceptionError
+from cmm_comp.sim_controller.modbus_controller import ModbusController
+from cmm_comp.sim_controller.runner import build_program, evaluate, make_readings
+from cmm_comp.sim_controller.sim_machine import Environment, SimulatedMachine
 
 
 def test_demo_in_process_e0_ten_times_smaller(tmp_path) -> None:
@@ -34,7 +34,7 @@ def test_demo_in_process_e0_ten_times_smaller(tmp_path) -> None:
 def test_demo_cli_writes_summary_json(tmp_path) -> None:
     out = tmp_path / "summary.json"
     proc = subprocess.run(
-        [sys.executable, "-m", "daemon.cli", "demo", "--json", str(out), "--random", "50"],
+        [sys.executable, "-m", "cmm_comp.cli", "demo", "--json", str(out), "--random", "50"],
         cwd=tmp_path,
         capture_output=True,
         text=True,
@@ -107,7 +107,7 @@ def test_examples_daemon_toml_checks_with_overrides(tmp_path) -> None:
         [
             sys.executable,
             "-m",
-            "daemon.cli",
+            "cmm_comp.cli",
             "daemon",
             "--config",
             str(ROOT / "examples" / "daemon.toml"),
@@ -122,7 +122,7 @@ def test_examples_daemon_toml_checks_with_overrides(tmp_path) -> None:
     assert proc.returncode == 0, proc.stderr
     assert "sha256" in proc.stdout
     bad = subprocess.run(
-        [sys.executable, "-m", "daemon.cli", "daemon", "--can-bitrate", "fast", "--check"],
+        [sys.executable, "-m", "cmm_comp.cli", "daemon", "--can-bitrate", "fast", "--check"],
         capture_output=True,
         text=True,
         timeout=60,

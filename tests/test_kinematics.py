@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from paper_a1 import CORRECTIONS, PRINTED
 from scipy.spatial.transform import Rotation
 
-from compensation.components import TABLE_COMPONENTS, parse_component
-from compensation.kinematics import (
+from cmm_comp.compensation.components import TABLE_COMPONENTS, parse_component
+from cmm_comp.compensation.kinematics import (
     MODEL_CHAINS,
     Chain,
     exact_pose,

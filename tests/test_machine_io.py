@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.errors import MachineFileError
-from compensation.machine import Machine
+from cmm_comp.compensation.errors import MachineFileError
+from cmm_comp.compensation.machine import Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples" / "machines").glob("*.toml"))
@@ -260,7 +260,7 @@ def test_cli_prints_load_warnings(tmp_path: Path) -> None:
     )
     path = write(tmp_path, text)
     r = subprocess.run(
-        [sys.executable, "-m", "daemon.cli", "diagonals", str(path)],
+        [sys.executable, "-m", "cmm_comp.cli", "diagonals", str(path)],
         capture_output=True,
         text=True,
         cwd=ROOT,

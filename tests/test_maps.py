@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.machine import Machine
-from compensation.maps import diagonal_endpoints, diagonals_um, line_report, volumetric_map
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.maps import diagonal_endpoints, diagonals_um, line_report, volumetric_map
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
@@ -90,7 +90,7 @@ def test_line_report_bandwidth_and_max() -> None:
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "daemon.cli", *args],
+        [sys.executable, "-m", "cmm_comp.cli", *args],
         capture_output=True,
         text=True,
         cwd=cwd,

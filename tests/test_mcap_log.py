@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from daemon.mcap_log import McapLogger
-from daemon.mcap_read import load_session, read_messages, session_files
-from daemon.mcap_schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
+from cmm_comp.daemon.mcap_log import McapLogger
+from cmm_comp.daemon.mcap_read import load_session, read_messages, session_files
+from cmm_comp.daemon.mcap_schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
 
 T0_NS = 1_700_000_000_123_456_789
 
@@ -332,7 +332,7 @@ def test_sliced_file_writes_whole_buffers_in_short_system_calls(tmp_path: Path) 
     everything, in order (what the MCAP writer relies on)."""
     import io as _io
 
-    from daemon.mcap_log import WRITE_SLICE, SlicedFileIO
+    from cmm_comp.daemon.mcap_log import WRITE_SLICE, SlicedFileIO
 
     path = tmp_path / "f.bin"
     raw = SlicedFileIO(path, "xb")

@@ -12,12 +12,12 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from daemon.can_endpoint import frame_record
-from daemon.mcap_log import McapLogger
-from daemon.mcap_process import McapProcessLogger
-from daemon.mcap_read import read_messages
-from daemon.mcap_records import corrected_payload, expand, frame_payload, raw_payload
-from daemon.mcap_schemas import check_message
+from cmm_comp.daemon.can_endpoint import frame_record
+from cmm_comp.daemon.mcap_log import McapLogger
+from cmm_comp.daemon.mcap_process import McapProcessLogger
+from cmm_comp.daemon.mcap_read import read_messages
+from cmm_comp.daemon.mcap_records import corrected_payload, expand, frame_payload, raw_payload
+from cmm_comp.daemon.mcap_schemas import check_message
 
 T0_S = 1_700_000_000
 

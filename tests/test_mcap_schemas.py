@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from daemon.mcap_schemas import (
+from cmm_comp.daemon.mcap_schemas import (
     NS_PER_S,
     TOPIC_SCHEMAS,
     check_message,

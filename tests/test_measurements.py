@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.errors import MeasurementFileError
-from compensation.machine import Machine
-from compensation.measurements import read_measurements, write_measurements
-from sim_controller.sessions import plan_session
+from cmm_comp.compensation.errors import MeasurementFileError
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.measurements import read_measurements, write_measurements
+from cmm_comp.sim_controller.sessions import plan_session
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
@@ -63,7 +63,7 @@ def test_bad_files(tmp_path, text, match) -> None:
 
 
 def test_cli_bad_file_no_traceback_nothing_written(tmp_path, capsys) -> None:
-    from compensation.diagnosis_cli import main
+    from cmm_comp.cli import main
 
     p = tmp_path / "bad.csv"
     p.write_text("x,y,z,ref_x,ref_y,ref_z\n1,2,3,4,5,6\n1,2,oops,4,5,6\n")

@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from paper_a2 import LINEAR_TARGETS, PRINTED, SLIPS, SQUARENESS_AGREE, SQUARENESS_TARGETS
 
-from compensation.components import AXES, AXIS_INDEX, TABLE_COMPONENTS
-from compensation.kinematics import MODEL_CHAINS, first_order_jacobian
-from compensation.machine import Machine
-from compensation.straightness import apply_criterion
+from cmm_comp.compensation.components import AXES, AXIS_INDEX, TABLE_COMPONENTS
+from cmm_comp.compensation.kinematics import MODEL_CHAINS, first_order_jacobian
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.straightness import apply_criterion
 
 MODELS = tuple(MODEL_CHAINS)
 ANGULAR = tuple(f"e{i}_{a}" for a in AXES for i in AXES)

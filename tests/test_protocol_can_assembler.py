@@ -7,7 +7,7 @@ import random
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocol import (
+from cmm_comp.protocol import (
     Axis,
     CorrectedAxis,
     Duplicate,

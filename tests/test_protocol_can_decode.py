@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocol import (
+from cmm_comp.protocol import (
     Axis,
     BadLength,
     BadValue,
@@ -23,7 +23,7 @@ from protocol import (
     decode_message,
     encode_message,
 )
-from protocol.can_frames import FRAME_CLASS
+from cmm_comp.protocol.can_frames import FRAME_CLASS
 
 USED_BITS = {RawAxis: (7, 0x1F), TemperatureSample: (1, 0x01), CorrectionStatus: (3, 0x1F)}
 """(byte index, mask of defined bits) for the frames that have reserved bits."""

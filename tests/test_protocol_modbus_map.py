@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymodbus.client.mixin import ModbusClientMixin
 
-from protocol import (
+from cmm_comp.protocol import (
     AnswerBlock,
     Applied,
     DaemonBlock,
@@ -22,8 +22,8 @@ from protocol import (
     commits_reading,
     decode_output,
 )
-from protocol import modbus_map as mm
-from protocol.modbus_codec import int_from_registers, int_to_registers
+from cmm_comp.protocol import modbus_map as mm
+from cmm_comp.protocol.modbus_codec import int_from_registers, int_to_registers
 
 DT = ModbusClientMixin.DATATYPE
 i64 = st.integers(-(1 << 63), (1 << 63) - 1)

@@ -15,7 +15,7 @@ import pytest
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.server import ModbusTcpServer
 
-from protocol import (
+from cmm_comp.protocol import (
     AnswerBlock,
     AnswerTimeoutError,
     Applied,
@@ -28,8 +28,8 @@ from protocol import (
     TemperatureSlot,
     build_sim_device,
 )
-from protocol import modbus_map as mm
-from protocol.modbus_codec import int_to_registers
+from cmm_comp.protocol import modbus_map as mm
+from cmm_comp.protocol.modbus_codec import int_to_registers
 
 
 class FakeDaemon:

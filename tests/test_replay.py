@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from test_daemon_support import base_config, channel, daemon_and_controller, npl_grid_path
 
-from daemon.replay import ReplayError, replay_offline, replay_to_bus
-from sim_controller.controller import RawReading
+from cmm_comp.daemon.replay import ReplayError, replay_offline, replay_to_bus
+from cmm_comp.sim_controller.controller import RawReading
 
 
 @pytest.fixture
@@ -50,7 +50,7 @@ def test_replay_other_grid_reports_differences(session, tmp_path) -> None:
         [
             sys.executable,
             "-m",
-            "daemon.cli",
+            "cmm_comp.cli",
             "replay",
             str(session),
             "--grid",

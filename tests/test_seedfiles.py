@@ -12,9 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.errors import MachineFileError
-from compensation.machine import Machine
-from compensation.seedfiles import find_seed_machines, load_seed_fileset, write_seed_fileset
+from cmm_comp.compensation.errors import MachineFileError
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.seedfiles import (
+    find_seed_machines,
+    load_seed_fileset,
+    write_seed_fileset,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples" / "machines"

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from compensation.machine import Machine
-from sim_controller.sessions import plan_session, true_error_um
-from sim_controller.true_machine import HIDDEN_CAUSES, effect_rms_um, simulate
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.sim_controller.sessions import plan_session, true_error_um
+from cmm_comp.sim_controller.true_machine import HIDDEN_CAUSES, effect_rms_um, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"

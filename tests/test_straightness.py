@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from compensation.straightness import (
+from cmm_comp.compensation.straightness import (
     CRITERIA,
     END_POINTS,
     LEAST_SQUARES,

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from compensation.machine import Machine
+from cmm_comp.compensation.machine import Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -8,34 +8,24 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
-from .errors import CmmCompError
+from .common import load_machine, write_text_atomic
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
-    from .cli import load_machine
-    from .measurements import read_measurements
+    from cmm_comp.compensation.measurements import read_measurements
 
     machine = load_machine(args.machine)
     data = read_measurements(args.measurements)
     return machine, data
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
-
-
 def _run(args: argparse.Namespace, action: Any) -> int:
-    from .diagnosis import diagnose
+    from cmm_comp.compensation import CmmCompError
+    from cmm_comp.compensation.diagnosis import diagnose
 
     try:
         machine, data = _load(args)
@@ -54,9 +44,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     """``diagnose MACHINE MEASUREMENTS --json OUT [--report DIR]``: exit 0 found or not."""
 
     def action(diagnosis: Any) -> int:
-        _atomic_write(Path(args.json), json.dumps(diagnosis.to_json(), indent=2, default=float))
+        write_text_atomic(Path(args.json), json.dumps(diagnosis.to_json(), indent=2, default=float))
         if args.report:
-            from .diagnosis.report import write_report
+            from cmm_comp.compensation.diagnosis.report import write_report
 
             write_report(diagnosis, args.report, title=f"Diagnosis of {args.machine}")
         print(
@@ -76,15 +66,7 @@ def cmd_extend(args: argparse.Namespace) -> int:
     def action(diagnosis: Any) -> int:
         extended = diagnosis.extended_machine()
         out = Path(args.output)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".toml")
-        os.close(fd)
-        try:
-            extended.to_toml(tmp)
-            os.replace(tmp, out)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        extended.to_toml(out)  # atomic: nothing is written on failure
         print(f"{out}: {len(diagnosis.effects)} effect(s) added")
         return 0
 
@@ -106,16 +88,3 @@ def add_parsers(subparsers: Any) -> None:
     e.add_argument("measurements", help="measurements.csv (FORMATS.md §2)")
     e.add_argument("-o", "--output", required=True, help="extended machine.toml")
     e.set_defaults(handler=cmd_extend)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry (``python -m compensation.diagnosis_cli``) until the CLI registers us."""
-    parser = argparse.ArgumentParser(prog="cmm-comp")
-    sub = parser.add_subparsers(dest="command", required=True)
-    add_parsers(sub)
-    args = parser.parse_args(argv)
-    return int(args.handler(args))
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -8,57 +8,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-
-from .machine import Machine
-
-
-def load_machine(path: Path) -> Machine:
-    """Load a machine description and print its load warnings to stderr (one line each)."""
-    machine = Machine.from_toml(path)
-    for warning in machine.warnings:
-        print(f"cmm-comp: warning: {warning}", file=sys.stderr)
-    return machine
-
-
-def progress_printer(label: str) -> Callable[[float], None]:
-    """A progress callback printing ``label: NN %`` to stderr (only on a terminal)."""
-    last = [-1]
-
-    def report(fraction: float) -> None:
-        pct = int(fraction * 100)
-        if pct != last[0] and sys.stderr.isatty():
-            last[0] = pct
-            end = "\n" if pct >= 100 else ""
-            print(f"\r{label}: {pct:3d} %", end=end, file=sys.stderr, flush=True)
-
-    return report
-
-
-def temps_from_args(args: argparse.Namespace) -> dict[str, float] | None:
-    temps = {
-        name: value
-        for name, value in (
-            ("T_x", getattr(args, "temp_x", None)),
-            ("T_y", getattr(args, "temp_y", None)),
-            ("T_z", getattr(args, "temp_z", None)),
-            ("T_wp", getattr(args, "temp_wp", None)),
-        )
-        if value is not None
-    }
-    return temps or None
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    tmp.replace(path)
+from .common import load_machine, progress_printer, temps_from_args, write_json_atomic
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -77,7 +29,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from .maps import volumetric_map
+    import numpy as np
+
+    from cmm_comp.compensation.maps import volumetric_map
 
     machine = load_machine(args.machine)
     vmap = volumetric_map(
@@ -85,7 +39,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     )
     vmap.write_csv(args.out)
     if args.plot:
-        from .plots import plot_vector_map
+        from cmm_comp.compensation.plots import plot_vector_map
 
         plot_vector_map(vmap, args.plot, args.magnification, title=machine.name)
     peak = float(np.max(np.linalg.norm(vmap.error_um, axis=1)))
@@ -96,7 +50,7 @@ def cmd_map(args: argparse.Namespace) -> int:
 
 
 def cmd_diagonals(args: argparse.Namespace) -> int:
-    from .maps import diagonal_endpoints, diagonals_um
+    from cmm_comp.compensation.maps import diagonal_endpoints, diagonals_um
 
     machine = load_machine(args.machine)
     diag = diagonals_um(machine, args.probe, temps_from_args(args))
@@ -109,7 +63,7 @@ def cmd_diagonals(args: argparse.Namespace) -> int:
     if args.json:
         write_json_atomic(args.json, out)
     if args.plot:
-        from .plots import plot_diagonals
+        from cmm_comp.compensation.plots import plot_diagonals
 
         plot_diagonals(machine, diag, args.plot)
     for n, (v, (a, b)) in enumerate(zip(diag, ends, strict=True), start=1):
@@ -118,7 +72,7 @@ def cmd_diagonals(args: argparse.Namespace) -> int:
 
 
 def cmd_line(args: argparse.Namespace) -> int:
-    from .maps import line_report
+    from cmm_comp.compensation.maps import line_report
 
     machine = load_machine(args.machine)
     report = line_report(
@@ -127,7 +81,7 @@ def cmd_line(args: argparse.Namespace) -> int:
     if args.out:
         report.write_csv(args.out)
     if args.plot:
-        from .plots import plot_line
+        from cmm_comp.compensation.plots import plot_line
 
         plot_line(report, args.plot, title=machine.name)
     s = report.summary()
@@ -141,8 +95,15 @@ def cmd_line(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Everything people look at, in one directory: map CSV, diagonals JSON, line CSV, PNG plots."""
-    from .maps import diagonals_um, line_report, volumetric_map
-    from .plots import plot_diagonals, plot_line, plot_parametric_errors, plot_vector_map
+    import numpy as np
+
+    from cmm_comp.compensation.maps import diagonals_um, line_report, volumetric_map
+    from cmm_comp.compensation.plots import (
+        plot_diagonals,
+        plot_line,
+        plot_parametric_errors,
+        plot_vector_map,
+    )
 
     machine = load_machine(args.machine)
     out: Path = args.out
@@ -179,8 +140,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_iso230(args: argparse.Namespace) -> int:
     """Evaluate an ISO 230-2 run (key=value .dat file) and print/plot the standard's values."""
-    from .iso230 import format_iso230_report, plot_iso230
-    from .realdata import read_iso230_dat
+    from cmm_comp.compensation.iso230 import format_iso230_report, plot_iso230
+    from cmm_comp.compensation.realdata import read_iso230_dat
 
     run = read_iso230_dat(args.dat)
     result = run.evaluate()
@@ -194,7 +155,7 @@ def cmd_iso230(args: argparse.Namespace) -> int:
 
 def cmd_import_seed(args: argparse.Namespace) -> int:
     """Load a data set kept in the paper's file layout (NAME S/R + .CTL, .DPX …) → machine.toml."""
-    from .seedfiles import find_seed_machines, load_seed_fileset
+    from cmm_comp.compensation.seedfiles import find_seed_machines, load_seed_fileset
 
     if args.name is None:
         names = find_seed_machines(args.directory)
@@ -211,7 +172,7 @@ def cmd_import_seed(args: argparse.Namespace) -> int:
 
 def cmd_export_seed(args: argparse.Namespace) -> int:
     """Write a machine description as the paper's file set (for legacy tools)."""
-    from .seedfiles import write_seed_fileset
+    from cmm_comp.compensation.seedfiles import write_seed_fileset
 
     machine = load_machine(args.machine)
     written = write_seed_fileset(machine, args.directory, args.name)

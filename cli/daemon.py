@@ -1,7 +1,7 @@
-"""CLI handlers ``cmm-comp daemon``, ``cmm-comp demo``, ``cmm-comp replay``.
+"""``cmm-comp daemon`` and ``cmm-comp replay``: the production daemon and its session logs.
 
-``add_parsers(subparsers)`` registers the three subcommands (each sets ``handler``);
-``daemon/cli.py`` calls it. Handlers return the exit code: 0 success, 1 run-time failure,
+``add_parsers(subparsers)`` registers the two subcommands (each sets ``handler``);
+``cli/main.py`` calls it. Handlers return the exit code: 0 success, 1 run-time failure,
 2 bad input (the message names the file or flag; never a traceback).
 """
 
@@ -13,10 +13,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from .common import fail
+
 
 def add_parsers(subparsers: Any) -> None:
-    """Register ``daemon``, ``demo`` and ``replay`` on an argparse subparsers object."""
-    from .config import add_override_flags
+    """Register ``daemon`` and ``replay`` on an argparse subparsers object."""
+    from cmm_comp.daemon.config import add_override_flags
 
     p = subparsers.add_parser(
         "daemon",
@@ -31,21 +33,6 @@ def add_parsers(subparsers: Any) -> None:
     )
     add_override_flags(p)
     p.set_defaults(handler=cmd_daemon)
-
-    p = subparsers.add_parser(
-        "demo",
-        help="simulated controller → daemon over a virtual CAN bus; E0 before/after",
-        description="Run the ISO 10360-2 length test, a ball plate and random points on a "
-        "simulated machine through the daemon (python-can virtual bus, one process).",
-    )
-    p.add_argument("--mcap", metavar="PATH", help="write the session log here (overwritten)")
-    p.add_argument("--json", metavar="SUMMARY", help="write the summary JSON here")
-    p.add_argument("--machine", help="machine.toml (default examples/machines/npl-bridge.toml)")
-    p.add_argument("--grid", help="use this grid instead of building one from the machine")
-    p.add_argument("--random", type=int, default=500, help="random points (default 500)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.set_defaults(handler=cmd_demo)
 
     p = subparsers.add_parser(
         "replay",
@@ -70,27 +57,22 @@ def add_parsers(subparsers: Any) -> None:
     p.set_defaults(handler=cmd_replay)
 
 
-def _err(msg: str) -> int:
-    print(f"cmm-comp: {msg}", file=sys.stderr)
-    return 2
-
-
 def cmd_daemon(args: argparse.Namespace) -> int:
     """Run the daemon until SIGTERM/SIGINT."""
-    from .config import ConfigError, load_config
-    from .grid_slot import GridLoadError, load_grid
-    from .service import DaemonService
+    from cmm_comp.daemon.config import ConfigError, load_config
+    from cmm_comp.daemon.grid_slot import GridLoadError, load_grid
+    from cmm_comp.daemon.service import DaemonService
 
     try:
         config = load_config(args.config, args)
     except ConfigError as exc:
-        return _err(str(exc))
+        return fail(str(exc))
     if args.check:
         if config.grid.path:
             try:
                 loaded = load_grid(config.grid.path, config.grid.expect_machine_sha256)
             except GridLoadError as exc:
-                return _err(str(exc))
+                return fail(str(exc))
             print(f"{config.source}: ok; grid {loaded.path} sha256 {loaded.sha256}")
         else:
             print(f"{config.source}: ok; no grid configured")
@@ -105,36 +87,6 @@ def cmd_daemon(args: argparse.Namespace) -> int:
         print(f"cmm-comp daemon: cannot start: {exc}", file=sys.stderr)
         return 1
     return service.run_forever()
-
-
-def cmd_demo(args: argparse.Namespace) -> int:
-    """Run the demo, print the summary table, write the JSON summary."""
-    from compensation.errors import CmmCompError
-
-    from .demo import format_table, run_demo, summary_json
-
-    def progress(msg: str) -> None:
-        if not args.quiet:
-            print(f"[demo] {msg}", file=sys.stderr, flush=True)
-
-    try:
-        result = run_demo(
-            machine_path=args.machine,
-            grid_path=args.grid,
-            mcap_path=args.mcap,
-            n_random=args.random,
-            seed=args.seed,
-            progress=progress,
-        )
-    except (CmmCompError, FileNotFoundError, ValueError) as exc:
-        return _err(str(exc))
-    print(format_table(result))
-    if args.json:
-        Path(args.json).write_text(json.dumps(summary_json(result), indent=2) + "\n")
-    if result["controller_errors"]:
-        print(f"controller errors: {result['controller_errors']}", file=sys.stderr)
-        return 1
-    return 0
 
 
 def _bus_options(items: list[str]) -> dict[str, Any]:
@@ -154,7 +106,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """Re-correct a session (default) or re-send it to a bus (``--to-bus``)."""
     import can
 
-    from .replay import ReplayError, replay_offline, replay_to_bus
+    from cmm_comp.daemon.replay import ReplayError, replay_offline, replay_to_bus
 
     try:
         if args.to_bus:
@@ -165,7 +117,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             return 0
         report = replay_offline(args.session, args.grid)
     except (ReplayError, ValueError, can.CanError) as exc:
-        return _err(str(exc))
+        return fail(str(exc))
     rows = [
         ("session", ", ".join(report.session) + (" (cut by a crash)" if report.truncated else "")),
         ("grid", f"{report.grid_path} ({report.grid_sha256[:12]})"),

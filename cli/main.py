@@ -13,10 +13,11 @@ import sys
 # (module, function) pairs that add subcommands; imported lazily so a missing optional part
 # cannot break the rest of the CLI.
 _REGISTRARS: tuple[tuple[str, str], ...] = (
-    ("compensation.cli", "add_parsers"),
-    ("compensation.grid_cli", "add_parsers"),
-    ("compensation.diagnosis_cli", "add_parsers"),
-    ("daemon.commands", "add_parsers"),
+    ("cmm_comp.cli.model", "add_parsers"),
+    ("cmm_comp.cli.grid", "add_parsers"),
+    ("cmm_comp.cli.diagnosis", "add_parsers"),
+    ("cmm_comp.cli.daemon", "add_parsers"),
+    ("cmm_comp.cli.demo", "add_parsers"),
 )
 
 
@@ -38,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from compensation.errors import CmmCompError
+    from cmm_comp.compensation import CmmCompError
 
     parser = build_parser()
     args = parser.parse_args(argv)

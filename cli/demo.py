@@ -1,33 +1,29 @@
-"""The demo: simulated controller → daemon over a python-can ``virtual`` bus, in one process.
+"""``cmm-comp demo``: simulated controller → daemon over a python-can ``virtual`` bus, in one process.
 
 Builds the grid from ``examples/machines/npl-bridge.toml`` unless one is given, starts a
 :class:`DaemonService` on a fresh virtual channel (MCAP log on), runs the ISO 10360-2 length
 test, a ball plate and random points through :class:`sim_controller.CanController`, and
 returns the summary of FORMATS.md §3 (``readings``, ``corrected``, ``e0_before_um``,
-``e0_after_um``, ``latency_us.p50/p99``) plus detail figures. Lives in ``daemon`` because it
-starts both sides (``sim_controller`` never imports ``daemon``).
+``e0_after_um``, ``latency_us.p50/p99``) plus detail figures. Lives in the CLI because it wires both sides:
+the daemon never imports the simulator, and the simulator never imports the daemon.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import sys
 import tempfile
 import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import can
-import numpy as np
+from .common import fail
 
-from compensation.grid import CorrectionGrid
-from compensation.machine import Machine
-from sim_controller.controller import CanController
-from sim_controller.runner import build_program, evaluate, make_readings, run_can
-from sim_controller.sim_machine import Environment, SimulatedMachine
-
-from .config import DaemonConfig
-from .service import DaemonService
+if TYPE_CHECKING:
+    from cmm_comp.daemon import DaemonConfig
 
 SUMMARY_KEYS = ("readings", "corrected", "e0_before_um", "e0_after_um", "latency_us")
 
@@ -44,6 +40,8 @@ def demo_config(
     grid_path: str, channel: str, mcap_path: str, stylus_mm: list[float]
 ) -> DaemonConfig:
     """Daemon configuration of the demo: virtual CAN, no Modbus, no metrics port."""
+    from cmm_comp.daemon import DaemonConfig
+
     cfg = DaemonConfig(source="<demo>")
     cfg.grid.path = grid_path
     cfg.grid.stylus_mm = list(stylus_mm)
@@ -63,7 +61,16 @@ def run_demo(
     noise_um: float | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
-    """Run the demo; return the summary (FORMATS.md §3 keys first, then details)."""
+    """Run the demo; return the summary (docs/formats.md keys first, then details)."""
+    import can
+    import numpy as np
+
+    from cmm_comp.compensation import CorrectionGrid, Machine
+    from cmm_comp.daemon import DaemonService
+    from cmm_comp.sim_controller.controller import CanController
+    from cmm_comp.sim_controller.runner import build_program, evaluate, make_readings, run_can
+    from cmm_comp.sim_controller.sim_machine import Environment, SimulatedMachine
+
     say = progress or (lambda _msg: None)
     t_start = time.perf_counter()
     machine = Machine.from_toml(machine_path or default_machine_path())
@@ -148,3 +155,49 @@ def format_table(result: dict[str, Any]) -> str:
     rows.append(("elapsed", f"{result['elapsed_s']:.1f} s"))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def add_parsers(subparsers: Any) -> None:
+    """Register ``demo`` on an argparse subparsers object."""
+    p = subparsers.add_parser(
+        "demo",
+        help="simulated controller → daemon over a virtual CAN bus; E0 before/after",
+        description="Run the ISO 10360-2 length test, a ball plate and random points on a "
+        "simulated machine through the daemon (python-can virtual bus, one process).",
+    )
+    p.add_argument("--mcap", metavar="PATH", help="write the session log here (overwritten)")
+    p.add_argument("--json", metavar="SUMMARY", help="write the summary JSON here")
+    p.add_argument("--machine", help="machine.toml (default examples/machines/npl-bridge.toml)")
+    p.add_argument("--grid", help="use this grid instead of building one from the machine")
+    p.add_argument("--random", type=int, default=500, help="random points (default 500)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(handler=cmd_demo)
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Run the demo, print the summary table, write the JSON summary."""
+    from cmm_comp.compensation import CmmCompError
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"[demo] {msg}", file=sys.stderr, flush=True)
+
+    try:
+        result = run_demo(
+            machine_path=args.machine,
+            grid_path=args.grid,
+            mcap_path=args.mcap,
+            n_random=args.random,
+            seed=args.seed,
+            progress=progress,
+        )
+    except (CmmCompError, FileNotFoundError, ValueError) as exc:
+        return fail(str(exc))
+    print(format_table(result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(summary_json(result), indent=2) + "\n")
+    if result["controller_errors"]:
+        print(f"controller errors: {result['controller_errors']}", file=sys.stderr)
+        return 1
+    return 0

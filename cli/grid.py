@@ -9,15 +9,16 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import math
-import os
 import sys
-import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from .common import load_machine, write_text_atomic
 
-from compensation.grid import CorrectionGrid
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["add_parsers", "cmd_correct", "cmd_grid_build", "read_points_csv"]
 
@@ -37,7 +38,7 @@ SIGNAL_COLUMNS = (
 
 def cmd_grid_build(args: argparse.Namespace) -> int:
     """``cmm-comp grid build MACHINE -o GRID [--steps NX NY NZ]``."""
-    from compensation.cli import load_machine
+    from cmm_comp.compensation.grid import CorrectionGrid
 
     machine = load_machine(args.machine)
 
@@ -58,6 +59,8 @@ def cmd_grid_build(args: argparse.Namespace) -> int:
 
 def read_points_csv(path: Path) -> tuple[list[str], list[list[str]], dict[str, np.ndarray]]:
     """Header, raw rows and float columns of a POINTS.csv; ValueError names file/line/column."""
+    import numpy as np
+
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
@@ -84,6 +87,10 @@ def read_points_csv(path: Path) -> tuple[list[str], list[list[str]], dict[str, n
 
 def cmd_correct(args: argparse.Namespace) -> int:
     """``cmm-comp correct GRID --in POINTS.csv --out OUT.csv``."""
+    import numpy as np
+
+    from cmm_comp.compensation.grid import CorrectionGrid
+
     grid = CorrectionGrid.load(args.grid)
     header, rows, cols = read_points_csv(Path(args.input))
     pts = np.c_[cols["x"], cols["y"], cols["z"]]
@@ -96,18 +103,13 @@ def cmd_correct(args: argparse.Namespace) -> int:
     inputs = {k: v for k, v in signals.items() if not k.startswith("T_")}
     corrected, status = grid.correct(pts, stylus, temps or None, inputs or None)
     out = Path(args.output)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent or Path("."))
-    try:
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-            writer = csv.writer(fh)
-            writer.writerow([*header, "cx", "cy", "cz", "status"])
-            for row, c, st in zip(rows, corrected, status, strict=True):
-                cells = ["" if math.isnan(v) else f"{v:.6f}" for v in c]
-                writer.writerow([*row, *cells, st])
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    buf = io.StringIO(newline="")
+    writer = csv.writer(buf)
+    writer.writerow([*header, "cx", "cy", "cz", "status"])
+    for row, c, st in zip(rows, corrected, status, strict=True):
+        cells = ["" if math.isnan(v) else f"{v:.6f}" for v in c]
+        writer.writerow([*row, *cells, st])
+    write_text_atomic(out, buf.getvalue())
     n_ok = int(np.sum(status == "ok"))
     print(f"wrote {out}: {len(rows)} points, {n_ok} ok, {len(rows) - n_ok} flagged")
     return 0

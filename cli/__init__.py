@@ -1,0 +1,12 @@
+"""The one command line, ``cmm-comp``: one module per command group.
+
+``model`` (map, diagonals, line, report, iso230, seed files), ``grid`` (grid build, correct),
+``diagnosis`` (diagnose, extend), ``daemon`` (daemon, replay), ``demo`` (simulated controller →
+daemon). Each module imports what its commands use only when they run.
+"""
+
+from __future__ import annotations
+
+from .main import build_parser, main
+
+__all__ = ["build_parser", "main"]

@@ -1,0 +1,7 @@
+"""``python -m cmm_comp.cli …`` is ``cmm-comp …``."""
+
+import sys
+
+from .main import main
+
+sys.exit(main())

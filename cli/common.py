@@ -1,0 +1,92 @@
+"""Helpers shared by the ``cmm-comp`` command groups: loading, progress, atomic output.
+
+Imports nothing heavy at module level: ``cmm-comp --help`` must start fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from cmm_comp.compensation import Machine
+
+__all__ = [
+    "fail",
+    "load_machine",
+    "progress_printer",
+    "temps_from_args",
+    "write_json_atomic",
+    "write_text_atomic",
+]
+
+
+def fail(message: str) -> int:
+    """Print ``cmm-comp: MESSAGE`` on stderr and return exit code 2 (bad input)."""
+    print(f"cmm-comp: {message}", file=sys.stderr)
+    return 2
+
+
+def load_machine(path: str | Path) -> Machine:
+    """Load a machine description and print its load warnings to stderr (one line each)."""
+    from cmm_comp.compensation import Machine
+
+    machine = Machine.from_toml(path)
+    for warning in machine.warnings:
+        print(f"cmm-comp: warning: {warning}", file=sys.stderr)
+    return machine
+
+
+def progress_printer(label: str) -> Callable[[float], None]:
+    """A progress callback printing ``label: NN %`` to stderr (only on a terminal)."""
+    last = [-1]
+
+    def report(fraction: float) -> None:
+        pct = int(fraction * 100)
+        if pct != last[0] and sys.stderr.isatty():
+            last[0] = pct
+            end = "\n" if pct >= 100 else ""
+            print(f"\r{label}: {pct:3d} %", end=end, file=sys.stderr, flush=True)
+
+    return report
+
+
+def temps_from_args(args: argparse.Namespace) -> dict[str, float] | None:
+    """``--temp-x/-y/-z/-wp`` flags as a ``temps_C`` mapping (°C), or None when none is given."""
+    temps = {
+        name: value
+        for name, value in (
+            ("T_x", getattr(args, "temp_x", None)),
+            ("T_y", getattr(args, "temp_y", None)),
+            ("T_z", getattr(args, "temp_z", None)),
+            ("T_wp", getattr(args, "temp_wp", None)),
+        )
+        if value is not None
+    }
+    return temps or None
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename: a failed run leaves
+    the previous file intact, never a half-written one."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_json_atomic(path: str | Path, data: Any) -> None:
+    """``data`` as indented JSON, written atomically (see :func:`write_text_atomic`)."""
+    write_text_atomic(path, json.dumps(data, indent=2, default=float) + "\n")
