@@ -1,0 +1,133 @@
+"""The distribution installs one top-level import name, ``cmm_comp``, and nothing else.
+
+The folders ``compensation/``, ``protocol/``, ``daemon/``, ``sim_controller/``, ``cli/`` are
+mapped to ``cmm_comp.*`` by setuptools (pyproject.toml). ``daemon`` is also the import name of
+python-daemon, which the test extras install on purpose: this whole suite runs beside it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import sysconfig
+import tomllib
+import venv
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FOLDERS = ("compensation", "protocol", "daemon", "sim_controller", "cli")
+
+
+def _pyproject() -> dict:
+    return tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+
+
+def test_every_package_folder_is_listed_under_cmm_comp() -> None:
+    listed = set(_pyproject()["tool"]["setuptools"]["packages"])
+    on_disk = {
+        "cmm_comp." + ".".join(init.parent.relative_to(ROOT).parts)
+        for folder in FOLDERS
+        for init in (ROOT / folder).rglob("__init__.py")
+    }
+    assert on_disk - listed == set(), "pyproject.toml [tool.setuptools] packages misses these"
+    assert listed - on_disk == set(), "pyproject.toml lists packages that do not exist"
+    mapping = _pyproject()["tool"]["setuptools"]["package-dir"]
+    assert mapping == {f"cmm_comp.{f}": f for f in FOLDERS}
+
+
+def test_python_daemon_and_cmm_comp_daemon_coexist() -> None:
+    import daemon  # python-daemon (a test extra)
+    from cmm_comp.daemon import ConfigError, DaemonConfig
+
+    assert hasattr(daemon, "DaemonContext"), f"`import daemon` gave {daemon!r}"
+    assert not hasattr(daemon, "DaemonConfig")
+    assert DaemonConfig(source="<test>").check().source == "<test>"
+    assert issubclass(ConfigError, Exception)
+
+
+@pytest.mark.slow
+def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> None:
+    """Build and install the real wheel (not the editable finder) into a new venv that also sees
+    python-daemon; import both and run a command that reads package data and does real work."""
+    env_dir = tmp_path / "venv"
+    venv.EnvBuilder(with_pip=False).create(env_dir)
+    py = env_dir / "bin" / "python"
+    purelib = Path(
+        subprocess.check_output(
+            [py, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], text=True
+        ).strip()
+    )
+    # The new venv borrows this environment's third-party libraries (numpy, scipy, python-daemon,
+    # setuptools …) through a .pth line, but not cmm_comp: its own site-packages comes first and
+    # the editable finder of this environment is a .pth *file*, which a path entry does not run.
+    outer = sysconfig.get_paths()["purelib"]
+    (purelib / "outer.pth").write_text(outer + "\n")
+    wheel_dir = tmp_path / "wheel"
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(wheel_dir),
+            str(ROOT),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    (wheel,) = wheel_dir.glob("cmm_comp-*.whl")
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--no-deps",
+            "-q",
+            "--target",
+            str(purelib),
+            str(wheel),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    installed = sorted(p.name for p in purelib.iterdir() if not p.name.endswith((".pth",)))
+    assert [n for n in installed if not n.startswith("cmm_comp")] in ([], ["bin"])
+    code = """
+import daemon, json, sys
+from pathlib import Path
+import cmm_comp.daemon as ours
+from cmm_comp.compensation import Machine
+from cmm_comp.protocol import dbc_text
+assert hasattr(daemon, "DaemonContext"), daemon
+assert Path(ours.__file__).parts[-3:-1] == ("cmm_comp", "daemon"), ours.__file__
+machine = Machine.from_toml(sys.argv[1])
+print(json.dumps({"daemon": daemon.__file__, "ours": ours.__file__,
+                  "dbc": "BO_" in dbc_text(), "diag": machine.volumetric_error([[0, 0, 0]]).tolist()}))
+"""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = subprocess.run(
+        [py, "-c", code, str(ROOT / "examples" / "machines" / "npl-bridge.toml")],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,  # not the checkout: the folders there must not be what gets imported
+        env=env,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    import json
+
+    result = json.loads(out.stdout)
+    assert result["dbc"]
+    assert str(purelib) in result["ours"], "cmm_comp came from somewhere else than the wheel"
+    assert "site-packages/daemon" in result["daemon"]
+    assert len(result["diag"][0]) == 3
