@@ -1,6 +1,6 @@
 """Identification-rate study of the diagnosis: hidden causes × effect sizes × seeds.
 
-For every cause of FORMATS.md §4 (and clean sessions, and pairs of causes) and every effect size
+For every cause of docs/formats.md §4 (and clean sessions, and pairs of causes) and every effect size
 (3-D RMS of the hidden effect as a multiple of the noise RMS), simulate sessions on the NPL-like
 bridge machine (sim_controller), diagnose, and count a case as *named* when the set of (cause,
 component/axis/varies_with) found equals the hidden one exactly (``none`` for clean sessions), and

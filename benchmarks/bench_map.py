@@ -16,7 +16,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.maps import volumetric_map
+from cmm_comp.compensation.reports.maps import volumetric_map
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results" / "map.json"

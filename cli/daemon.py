@@ -106,7 +106,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """Re-correct a session (default) or re-send it to a bus (``--to-bus``)."""
     import can
 
-    from cmm_comp.daemon.replay import ReplayError, replay_offline, replay_to_bus
+    from cmm_comp.daemon.sessionlog.replay import ReplayError, replay_offline, replay_to_bus
 
     try:
         if args.to_bus:

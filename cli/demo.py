@@ -3,7 +3,7 @@
 Builds the grid from ``examples/machines/npl-bridge.toml`` unless one is given, starts a
 :class:`DaemonService` on a fresh virtual channel (MCAP log on), runs the ISO 10360-2 length
 test, a ball plate and random points through :class:`sim_controller.CanController`, and
-returns the summary of FORMATS.md §3 (``readings``, ``corrected``, ``e0_before_um``,
+returns the summary of docs/formats.md §3 (``readings``, ``corrected``, ``e0_before_um``,
 ``e0_after_um``, ``latency_us.p50/p99``) plus detail figures. Lives in the CLI because it wires both sides:
 the daemon never imports the simulator, and the simulator never imports the daemon.
 """
@@ -118,7 +118,7 @@ def run_demo(
 
 
 def summary_json(result: dict[str, Any]) -> dict[str, Any]:
-    """Exactly the FORMATS.md §3 keys."""
+    """Exactly the docs/formats.md §3 keys."""
     return {
         "readings": int(result["readings"]),
         "corrected": int(result["corrected"]),

@@ -1,4 +1,4 @@
-"""``cmm-comp diagnose`` and ``cmm-comp extend`` (FORMATS.md §4).
+"""``cmm-comp diagnose`` and ``cmm-comp extend`` (docs/formats.md §4).
 
 Register with :func:`add_parsers` (each subparser sets ``handler``). Bad input files give one
 message naming the file, line and column on stderr, write nothing and return exit code 2.
@@ -16,7 +16,7 @@ from .common import load_machine, write_text_atomic
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
-    from cmm_comp.compensation.measurements import read_measurements
+    from cmm_comp.compensation.formats.measurements import read_measurements
 
     machine = load_machine(args.machine)
     data = read_measurements(args.measurements)
@@ -79,12 +79,12 @@ def add_parsers(subparsers: Any) -> None:
         "diagnose", help="compare the model with measurements and name the causes of the misfit"
     )
     p.add_argument("machine", help="machine.toml")
-    p.add_argument("measurements", help="measurements.csv (FORMATS.md §2)")
-    p.add_argument("--json", required=True, help="output JSON (FORMATS.md §4)")
+    p.add_argument("measurements", help="measurements.csv (docs/formats.md §2)")
+    p.add_argument("--json", required=True, help="output JSON (docs/formats.md §4)")
     p.add_argument("--report", help="directory for PNG plots and index.html")
     p.set_defaults(handler=cmd_diagnose)
     e = subparsers.add_parser("extend", help="write the machine extended by the effects found")
     e.add_argument("machine", help="machine.toml")
-    e.add_argument("measurements", help="measurements.csv (FORMATS.md §2)")
+    e.add_argument("measurements", help="measurements.csv (docs/formats.md §2)")
     e.add_argument("-o", "--output", required=True, help="extended machine.toml")
     e.set_defaults(handler=cmd_extend)

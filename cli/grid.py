@@ -1,4 +1,4 @@
-"""``cmm-comp grid build`` and ``cmm-comp correct`` (FORMATS.md §3).
+"""``cmm-comp grid build`` and ``cmm-comp correct`` (docs/formats.md §3).
 
 Register with ``add_parsers(subparsers)``; each handler takes the parsed arguments and returns
 an exit code. User-file problems raise ``ValueError`` (``GridFileError`` is one) with a message
@@ -22,18 +22,15 @@ if TYPE_CHECKING:
 
 __all__ = ["add_parsers", "cmd_correct", "cmd_grid_build", "read_points_csv"]
 
-SIGNAL_COLUMNS = (
-    "T_x",
-    "T_y",
-    "T_z",
-    "T_wp",
-    "T_top",
-    "T_bottom",
-    "T_air",
-    "dir_x",
-    "dir_y",
-    "dir_z",
-)
+DIRECTION_COLUMNS = ("dir_x", "dir_y", "dir_z")
+
+
+def _signal_columns() -> tuple[str, ...]:
+    """Runtime-signal columns of a points CSV: the temperature roles, then the directions
+    (imported on use: ``cmm-comp --help`` must not import the model)."""
+    from cmm_comp.compensation.thermal.roles import TEMPERATURE_ROLES
+
+    return (*TEMPERATURE_ROLES, *DIRECTION_COLUMNS)
 
 
 def cmd_grid_build(args: argparse.Namespace) -> int:
@@ -71,7 +68,7 @@ def read_points_csv(path: Path) -> tuple[list[str], list[list[str]], dict[str, n
     for name in ("x", "y", "z"):
         if name not in header:
             raise ValueError(f"{path}: missing column {name!r} (required: x, y, z)")
-    wanted = [c for c in ("x", "y", "z", "px", "py", "pz", *SIGNAL_COLUMNS) if c in header]
+    wanted = [c for c in ("x", "y", "z", "px", "py", "pz", *_signal_columns()) if c in header]
     cols = {c: np.empty(len(rows)) for c in wanted}
     for line, row in enumerate(rows, start=2):
         if len(row) != len(header):
@@ -98,7 +95,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
         stylus = np.c_[cols["px"], cols["py"], cols["pz"]]
     else:
         stylus = np.asarray(grid.metadata.get("probe_offset_mm", [0.0, 0.0, 0.0]), float)
-    signals = {c: cols[c] for c in SIGNAL_COLUMNS if c in cols}
+    signals = {c: cols[c] for c in _signal_columns() if c in cols}
     temps = {k: v for k, v in signals.items() if k.startswith("T_")}
     inputs = {k: v for k, v in signals.items() if not k.startswith("T_")}
     corrected, status = grid.correct(pts, stylus, temps or None, inputs or None)

@@ -31,7 +31,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 def cmd_map(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from cmm_comp.compensation.maps import volumetric_map
+    from cmm_comp.compensation.reports.maps import volumetric_map
 
     machine = load_machine(args.machine)
     vmap = volumetric_map(
@@ -39,7 +39,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     )
     vmap.write_csv(args.out)
     if args.plot:
-        from cmm_comp.compensation.plots import plot_vector_map
+        from cmm_comp.compensation.reports.plots import plot_vector_map
 
         plot_vector_map(vmap, args.plot, args.magnification, title=machine.name)
     peak = float(np.max(np.linalg.norm(vmap.error_um, axis=1)))
@@ -50,7 +50,7 @@ def cmd_map(args: argparse.Namespace) -> int:
 
 
 def cmd_diagonals(args: argparse.Namespace) -> int:
-    from cmm_comp.compensation.maps import diagonal_endpoints, diagonals_um
+    from cmm_comp.compensation.reports.maps import diagonal_endpoints, diagonals_um
 
     machine = load_machine(args.machine)
     diag = diagonals_um(machine, args.probe, temps_from_args(args))
@@ -63,7 +63,7 @@ def cmd_diagonals(args: argparse.Namespace) -> int:
     if args.json:
         write_json_atomic(args.json, out)
     if args.plot:
-        from cmm_comp.compensation.plots import plot_diagonals
+        from cmm_comp.compensation.reports.plots import plot_diagonals
 
         plot_diagonals(machine, diag, args.plot)
     for n, (v, (a, b)) in enumerate(zip(diag, ends, strict=True), start=1):
@@ -72,7 +72,7 @@ def cmd_diagonals(args: argparse.Namespace) -> int:
 
 
 def cmd_line(args: argparse.Namespace) -> int:
-    from cmm_comp.compensation.maps import line_report
+    from cmm_comp.compensation.reports.maps import line_report
 
     machine = load_machine(args.machine)
     report = line_report(
@@ -81,7 +81,7 @@ def cmd_line(args: argparse.Namespace) -> int:
     if args.out:
         report.write_csv(args.out)
     if args.plot:
-        from cmm_comp.compensation.plots import plot_line
+        from cmm_comp.compensation.reports.plots import plot_line
 
         plot_line(report, args.plot, title=machine.name)
     s = report.summary()
@@ -97,8 +97,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Everything people look at, in one directory: map CSV, diagonals JSON, line CSV, PNG plots."""
     import numpy as np
 
-    from cmm_comp.compensation.maps import diagonals_um, line_report, volumetric_map
-    from cmm_comp.compensation.plots import (
+    from cmm_comp.compensation.reports.maps import diagonals_um, line_report, volumetric_map
+    from cmm_comp.compensation.reports.plots import (
         plot_diagonals,
         plot_line,
         plot_parametric_errors,
@@ -140,8 +140,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_iso230(args: argparse.Namespace) -> int:
     """Evaluate an ISO 230-2 run (key=value .dat file) and print/plot the standard's values."""
-    from cmm_comp.compensation.iso230 import format_iso230_report, plot_iso230
-    from cmm_comp.compensation.realdata import read_iso230_dat
+    from cmm_comp.compensation.formats.realdata import read_iso230_dat
+    from cmm_comp.compensation.reports.iso230 import format_iso230_report, plot_iso230
 
     run = read_iso230_dat(args.dat)
     result = run.evaluate()
@@ -155,7 +155,7 @@ def cmd_iso230(args: argparse.Namespace) -> int:
 
 def cmd_import_seed(args: argparse.Namespace) -> int:
     """Load a data set kept in the paper's file layout (NAME S/R + .CTL, .DPX …) → machine.toml."""
-    from cmm_comp.compensation.seedfiles import find_seed_machines, load_seed_fileset
+    from cmm_comp.compensation.formats.seedfiles import find_seed_machines, load_seed_fileset
 
     if args.name is None:
         names = find_seed_machines(args.directory)
@@ -172,7 +172,7 @@ def cmd_import_seed(args: argparse.Namespace) -> int:
 
 def cmd_export_seed(args: argparse.Namespace) -> int:
     """Write a machine description as the paper's file set (for legacy tools)."""
-    from cmm_comp.compensation.seedfiles import write_seed_fileset
+    from cmm_comp.compensation.formats.seedfiles import write_seed_fileset
 
     machine = load_machine(args.machine)
     written = write_seed_fileset(machine, args.directory, args.name)

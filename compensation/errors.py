@@ -1,13 +1,29 @@
-"""Exceptions with messages written for people: they name the file, key or value and what is allowed."""
+"""Every exception class of the project derives from :class:`CmmCompError`, defined here.
+
+Messages are written for people: they name the file, key or value and what is allowed.
+Errors about bad input (machine, measurement, grid and real-data files; daemon configuration)
+are also ``ValueError``; the daemon's log-writer failure is also a ``RuntimeError``. The
+compensation package's own errors are defined here; the daemon's are defined beside their code and
+derive from :class:`CmmCompError`. (The protocol package, dependency-free codecs, keeps its two
+client errors on ``RuntimeError``/``TimeoutError`` so that importing it stays light.)
+"""
 
 from __future__ import annotations
 
+__all__ = [
+    "CmmCompError",
+    "GridFileError",
+    "MachineFileError",
+    "MeasurementFileError",
+    "RealDataError",
+]
 
-class CmmCompError(ValueError):
-    """Base class of every error this project raises on bad input."""
+
+class CmmCompError(Exception):
+    """Base class of every exception this project defines (``except CmmCompError`` catches all)."""
 
 
-class MachineFileError(CmmCompError):
+class MachineFileError(CmmCompError, ValueError):
     """A machine description (TOML, CSV or seed-style file set) is malformed."""
 
     def __init__(self, source: str, where: str, problem: str) -> None:
@@ -18,5 +34,13 @@ class MachineFileError(CmmCompError):
         super().__init__(f"{location}: {problem}")
 
 
-class MeasurementFileError(CmmCompError):
+class MeasurementFileError(CmmCompError, ValueError):
     """A verification measurements file is malformed."""
+
+
+class GridFileError(CmmCompError, ValueError):
+    """A grid file cannot be used: the message names the file and the problem."""
+
+
+class RealDataError(CmmCompError, ValueError):
+    """A real-data file is malformed; the message names the file, the line and the problem."""

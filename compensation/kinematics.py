@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .components import AXES, AXIS_INDEX
+from .parametric_errors import AXES, AXIS_INDEX
 
 FloatArray = NDArray[np.float64]
 

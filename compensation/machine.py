@@ -1,4 +1,4 @@
-"""The machine: its description (FORMATS.md §1) and the exact volumetric error model.
+"""The machine: its description (docs/formats.md §1) and the exact volumetric error model.
 
 ``Machine.volumetric_error`` evaluates the parametric model with full homogeneous transforms
 (:mod:`compensation.kinematics`), plus thermal terms, the optional arm-deflection terms of the
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .components import AXES, AXIS_INDEX
-from .effects_base import Effect, EvalContext
+from .effects.base import Effect, EvalContext
+from .errors import MachineFileError
 from .kinematics import (
     ARM_AXIS,
     Chain,
@@ -27,58 +27,13 @@ from .kinematics import (
     first_order_error,
     first_order_jacobian,
 )
+from .machine_parts import ArmDeflection, Probe, Volume
+from .offsets import refer_to_reference
+from .parametric_errors import AXIS_INDEX, ParametricErrors
 from .tables import ErrorTable
+from .thermal import TEMPERATURE_ROLES, Thermal
 
 FloatArray = NDArray[np.float64]
-
-#: Temperature signal names (FORMATS.md §2, §5).
-TEMPERATURE_SIGNALS: tuple[str, ...] = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
-
-
-@dataclass(frozen=True)
-class Volume:
-    """Working volume (mm), the reference point all parametric errors refer to, default steps."""
-
-    lower_mm: FloatArray
-    upper_mm: FloatArray
-    reference_mm: FloatArray
-    steps: tuple[int, int, int] | None = None
-
-    def contains(self, points_mm: FloatArray, tol_mm: float = 1e-9) -> NDArray[np.bool_]:
-        p = np.asarray(points_mm, dtype=float)
-        return np.all((p >= self.lower_mm - tol_mm) & (p <= self.upper_mm + tol_mm), axis=-1)
-
-    def nodes(self, steps: tuple[int, int, int]) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Node coordinates along x, y, z for ``steps`` nodes per axis (paper: "13 steps")."""
-        return tuple(  # type: ignore[return-value]
-            np.linspace(self.lower_mm[k], self.upper_mm[k], int(steps[k])) for k in range(3)
-        )
-
-
-@dataclass(frozen=True)
-class Probe:
-    offset_mm: FloatArray  # stylus tip offset (Xp, Yp, Zp)
-    random_um: float = 0.0  # random probing error (2σ)
-
-
-@dataclass(frozen=True)
-class Thermal:
-    reference_C: float = 20.0
-    expansion: FloatArray = field(default_factory=lambda: np.zeros(3))  # µm/(m·°C) per axis scale
-    workpiece_expansion: float | None = None  # µm/(m·°C)
-    workpiece_fixture_mm: FloatArray | None = None
-
-
-@dataclass(frozen=True)
-class ArmDeflection:
-    """The φ terms of the horizontal-arm models (not rigid-body; see docs/seed-equations.md).
-
-    ``phi1`` µrad per m of arm travel: a load-dependent tilt (MH1: ΔX += φ1·x·z; MH2: ΔY += φ1·y·z);
-    ``phi2`` µrad per m: the arm's droop curvature (MH1: ΔZ −= φ2·x²/2; MH2: ΔZ += φ2·y²/2).
-    """
-
-    phi1: float = 0.0
-    phi2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -92,6 +47,8 @@ class PoseError:
     translation_um: FloatArray  # (N, 3)
 
     def error_um(self, stylus_mm: ArrayLike) -> FloatArray:
+        """Error (N, 3) µm for the stylus offset ``stylus_mm`` (mm, required: a pose does not know
+        the machine; pass ``machine.probe.offset_mm`` for the machine's default)."""
         p = np.broadcast_to(np.asarray(stylus_mm, dtype=float), self.translation_um.shape)
         return self.translation_um + 1000.0 * np.einsum("nij,nj->ni", self.rotation - np.eye(3), p)
 
@@ -118,33 +75,97 @@ class Machine:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_toml(cls, path: str | Path) -> Machine:
-        """Load ``machine.toml`` (FORMATS.md §1); :class:`MachineFileError` on any problem."""
-        from .machine_io import load_machine
+        """Load ``machine.toml`` (docs/formats.md §1); :class:`MachineFileError` on any problem."""
+        from .formats.machine_toml import read_machine_toml
 
-        return load_machine(Path(path))
+        path = Path(path)
+        return cls.from_dict(read_machine_toml(path), source=str(path), base_dir=path.parent)
 
     @classmethod
     def from_dict(
         cls, data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | None = None
     ) -> Machine:
         """Build from the parsed TOML structure (same rules and errors as :meth:`from_toml`)."""
-        from .machine_io import machine_from_dict
+        from .formats.machine_parser import parse_machine
 
-        return machine_from_dict(data, source=source, base_dir=base_dir or Path.cwd())
+        base = base_dir or Path.cwd()
+        parsed = parse_machine(data, source=source, base_dir=base)
+        machine = cls(
+            name=parsed.name,
+            model=parsed.model,
+            chain=parsed.chain,
+            volume=parsed.volume,
+            probe=parsed.probe,
+            thermal=parsed.thermal,
+            squareness_urad=parsed.squareness_urad,
+            tables=parsed.tables,
+            squareness_random_urad=parsed.squareness_random_urad,
+            arm=parsed.arm,
+            effects=parsed.effects,
+            description=parsed.description,
+            source=source,
+            warnings=parsed.warnings,
+        )
+        try:
+            refer_to_reference(machine, parsed.squareness_offset_mm)
+        except ValueError as exc:
+            raise MachineFileError(source, "errors", str(exc)) from None
+        return machine
+
+    @classmethod
+    def from_parts(
+        cls,
+        *,
+        model: str,
+        volume: Volume | Sequence[Sequence[float]],
+        errors: ParametricErrors | None = None,
+        probe: Probe | Sequence[float] | None = None,
+        thermal: Thermal | None = None,
+        arm: ArmDeflection | None = None,
+        effects: Sequence[Effect] = (),
+        name: str = "machine",
+    ) -> Machine:
+        """A machine from Python objects, without writing a TOML-shaped dict.
+
+        ``model`` a code or alias (``"MB1"`` or ``"moving_bridge"``, :mod:`.models`);
+        ``volume`` a :class:`Volume` or ``((x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi))`` mm (the
+        reference point is then the lower corner); ``errors`` from
+        :meth:`ParametricErrors.from_polynomials` / :meth:`~ParametricErrors.from_tables`
+        (None: all zero); ``probe`` a :class:`Probe` or the stylus offset (Xp, Yp, Zp) mm.
+        Built through :meth:`from_dict`, so the checks, offsets and ``description`` are those of
+        an equivalent ``machine.toml`` (:meth:`to_toml` writes it).
+        """
+        from .formats.machine_toml import description_from_parts
+
+        if not isinstance(volume, Volume):
+            lower, upper = np.array([[float(v) for v in pair] for pair in volume]).T
+            volume = Volume(lower_mm=lower, upper_mm=upper, reference_mm=lower.copy())
+        if not isinstance(probe, Probe):
+            offset = np.zeros(3) if probe is None else np.asarray(probe, dtype=float)
+            probe = Probe(offset_mm=offset)
+        data = description_from_parts(
+            name=name,
+            model=model,
+            volume=volume,
+            probe=probe,
+            thermal=thermal or Thermal(),
+            arm=arm or ArmDeflection(),
+            error_sections=(errors or ParametricErrors()).toml_sections(),
+            effects=effects,
+        )
+        return cls.from_dict(data, source="<python>")
 
     def to_toml(self, path: str | Path) -> None:
         """Write a self-contained description (tables inline) that loads back to this machine."""
-        from .machine_io import write_machine
+        from .formats.machine_toml import write_machine_toml
 
-        write_machine(self, Path(path))
+        write_machine_toml(self.description, Path(path))
 
     def with_effects(self, effects: list[Effect]) -> Machine:
         """A copy of this machine with ``effects`` added (the description is updated too)."""
-        from .machine_io import machine_from_dict
-
         data = json.loads(json.dumps(self.description))
         data["effects"] = list(data.get("effects", [])) + [e.to_table() for e in effects]
-        return machine_from_dict(data, source=self.source, base_dir=Path.cwd())
+        return type(self).from_dict(data, source=self.source, base_dir=Path.cwd())
 
     # ------------------------------------------------------------------ identity
     def identity_sha256(self) -> str:
@@ -154,13 +175,7 @@ class Machine:
 
     def runtime_signals(self) -> dict[str, float]:
         """Runtime inputs the model depends on, with their reference values."""
-        ref = self.thermal.reference_C
-        out: dict[str, float] = {}
-        for k, axis in enumerate(AXES):
-            if self.thermal.expansion[k] != 0.0:
-                out[f"T_{axis}"] = ref
-        if self.thermal.workpiece_expansion:
-            out["T_wp"] = ref
+        out = self.thermal.runtime_signals()
         for table in self.tables.values():
             if table.reversal is not None:
                 out[f"dir_{table.component.axis}"] = 0.0
@@ -214,11 +229,16 @@ class Machine:
             effect.transform_signals(ctx)
         for effect in self.effects:
             effect.modify_errors(ctx)
-        self._thermal_terms(ctx)
+        self.thermal.add_expansion(ctx)
         self._arm_terms(ctx)
         for effect in self.effects:
             effect.add_direct(ctx)
         return ctx
+
+    def stylus_or_probe(self, stylus_mm: ArrayLike | None) -> FloatArray:
+        """``stylus_mm`` as floats, or the machine's probe offset when it is None (the default
+        stylus of every function that takes one)."""
+        return np.asarray(self.probe.offset_mm if stylus_mm is None else stylus_mm, dtype=float)
 
     def pose_error(
         self,
@@ -234,7 +254,7 @@ class Machine:
     def volumetric_error(
         self,
         points_mm: ArrayLike,
-        stylus_mm: ArrayLike = (0.0, 0.0, 0.0),
+        stylus_mm: ArrayLike | None = None,
         temps_C: Mapping[str, Any] | None = None,
         *,
         inputs: Mapping[str, Any] | None = None,
@@ -242,12 +262,15 @@ class Machine:
     ) -> FloatArray:
         """Volumetric error (N, 3) µm at indicated ``points_mm`` (N, 3) for a stylus offset (mm).
 
+        ``stylus_mm`` (3,) or (N, 3); None (the default) is the machine's probe offset
+        (``probe.offset_mm``), as for the map, diagonals and line reports.
+
         ``temps_C`` maps temperature names (``T_x`` … ``T_air``) to scalars or (N,) arrays;
         ``inputs`` any other runtime signal (``dir_x`` …, ``nx`` …, ``t``). ``method`` is
         ``"exact"`` (full rigid-body transforms) or ``"first_order"`` (the paper's A.1 form).
         """
         ctx = self._context(points_mm, temps_C, inputs)
-        p = np.broadcast_to(np.asarray(stylus_mm, dtype=float), ctx.q_mm.shape)
+        p = np.broadcast_to(self.stylus_or_probe(stylus_mm), ctx.q_mm.shape)
         if method == "exact":
             rot, t_um = exact_pose(self.chain, ctx.u_mm, ctx.errors, ctx.squareness_urad)
             rigid = t_um + 1000.0 * np.einsum("nij,nj->ni", rot - np.eye(3), p)
@@ -257,16 +280,16 @@ class Machine:
             raise ValueError(f"method must be 'exact' or 'first_order', got {method!r}")
         return rigid + ctx.direct_um
 
-    def random_error(
-        self, points_mm: ArrayLike, stylus_mm: ArrayLike = (0.0, 0.0, 0.0)
-    ) -> FloatArray:
+    def random_error(self, points_mm: ArrayLike, stylus_mm: ArrayLike | None = None) -> FloatArray:
         """Random volumetric error (N, 3) µm (2σ), the paper's propagation formula (§5.1).
+
+        ``stylus_mm`` (mm) None (the default) is the machine's probe offset.
 
         ``RΔX_i = sqrt(Σ_j (∂ΔX_i/∂E_j · ΔRE_j)² + ΔXp²)`` with the first-order partial
         derivatives of the chain and the random parts ΔRE_j of the 21 errors (2σ bands).
         """
         q = _as_points(points_mm)
-        p = np.broadcast_to(np.asarray(stylus_mm, dtype=float), q.shape)
+        p = np.broadcast_to(self.stylus_or_probe(stylus_mm), q.shape)
         jac, sq = first_order_jacobian(self.chain, q - self.volume.reference_mm, p)
         rnd = np.zeros((q.shape[0], 3, 6))
         for table in self.tables.values():
@@ -288,25 +311,6 @@ class Machine:
         )
 
     # ------------------------------------------------------------------ built-in terms
-    def _thermal_terms(self, ctx: EvalContext) -> None:
-        """FORMATS.md §1: α_j·(T_j − T_ref)·(q_j − ref_j)/1000 per axis; workpiece about fixture."""
-        ref_c = self.thermal.reference_C
-        for k, axis in enumerate(AXES):
-            alpha = self.thermal.expansion[k]
-            if alpha:
-                dt = ctx.signals[f"T_{axis}"] - ref_c
-                ctx.direct_um[:, k] += alpha * dt * ctx.u_mm[:, k] / 1000.0
-        if self.thermal.workpiece_expansion:
-            fixture = (
-                self.thermal.workpiece_fixture_mm
-                if self.thermal.workpiece_fixture_mm is not None
-                else self.volume.reference_mm
-            )
-            dt = ctx.signals["T_wp"] - ref_c
-            ctx.direct_um -= (
-                self.thermal.workpiece_expansion * dt[:, None] * (ctx.q_mm - fixture) / 1000.0
-            )
-
     def _arm_terms(self, ctx: EvalContext) -> None:
         if self.model not in ARM_AXIS or (self.arm.phi1 == 0.0 and self.arm.phi2 == 0.0):
             return
@@ -331,7 +335,7 @@ def _as_points(points_mm: ArrayLike) -> FloatArray:
 def _signals(
     n: int, reference_C: float, temps_C: Mapping[str, Any] | None, inputs: Mapping[str, Any] | None
 ) -> dict[str, FloatArray]:
-    out: dict[str, FloatArray] = {name: np.full(n, reference_C) for name in TEMPERATURE_SIGNALS}
+    out: dict[str, FloatArray] = {name: np.full(n, reference_C) for name in TEMPERATURE_ROLES}
     for mapping in (temps_C, inputs):
         if not mapping:
             continue

@@ -31,8 +31,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .components import AXIS_INDEX
 from .kinematics import first_order_jacobian
+from .parametric_errors import AXIS_INDEX
 
 if TYPE_CHECKING:
     from .machine import Machine

@@ -38,7 +38,7 @@ __all__ = [
 LEAST_SQUARES: Final = "least_squares"
 END_POINTS: Final = "end_points"
 MIN_ZONE: Final = "min_zone"
-#: The allowed criterion names, as used by ``criterion = "…"`` in machine.toml (FORMATS.md §1).
+#: The allowed criterion names, as used by ``criterion = "…"`` in machine.toml (docs/formats.md §1).
 CRITERIA: Final[tuple[str, ...]] = (LEAST_SQUARES, END_POINTS, MIN_ZONE)
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
-from .components import Component
+from .parametric_errors import Component
 
 FloatArray = NDArray[np.float64]
 MAX_POLYNOMIAL_ORDER = 10

@@ -25,7 +25,6 @@ from typing import Any
 
 import can
 
-from cmm_comp.daemon.mcap_records import FrameRecord
 from cmm_comp.protocol import (
     BadLength,
     BadValue,
@@ -45,17 +44,20 @@ from cmm_comp.protocol import (
     TripletAssembler,
     UnknownId,
     decode_message,
+    encode_corrected_axes,
+    encode_correction_status,
     encode_message,
 )
-from cmm_comp.protocol.can_frames import AXIS_LAYOUT, CORRECTION_STATUS_LAYOUT
 from cmm_comp.protocol.can_ids import MessageKind
-from cmm_comp.protocol.codes import Axis, DaemonState, Status, saturate_u16
+from cmm_comp.protocol.codes import Axis, DaemonState, Status
 
 from .config import CanSection
 from .engine import Answer, CorrectionEngine, Reading
 from .events import EventLog
 from .metrics import Metrics
 from .osthread import name_os_thread
+from .sessionlog.logger import SessionLogger
+from .sessionlog.records import FrameRecord
 from .state import StateBoard
 
 BusFactory = Callable[[CanSection, CanIds], can.BusABC]
@@ -86,7 +88,7 @@ def open_bus(cfg: CanSection, ids: CanIds) -> can.BusABC:
 
 def frame_record(msg: can.Message, channel: str) -> FrameRecord:
     """The compact ``/cmm/can_rx`` / ``/cmm/can_tx`` record of one frame (the MCAP writer
-    builds the JSON payload from it: :func:`daemon.mcap_records.frame_payload`)."""
+    builds the JSON payload from it: :func:`daemon.sessionlog.records.frame_payload`)."""
     return (
         msg.arbitration_id,
         msg.is_extended_id,
@@ -118,7 +120,7 @@ class CanEndpoint(can.Listener):
         heartbeat: Callable[[], Heartbeat],
         metrics: Metrics,
         events: EventLog,
-        logger: Any | None = None,
+        logger: SessionLogger | None = None,
         bus_factory: BusFactory = open_bus,
     ) -> None:
         self.config = config
@@ -367,18 +369,15 @@ class CanEndpoint(can.Listener):
     def _send_answer(self, answer: Answer, t_rx: float) -> float:
         seq, st = answer.seq, int(answer.status)
         ids = self._corrected_ids
+        x, y, z = encode_corrected_axes(seq, st, answer.position_nm)
         msgs = [
-            can.Message(
-                arbitration_id=ids[k],
-                is_extended_id=False,
-                data=AXIS_LAYOUT.pack(pos.to_bytes(5, "little", signed=True), seq, k | st << 2),
-            )
-            for k, pos in enumerate(answer.position_nm)
+            can.Message(arbitration_id=ids[0], is_extended_id=False, data=x),
+            can.Message(arbitration_id=ids[1], is_extended_id=False, data=y),
+            can.Message(arbitration_id=ids[2], is_extended_id=False, data=z),
         ]
         latency_us = (time.perf_counter() - t_rx) * 1e6
-        corr = saturate_u16(round(answer.correction_norm_um * 100))
-        status = CORRECTION_STATUS_LAYOUT.pack(
-            seq, st, int(answer.applied), saturate_u16(round(latency_us)), corr
+        status = encode_correction_status(
+            seq, st, int(answer.applied), latency_us, answer.correction_norm_um
         )
         msgs.append(can.Message(arbitration_id=ids[3], is_extended_id=False, data=status))
         self._send_msgs(msgs)
@@ -392,8 +391,8 @@ class CanEndpoint(can.Listener):
         self._send_msgs([encode_message(f, self.ids) for f in frames])
 
     def _send_msgs(self, msgs: list[can.Message]) -> None:
-        """Send answer frames (struct-packed on the hot path; equal to the frame classes'
-        ``encode()``, which a test checks)."""
+        """Send answer frames (packed by the protocol's fast encoders on the hot path; equal
+        to the frame classes' ``encode()`` and to cantools on the DBC, which tests check)."""
         bus = self._bus
         if bus is None:
             self.metrics.fault("send_without_bus", len(msgs))

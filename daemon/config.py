@@ -17,13 +17,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_args, get_origin, get_type_hints
 
-TEMPERATURE_ROLES = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
+from cmm_comp.compensation.errors import CmmCompError
+from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
+
 MCAP_WRITERS = ("thread", "process")
 MCAP_WRITER_PRIORITIES = ("idle", "normal")
 MCAP_COMPRESSIONS = ("zstd", "lz4", "none")
 
 
-class ConfigError(ValueError):
+class ConfigError(CmmCompError, ValueError):
     """A daemon configuration file or flag is invalid (message names the key and the rule)."""
 
 

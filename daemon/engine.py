@@ -19,12 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cmm_comp.protocol.codes import NM_PER_MM, Applied, Status
+from cmm_comp.compensation.thermal import STRUCTURE_ROLES, WORKPIECE
+from cmm_comp.protocol.codes import Applied, Status, mm3_from_nm, nm3_from_mm
 
 from .config import DaemonConfig
 from .events import EventLog
 from .grid_slot import GridSlot, LoadedGrid
 from .metrics import Metrics
+from .sessionlog.logger import SessionLogger
 from .temperatures import TemperatureTable
 
 _GRID_STATUS = {
@@ -35,7 +37,7 @@ _GRID_STATUS = {
     "missing_input": Status.MISSING_DIRECTION,
     "invalid_input": Status.INVALID_READING,
 }
-_SCALE_ROLES = frozenset({"T_x", "T_y", "T_z", "T_top", "T_bottom", "T_air"})
+_SCALE_ROLES = frozenset(STRUCTURE_ROLES)
 _DIR_KEYS = ("dir_x", "dir_y", "dir_z")
 _PROBE_KEYS = ("nx", "ny", "nz")
 
@@ -59,8 +61,7 @@ class Reading:
     @property
     def position_mm(self) -> tuple[float, float, float]:
         """Indicated X, Y, Z, mm."""
-        x, y, z = self.position_nm
-        return (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM)
+        return mm3_from_nm(self.position_nm)
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,7 +94,7 @@ class CorrectionEngine:
         temperatures: TemperatureTable,
         metrics: Metrics,
         events: EventLog,
-        logger: object | None = None,
+        logger: SessionLogger | None = None,
     ) -> None:
         self.config = config
         self.grids = grids
@@ -146,8 +147,7 @@ class CorrectionEngine:
                 inputs[key] = float(sign)
         if r.probe is not None:
             inputs.update(zip(_PROBE_KEYS, r.probe, strict=True))
-        x, y, z = r.position_nm
-        p = (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM)
+        p = mm3_from_nm(r.position_nm)
         grid = loaded.grid
         if hasattr(grid, "correct_point"):  # the grid's single-reading fast path
             c, label = grid.correct_point(p, self._stylus_t, temps, inputs or None)
@@ -168,7 +168,7 @@ class CorrectionEngine:
         if norm > self._warn_um:
             detail = f"|correction| {norm:.1f} µm > warning limit {self._warn_um} µm"
         applied = self._applied(loaded, temps, inputs, status)
-        pos = (round(c[0] * NM_PER_MM), round(c[1] * NM_PER_MM), round(c[2] * NM_PER_MM))
+        pos = nm3_from_mm(c)
         return Answer(r.seq, status, pos, applied, d_um, detail)
 
     def required_roles(self, loaded: LoadedGrid) -> tuple[str, ...]:
@@ -194,7 +194,7 @@ class CorrectionEngine:
             roles = set(loaded.temperature_roles) & set(temps)
             if roles & _SCALE_ROLES:
                 applied |= Applied.SCALE_THERMAL
-            if "T_wp" in roles:
+            if WORKPIECE in roles:
                 applied |= Applied.WORKPIECE_THERMAL
         needed = set(loaded.input_signals)
         if key[2] and needed & set(_DIR_KEYS):
@@ -230,8 +230,8 @@ class CorrectionEngine:
         log = self.logger
         if log is None:
             return
-        # compact records: the MCAP writer builds the JSON (daemon.mcap_records)
-        log.log(  # type: ignore[attr-defined]
+        # compact records: the MCAP writer builds the JSON (sessionlog.records)
+        log.log(
             "/cmm/raw",
             (
                 reading.seq,
@@ -243,7 +243,7 @@ class CorrectionEngine:
                 reading.probe,
             ),
         )
-        log.log(  # type: ignore[attr-defined]
+        log.log(
             "/cmm/corrected",
             (
                 answer.seq,
@@ -271,7 +271,7 @@ class CorrectionEngine:
             self.metrics.fault(f"temperature_{state.fault.label}")
             self.events.emit("temperature_fault", "warning", sensor=sensor, detail=state.detail)
         if self.logger is not None:
-            self.logger.log(  # type: ignore[attr-defined]
+            self.logger.log(
                 "/cmm/temperature",
                 {
                     "sensor": str(sensor),

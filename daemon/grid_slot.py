@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
 
-THERMAL_ROLES = ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
 
-
-class GridLoadError(ValueError):
+class GridLoadError(CmmCompError, ValueError):
     """A grid file could not be used (message names the file and the problem)."""
 
 
@@ -66,8 +66,8 @@ def load_grid(path: str | Path, expect_machine_sha256: str = "") -> LoadedGrid:
     except (ValueError, OSError, KeyError, TypeError) as exc:
         raise GridLoadError(f"{path}: {exc}") from None
     needed = [s for s in grid.signals if s.needed]
-    temps = {s.name: s.reference for s in needed if s.name in THERMAL_ROLES}
-    inputs = {s.name: s.reference for s in needed if s.name not in THERMAL_ROLES}
+    temps = {s.name: s.reference for s in needed if s.name in TEMPERATURE_ROLES}
+    inputs = {s.name: s.reference for s in needed if s.name not in TEMPERATURE_ROLES}
     centre = 0.5 * (np.asarray(grid.lower_mm) + np.asarray(grid.upper_mm))
     try:
         out, status = grid.correct(centre[None, :], (0.0, 0.0, 0.0), temps, inputs)

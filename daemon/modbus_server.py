@@ -30,13 +30,13 @@ from cmm_comp.protocol import (
     build_sim_device,
 )
 from cmm_comp.protocol import modbus_map as mm
-from cmm_comp.protocol.codes import saturate_u16
 
 from .config import ModbusSection
 from .engine import CorrectionEngine, Reading
 from .events import EventLog
 from .metrics import Metrics
 from .osthread import name_os_thread
+from .sessionlog.logger import SessionLogger
 
 
 class ModbusEndpoint:
@@ -52,7 +52,7 @@ class ModbusEndpoint:
         daemon_block: Callable[[], DaemonBlock],
         metrics: Metrics,
         events: EventLog,
-        logger: Any | None = None,
+        logger: SessionLogger | None = None,
     ) -> None:
         self.config = config
         self.engine = engine
@@ -206,22 +206,20 @@ class ModbusEndpoint:
                 block.directions[2].sign,
             ),
             valid=block.valid,
-            probe=None
-            if block.probe_raw == (0, 0, 0)
-            else tuple(c * 2.0**-14 for c in block.probe_raw),  # type: ignore[arg-type]
+            probe=block.probe,
             received_s=t0,
             source="modbus",
         )
         self.metrics.count("frames_rx")
         answer = self.engine.correct(reading)
         latency_us = (time.perf_counter() - t0) * 1e6
-        out = AnswerBlock(
+        out = AnswerBlock.from_physical(
             answer.seq,
             answer.status,
             answer.position_nm,
             answer.applied,
-            saturate_u16(round(latency_us)),
-            saturate_u16(round(answer.correction_norm_um * 100)),
+            latency_us,
+            answer.correction_norm_um,
         )
         loop = self._loop
         if loop is not None:  # log after the response has gone out

@@ -21,8 +21,6 @@ from typing import Any, TextIO
 
 from mcap.writer import CompressionType
 
-from cmm_comp.daemon.mcap_log import McapLogger
-from cmm_comp.daemon.mcap_process import McapProcessLogger
 from cmm_comp.protocol import DaemonBlock, Heartbeat
 from cmm_comp.protocol.codes import DaemonState, grid_id_from_sha256
 
@@ -34,6 +32,7 @@ from .grid_slot import GridLoadError, GridSlot
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
 from .osthread import name_os_thread
+from .sessionlog import McapLogger, McapProcessLogger, SessionLogger
 from .state import StateBoard
 from .temperatures import TemperatureTable
 
@@ -63,7 +62,7 @@ class DaemonService:
             events_stream, config.log.format, config.log.level, config.log.max_per_s
         )
         self.metrics = Metrics()
-        self.logger: McapLogger | McapProcessLogger | None = None
+        self.logger: SessionLogger | None = None
         self.grids = GridSlot()
         self.temperatures = TemperatureTable(config.temperatures, config.sensor_roles())
         self.state = StateBoard(self._on_state_change)

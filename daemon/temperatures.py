@@ -15,9 +15,8 @@ from __future__ import annotations
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
-from cmm_comp.compensation.effects import FirstOrderLag
+from cmm_comp.compensation.thermal import FIRST_ORDER_LAG, FirstOrderLag, SignalFilter
 from cmm_comp.protocol.codes import Status
 
 from .config import TemperaturesSection
@@ -162,7 +161,7 @@ class TemperatureTable:
         return TemperatureVerdict(temps, status, detail)
 
     def effective(
-        self, temps_C: Mapping[str, float], filters: Sequence[Mapping[str, Any]], now_s: float
+        self, temps_C: Mapping[str, float], filters: Sequence[SignalFilter], now_s: float
     ) -> dict[str, float]:
         """Temperatures the grid expects after its signal filters (``grid.signal_filters``).
 
@@ -173,11 +172,10 @@ class TemperatureTable:
         """
         out = dict(temps_C)
         for spec in filters:
-            if spec.get("kind") != "first_order_lag":
+            if spec.kind != FIRST_ORDER_LAG:
                 continue
-            tau = float(spec["time_constant_s"])
-            weight = float(spec.get("fraction", 1.0))
-            for role in spec.get("signals", ()):
+            tau = spec.time_constant_s
+            for role in spec.signals:
                 if role not in temps_C:
                     continue
                 with self._lock:
@@ -189,7 +187,7 @@ class TemperatureTable:
                         t0 = state.received_s if state is not None else now_s
                         lag.update(t0, float(temps_C[role]))
                     lagged = lag.value_at(now_s)
-                out[role] = temps_C[role] + weight * (lagged - temps_C[role])
+                out[role] = spec.effective(temps_C[role], lagged)
         return out
 
     def snapshot(self) -> list[SensorState]:

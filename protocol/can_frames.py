@@ -20,15 +20,20 @@ from typing import Any, ClassVar, Self, TypeVar
 from .can_ids import CORRECTED_KIND, RAW_KIND, MessageKind
 from .codes import (
     APPLIED_MASK,
-    DIRECTION_LSB,
-    NM_PER_MM,
-    TEMP_C_PER_LSB,
     Applied,
     Axis,
     DaemonState,
     Direction,
     Status,
+    celsius_from_mC,
+    correction_raw_from_um,
     grid_id_from_sha256,
+    latency_raw_from_us,
+    mC_from_celsius,
+    mm_from_nm,
+    raw_from_unit_vector,
+    um_from_correction_raw,
+    unit_vector_from_raw,
 )
 
 PAYLOAD_SIZE = 8
@@ -143,7 +148,7 @@ class RawAxis:
     @property
     def position_mm(self) -> float:
         """Indicated position, mm."""
-        return self.position_nm / NM_PER_MM
+        return mm_from_nm(self.position_nm)
 
     def encode(self) -> bytes:
         """8-byte payload."""
@@ -211,7 +216,7 @@ class CorrectedAxis:
     @property
     def position_mm(self) -> float:
         """Corrected position, mm."""
-        return self.position_nm / NM_PER_MM
+        return mm_from_nm(self.position_nm)
 
     def encode(self) -> bytes:
         """8-byte payload."""
@@ -251,8 +256,7 @@ class ProbeDirection:
     @classmethod
     def from_unit_vector(cls, seq: int, n: tuple[float, float, float]) -> Self:
         """Quantise a unit vector (components in −1..1) to raw units of 2**-14."""
-        raw = [round(c / DIRECTION_LSB) for c in n]
-        return cls(seq, raw[0], raw[1], raw[2])
+        return cls(seq, *raw_from_unit_vector(n))
 
     @property
     def present(self) -> bool:
@@ -262,11 +266,7 @@ class ProbeDirection:
     @property
     def unit_vector(self) -> tuple[float, float, float]:
         """(nx, ny, nz), dimensionless."""
-        return (
-            self.nx_raw * DIRECTION_LSB,
-            self.ny_raw * DIRECTION_LSB,
-            self.nz_raw * DIRECTION_LSB,
-        )
+        return unit_vector_from_raw((self.nx_raw, self.ny_raw, self.nz_raw))
 
     def encode(self) -> bytes:
         """8-byte payload."""
@@ -300,12 +300,12 @@ class TemperatureSample:
     @classmethod
     def from_celsius(cls, sensor: int, temp_C: float, counter: int = 0, valid: bool = True) -> Self:
         """Quantise ``temp_C`` (°C) to 0.001 °C."""
-        return cls(sensor, round(temp_C / TEMP_C_PER_LSB), counter, valid)
+        return cls(sensor, mC_from_celsius(temp_C), counter, valid)
 
     @property
     def temp_C(self) -> float:
         """Temperature, °C."""
-        return self.temp_mC / 1000
+        return celsius_from_mC(self.temp_mC)
 
     def encode(self) -> bytes:
         """8-byte payload."""
@@ -343,7 +343,7 @@ class CorrectionStatus:
     @property
     def correction_um(self) -> float:
         """Length of the applied correction, µm."""
-        return self.correction_10nm / 100
+        return um_from_correction_raw(self.correction_10nm)
 
     def encode(self) -> bytes:
         """8-byte payload."""
@@ -415,3 +415,49 @@ FRAME_CLASS: dict[MessageKind, type[Frame]] = {
     MessageKind.CORRECTION_STATUS: CorrectionStatus,
     MessageKind.HEARTBEAT: Heartbeat,
 }
+
+
+# --------------------------------------------------------------------------- answer fast path
+_AXIS_PACK = AXIS_LAYOUT.pack
+_STATUS_PACK = CORRECTION_STATUS_LAYOUT.pack
+
+
+def encode_corrected_axes(
+    seq: int, status: int, position_nm: tuple[int, int, int]
+) -> tuple[bytes, bytes, bytes]:
+    """Payloads of CORRECTED_X/Y/Z for one answer, byte-equal to :meth:`CorrectedAxis.encode`
+    of each axis (the daemon's reply path: no frame objects, no validation beyond the
+    packing's own: OverflowError/struct.error on an out-of-range position or seq).
+
+    :param seq: reading sequence counter, uint16.
+    :param status: :class:`Status` code (0..63).
+    :param position_nm: corrected X, Y, Z, nm (int40 each).
+    """
+    x, y, z = position_nm
+    flags = status << 2  # axis code in bits 0-1
+    return (
+        _AXIS_PACK(x.to_bytes(5, "little", signed=True), seq, flags),
+        _AXIS_PACK(y.to_bytes(5, "little", signed=True), seq, flags | 1),
+        _AXIS_PACK(z.to_bytes(5, "little", signed=True), seq, flags | 2),
+    )
+
+
+def encode_correction_status(
+    seq: int, status: int, applied: int, latency_us: float, correction_um: float
+) -> bytes:
+    """Payload of CORRECTION_STATUS from physical values, byte-equal to
+    :meth:`CorrectionStatus.encode` of the quantised frame (the daemon's reply path).
+
+    :param seq: reading sequence counter, uint16.
+    :param status: :class:`Status` code.
+    :param applied: :class:`Applied` bit mask.
+    :param latency_us: reply latency, µs (rounded, saturated at 65535).
+    :param correction_um: length of the applied correction, µm (0.01 µm raw, saturated).
+    """
+    return _STATUS_PACK(
+        seq,
+        status,
+        applied,
+        latency_raw_from_us(latency_us),
+        correction_raw_from_um(correction_um),
+    )

@@ -2,7 +2,7 @@
 
 Every enum here has stable integer codes: they are on the wire, never renumber them; add new
 members at unused codes only. String labels (``Status.label``) are the status strings of
-``FORMATS.md`` (``"ok"``, ``"outside_volume"``, …), used in CSV output and the MCAP log.
+``docs/formats.md`` (``"ok"``, ``"outside_volume"``, …), used in CSV output and the MCAP log.
 
 Raw ↔ physical scalings (physical = raw · factor + offset, offset always 0 here):
 
@@ -13,19 +13,28 @@ Raw ↔ physical scalings (physical = raw · factor + offset, offset always 0 he
 | probing direction component | int16 | 2**-14 | 1 (unit vector component) |
 | correction magnitude | uint16 | 0.01 | µm (raw unit: 10 nm), saturating |
 | latency | uint16 | 1 | µs, saturating |
+
+Each factor is defined here once, and every raw ↔ physical conversion of the project goes
+through the helpers below (or the frame/block properties built on them): the daemon's
+endpoints, its log records and the simulated controller never scale by hand.
 """
 
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 
 NM_PER_MM = 1_000_000
 """Raw position unit: 1 nm; physical mm = raw · 1e-6."""
-TEMP_C_PER_LSB = 0.001
+MC_PER_C = 1000
+"""Raw temperature units (m°C) per °C."""
+TEMP_C_PER_LSB = 1 / MC_PER_C
 """Raw temperature unit: 0.001 °C (m°C)."""
 DIRECTION_LSB = 2.0**-14
 """Raw probing direction unit: 2**-14 (exact in binary and decimal, so DBC factors are exact)."""
-CORRECTION_UM_PER_LSB = 0.01
+CORRECTION_LSB_PER_UM = 100
+"""Raw correction-magnitude units (10 nm) per µm."""
+CORRECTION_UM_PER_LSB = 1 / CORRECTION_LSB_PER_UM
 """Raw correction-magnitude unit: 0.01 µm = 10 nm."""
 UINT16_MAX = 0xFFFF
 SEQ_MODULUS = 1 << 16
@@ -49,7 +58,7 @@ class Direction(enum.IntEnum):
 
     @property
     def sign(self) -> int:
-        """+1, −1, or 0 for unknown (the ``dir_x`` convention of FORMATS.md)."""
+        """+1, −1, or 0 for unknown (the ``dir_x`` convention of docs/formats.md)."""
         return {0: 0, 1: 1, 2: -1}[int(self)]
 
     @classmethod
@@ -64,7 +73,7 @@ class Direction(enum.IntEnum):
 class Status(enum.IntEnum):
     """Outcome of correcting one reading. Code fits in 6 bits (0..63).
 
-    ``label`` is the FORMATS.md status string. ``OK`` means fully corrected; every other status
+    ``label`` is the docs/formats.md status string. ``OK`` means fully corrected; every other status
     says why the output is not (fully) corrected: then the daemon's output positions carry the
     indicated (raw) position unchanged, except ``NOT_THERMALLY_CORRECTED`` and
     ``MISSING_DIRECTION`` where the geometric correction was applied but a term was left out.
@@ -92,7 +101,7 @@ class Status(enum.IntEnum):
 
     @property
     def label(self) -> str:
-        """FORMATS.md status string, e.g. ``"outside_volume"``."""
+        """docs/formats.md status string, e.g. ``"outside_volume"``."""
         return self.name.lower()
 
     @property
@@ -165,3 +174,60 @@ def saturate_u16(value: int) -> int:
 def seq_distance(newer: int, older: int) -> int:
     """Forward distance ``newer − older`` modulo 2**16 (0..65535)."""
     return (newer - older) % SEQ_MODULUS
+
+
+# --------------------------------------------------------------------------- raw <-> physical
+
+
+def mm_from_nm(position_nm: int) -> float:
+    """Position, mm, of a raw position in nm."""
+    return position_nm / NM_PER_MM
+
+
+def mm3_from_nm(position_nm: Sequence[int]) -> tuple[float, float, float]:
+    """X, Y, Z, mm, of raw X, Y, Z in nm."""
+    x, y, z = position_nm
+    return (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM)
+
+
+def nm3_from_mm(position_mm: Sequence[float]) -> tuple[int, int, int]:
+    """Raw X, Y, Z, nm (rounded to the nearest nm), of X, Y, Z in mm."""
+    x, y, z = position_mm
+    return (round(x * NM_PER_MM), round(y * NM_PER_MM), round(z * NM_PER_MM))
+
+
+def celsius_from_mC(temp_mC: int) -> float:
+    """Temperature, °C, of a raw temperature in 0.001 °C."""
+    return temp_mC / MC_PER_C
+
+
+def mC_from_celsius(temp_C: float) -> int:
+    """Raw temperature, 0.001 °C (rounded), of a temperature in °C."""
+    return round(temp_C / TEMP_C_PER_LSB)
+
+
+def unit_vector_from_raw(raw: Sequence[int]) -> tuple[float, float, float]:
+    """Probing unit vector (dimensionless) of raw int16 components × 2**-14."""
+    x, y, z = raw
+    return (x * DIRECTION_LSB, y * DIRECTION_LSB, z * DIRECTION_LSB)
+
+
+def raw_from_unit_vector(unit_vector: Sequence[float]) -> tuple[int, int, int]:
+    """Raw int16 components (units of 2**-14, rounded) of a probing unit vector."""
+    x, y, z = unit_vector
+    return (round(x / DIRECTION_LSB), round(y / DIRECTION_LSB), round(z / DIRECTION_LSB))
+
+
+def um_from_correction_raw(correction_10nm: int) -> float:
+    """Correction magnitude, µm, of its raw value in 0.01 µm."""
+    return correction_10nm / CORRECTION_LSB_PER_UM
+
+
+def correction_raw_from_um(correction_um: float) -> int:
+    """Raw correction magnitude, 0.01 µm, rounded and saturated to 0..65535."""
+    return saturate_u16(round(correction_um * CORRECTION_LSB_PER_UM))
+
+
+def latency_raw_from_us(latency_us: float) -> int:
+    """Raw latency, µs, rounded and saturated to 0..65535."""
+    return saturate_u16(round(latency_us))

@@ -13,12 +13,17 @@ from typing import Self
 from . import modbus_map as mm
 from .codes import (
     APPLIED_MASK,
-    DIRECTION_LSB,
-    NM_PER_MM,
     Applied,
     DaemonState,
     Direction,
     Status,
+    celsius_from_mC,
+    correction_raw_from_um,
+    latency_raw_from_us,
+    mm3_from_nm,
+    nm3_from_mm,
+    raw_from_unit_vector,
+    unit_vector_from_raw,
 )
 
 Vec3i = tuple[int, int, int]
@@ -89,16 +94,21 @@ class ReadingBlock:
         valid: tuple[bool, bool, bool] = (True, True, True),
     ) -> Self:
         """Build from mm, direction signs (+1/−1/0) and an optional probing unit vector."""
-        pos = tuple(round(p * NM_PER_MM) for p in position_mm)
+        pos = nm3_from_mm(position_mm)
         dirs = tuple(Direction.from_sign(s) for s in directions)
-        probe_raw = (0, 0, 0) if probe is None else tuple(round(c / DIRECTION_LSB) for c in probe)
+        probe_raw = (0, 0, 0) if probe is None else raw_from_unit_vector(probe)
         return cls(seq, pos, dirs, probe_raw, valid)  # type: ignore[arg-type]
 
     @property
     def position_mm(self) -> tuple[float, float, float]:
         """Indicated X, Y, Z, mm."""
-        x, y, z = self.position_nm
-        return (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM)
+        return mm3_from_nm(self.position_nm)
+
+    @property
+    def probe(self) -> tuple[float, float, float] | None:
+        """Probing direction unit vector (dimensionless), or None for (0, 0, 0)."""
+        raw = self.probe_raw
+        return None if raw == (0, 0, 0) else unit_vector_from_raw(raw)
 
     def to_registers(self) -> list[int]:
         """20 registers for addresses 100..119 (SEQ last, so one write commits)."""
@@ -142,7 +152,7 @@ class TemperatureSlot:
     @property
     def temp_C(self) -> float:
         """Temperature, °C."""
-        return self.temp_mC / 1000
+        return celsius_from_mC(self.temp_mC)
 
     def to_registers(self) -> list[int]:
         """4 registers: temperature (2, MSW first), flags, counter."""
@@ -168,11 +178,31 @@ class AnswerBlock:
     latency_us: int = 0
     correction_10nm: int = 0
 
+    @classmethod
+    def from_physical(
+        cls,
+        seq: int,
+        status: Status,
+        position_nm: Vec3i,
+        applied: Applied,
+        latency_us: float,
+        correction_um: float,
+    ) -> Self:
+        """Build from the latency in µs and the correction length in µm (both rounded to
+        their raw units and saturated at 65535)."""
+        return cls(
+            seq,
+            status,
+            position_nm,
+            applied,
+            latency_raw_from_us(latency_us),
+            correction_raw_from_um(correction_um),
+        )
+
     @property
     def position_mm(self) -> tuple[float, float, float]:
         """Corrected X, Y, Z, mm."""
-        x, y, z = self.position_nm
-        return (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM)
+        return mm3_from_nm(self.position_nm)
 
     def to_registers(self) -> list[int]:
         """17 registers for addresses 300..316."""

@@ -54,7 +54,7 @@ class AnswerRecord:
 
     seq: int
     status: str
-    """FORMATS.md status label, or ``"timeout"`` when no answer came."""
+    """docs/formats.md status label, or ``"timeout"`` when no answer came."""
     corrected_mm: tuple[float, float, float] | None
     latency_us: float
     daemon_latency_us: int = 0

@@ -3,7 +3,7 @@
 A program is a list of :class:`ProbePoint` (true position, probing direction, label). The
 programs here are random points in the volume and a ball plate; the ISO 10360-2 length test is
 in :mod:`sim_controller.iso10360`. Positions in mm; probing directions are unit vectors in the
-direction the stylus moves when it touches (FORMATS.md ``nx, ny, nz``).
+direction the stylus moves when it touches (docs/formats.md ``nx, ny, nz``).
 """
 
 from __future__ import annotations

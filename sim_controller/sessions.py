@@ -9,7 +9,7 @@ thermal causes can be told apart: each sensor is a shared drift plus its own slo
 crossing the reference temperature, with ``T_top − T_bottom`` a separate slow signal.
 
 :func:`measure_session` adds what a true machine does plus reference/probing noise, giving a
-:class:`compensation.measurements.Measurements` (FORMATS.md §2).
+:class:`compensation.formats.measurements.Measurements` (docs/formats.md §2).
 Units: mm, µm, °C, s.
 """
 
@@ -19,8 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cmm_comp.compensation.formats.measurements import Measurements
 from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.measurements import Measurements
+from cmm_comp.compensation.thermal import AIR, BOTTOM, SCALE_ROLES, TOP, WORKPIECE
 
 __all__ = ["SessionPlan", "measure_session", "plan_session"]
 
@@ -67,13 +68,13 @@ def _temperatures(
 ) -> dict[str, np.ndarray]:
     shared = _smooth_signal(rng, t_s, 0.8, (5400.0, 20000.0))
     temps: dict[str, np.ndarray] = {}
-    for name in ("T_x", "T_y", "T_z", "T_air", "T_wp"):
+    for name in (*SCALE_ROLES, AIR, WORKPIECE):
         own = _smooth_signal(rng, t_s, 0.7, (2400.0, 14000.0))
         temps[name] = reference_C + rng.uniform(-0.3, 0.3) + shared + own
     gradient = _smooth_signal(rng, t_s, 0.6, (3600.0, 14000.0)) + rng.uniform(-0.2, 0.2)
     middle = reference_C + shared + _smooth_signal(rng, t_s, 0.3, (3600.0, 14000.0))
-    temps["T_top"] = middle + gradient / 2
-    temps["T_bottom"] = middle - gradient / 2
+    temps[TOP] = middle + gradient / 2
+    temps[BOTTOM] = middle - gradient / 2
     return temps
 
 

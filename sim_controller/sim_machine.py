@@ -1,7 +1,7 @@
 """A simulated CMM: turns true stylus-tip positions into the indicated positions its scales show.
 
 The machine's error model says ``true = indicated + error(indicated)`` (error in µm, evaluated
-at the indicated position, FORMATS.md), so the indicated position of a true point ``t`` is the
+at the indicated position, docs/formats.md), so the indicated position of a true point ``t`` is the
 fixed point of ``q ← t − error(q)/1000``; the iteration contracts because ‖∂error/∂q‖ is
 ~10⁻⁵ µm/µm, and converges to < 1 nm in a few steps. Probing noise is Gaussian, along the
 probing direction when one is given (σ = the machine's ``probe.random_um`` / 2, that value

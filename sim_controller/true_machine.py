@@ -1,4 +1,4 @@
-"""The simulated true machine: the user's model plus hidden causes (FORMATS.md §4) plus noise.
+"""The simulated true machine: the user's model plus hidden causes (docs/formats.md §4) plus noise.
 
 :func:`random_effect` draws one cause with random shape/parameters (component, axis, period,
 time constant …); :func:`scale_effect` scales its amplitude parameters so that the effect's 3-D
@@ -14,23 +14,26 @@ from typing import Any
 
 import numpy as np
 
-from cmm_comp.compensation.components import ANGULAR, AXES, SQUARENESS, TABLE_COMPONENTS
 from cmm_comp.compensation.effects import (
     CouplingEffect,
+    Effect,
     ParametricEffect,
     PeriodicEffect,
     ProbeLobingEffect,
     ReversalEffect,
+    default_orders,
+    effect_from_table,
+)
+from cmm_comp.compensation.formats.measurements import Measurements
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.parametric_errors import ANGULAR, AXES, SQUARENESS, TABLE_COMPONENTS
+from cmm_comp.compensation.thermal import (
     ScaleExpansionEffect,
     SquarenessDriftEffect,
     ThermalGradientEffect,
     ThermalLagEffect,
     WorkpieceExpansionEffect,
-    default_orders,
 )
-from cmm_comp.compensation.effects_base import Effect, effect_from_table
-from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.measurements import Measurements
 
 from .sessions import SessionPlan, measure_session, plan_session, true_error_um
 

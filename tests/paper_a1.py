@@ -3,7 +3,7 @@
 Each model maps to three expressions (ΔX, ΔY, ΔZ) in the variables ``dI_J`` (µm), ``eI_J`` (µrad),
 ``alpha, beta1, beta2`` (µrad), ``x, y, z`` (positions from the reference) and ``Xp, Yp, Zp``
 (stylus offset), the arms in **metres** so that µrad·m = µm, and ``phi1, phi2`` (µrad/m) for the
-horizontal-arm models. Thermal terms are left out here (tested separately, FORMATS.md form).
+horizontal-arm models. Thermal terms are left out here (tested separately, docs/formats.md form).
 Transcription source: ../shared/seeds/000_189ae6c983475e5b.txt, appendix A.1. Where the printed
 equation disagrees with its kinematic chain, the disagreement is listed in ``CORRECTIONS`` and
 explained in docs/seed-equations.md; the expressions below are the paper's, not ours.

@@ -245,7 +245,7 @@ def test_bus_error_reconnects() -> None:
 def test_structured_logs_and_mcap(tmp_path) -> None:
     import io
 
-    from cmm_comp.daemon.mcap_read import read_messages
+    from cmm_comp.daemon.sessionlog.reader import read_messages
 
     cfg = base_config(channel())
     cfg.mcap.path = str(tmp_path / "s.mcap")
@@ -278,7 +278,7 @@ def test_config_must_enable_a_transport() -> None:
 def test_a_slow_mcap_logger_never_delays_an_answer(tmp_path) -> None:
     """Every log() call takes 5 ms here: an answer that waited for any of them would show it.
     Bookkeeping (events, MCAP records) runs only once the bus is quiet; nothing is lost."""
-    from cmm_comp.daemon.mcap_read import read_messages
+    from cmm_comp.daemon.sessionlog.reader import read_messages
 
     cfg = base_config(channel())
     cfg.mcap.path = str(tmp_path / "s.mcap")

@@ -1,6 +1,6 @@
 """A thermal lag found by model discovery reaches the daemon: the grid carries the filter and the
 daemon feeds the grid lagged temperatures. Oracle: the batch lag filter of the model
-(``compensation.effects.lag_filter``, itself checked against an ODE solution) on the same samples."""
+(``compensation.thermal.lag_filter``, itself checked against an ODE solution) on the same samples."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from cmm_comp.compensation.effects import FirstOrderLag, lag_filter
+from cmm_comp.compensation.thermal import FirstOrderLag, SignalFilter, lag_filter
 from cmm_comp.daemon.config import TemperaturesSection
 from cmm_comp.daemon.temperatures import TemperatureTable
 
@@ -29,12 +29,14 @@ def test_daemon_temperatures_follow_the_grid_filter() -> None:
     table = TemperatureTable(cfg, {0: "T_x", 1: "T_y"})
     tau, weight = 600.0, 0.7
     filters = [
-        {
-            "kind": "first_order_lag",
-            "signals": ["T_x", "T_y", "T_z"],
-            "time_constant_s": tau,
-            "fraction": weight,
-        }
+        SignalFilter.from_header(
+            {
+                "kind": "first_order_lag",
+                "signals": ["T_x", "T_y", "T_z"],
+                "time_constant_s": tau,
+                "fraction": weight,
+            }
+        )
     ]
     t = np.arange(0.0, 3600.0, 5.0)
     temp = 20.0 + 2.0 * np.sin(t / 900.0) + 0.0005 * t  # a slow drift, within the rate limit

@@ -12,8 +12,8 @@ import pytest
 
 from cmm_comp.compensation.diagnosis import compute_residuals, diagnose, length_error_e0_um
 from cmm_comp.compensation.diagnosis.candidates import all_candidates, effect_displacement_um
+from cmm_comp.compensation.formats.measurements import write_measurements
 from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.measurements import write_measurements
 from cmm_comp.sim_controller.sessions import true_error_um
 from cmm_comp.sim_controller.true_machine import HIDDEN_CAUSES, simulate
 

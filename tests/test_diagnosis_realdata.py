@@ -13,15 +13,15 @@ from pathlib import Path
 import pytest
 
 from cmm_comp.compensation.diagnosis import diagnose
-from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.measurements import read_measurements
-from cmm_comp.compensation.realdata import (
+from cmm_comp.compensation.formats.measurements import read_measurements
+from cmm_comp.compensation.formats.realdata import (
     iso230_points_from_log,
     iso230_run_from_points,
     measurement_rows,
     read_camonitor_log,
     write_measurements_csv,
 )
+from cmm_comp.compensation.machine import Machine
 
 pytestmark = pytest.mark.realdata
 

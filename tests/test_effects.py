@@ -11,21 +11,24 @@ from scipy.integrate import solve_ivp
 
 from cmm_comp.compensation.effects import (
     CouplingEffect,
-    FirstOrderLag,
+    EvalContext,
     ParametricEffect,
     PeriodicEffect,
     ProbeLobingEffect,
     ReversalEffect,
+    effect_from_table,
+    lobing_signals,
+)
+from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.thermal import (
+    FirstOrderLag,
     ScaleExpansionEffect,
     SquarenessDriftEffect,
     ThermalGradientEffect,
     ThermalLagEffect,
     WorkpieceExpansionEffect,
     lag_filter,
-    lobing_signals,
 )
-from cmm_comp.compensation.effects_base import EvalContext, effect_from_table
-from cmm_comp.compensation.machine import Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 

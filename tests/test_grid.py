@@ -7,10 +7,10 @@ import pytest
 import quaternion as npq
 from scipy.interpolate import make_interp_spline
 
-from cmm_comp.compensation import quaternion as qt
 from cmm_comp.compensation.grid import CorrectionGrid, GridSignal, make_grid_continuous
-from cmm_comp.compensation.grid_field import AnalyticErrorField
-from cmm_comp.compensation.squad import squad
+from cmm_comp.compensation.grid import quaternion as qt
+from cmm_comp.compensation.grid.field import AnalyticErrorField
+from cmm_comp.compensation.grid.squad import squad
 
 STYLUS = np.array([30.0, -40.0, -150.0])
 REF = {"T_x": 20.0, "T_top": 20.0}  # reference temperatures: the geometric grid

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cmm_comp.compensation import CorrectionGrid, Machine
+from cmm_comp.compensation.thermal import SignalFilter
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
@@ -79,13 +80,16 @@ def test_thermal_lag_filter_travels_in_the_grid_file(tmp_path: Path) -> None:
     data["effects"] = [{"cause": "thermal_lag", "time_constant_s": 1800.0, "fraction": 0.6}]
     machine = Machine.from_dict(data)
     grid = CorrectionGrid.build(machine, steps=(5, 5, 4))
-    assert grid.signal_filters == [
+    assert [f.to_header() for f in grid.signal_filters] == [
         {
             "kind": "first_order_lag",
             "signals": ["T_x", "T_y", "T_z"],
             "time_constant_s": 1800.0,
             "fraction": 0.6,
         }
+    ]
+    assert grid.signal_filters == [
+        SignalFilter("first_order_lag", ("T_x", "T_y", "T_z"), 1800.0, 0.6)
     ]
     grid.save(tmp_path / "lag.grid")
     loaded = CorrectionGrid.load(tmp_path / "lag.grid")

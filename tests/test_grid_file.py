@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cmm_comp.compensation.grid import CorrectionGrid, GridFileError
-from cmm_comp.compensation.grid_field import AnalyticErrorField
+from cmm_comp.compensation.grid.field import AnalyticErrorField
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,7 @@ from test_daemon_support import (
 )
 
 from cmm_comp.compensation.grid import CorrectionGrid
-from cmm_comp.daemon.mcap_read import read_messages
+from cmm_comp.daemon.sessionlog.reader import read_messages
 from cmm_comp.protocol.codes import DaemonState, grid_id_from_sha256
 from cmm_comp.sim_controller.controller import CanController, RawReading
 from cmm_comp.sim_controller.runner import build_program, evaluate, make_readings, run_can

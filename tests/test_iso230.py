@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cmm_comp.compensation.iso230 import evaluate_iso230, format_iso230_report, plot_iso230
+from cmm_comp.compensation.reports.iso230 import evaluate_iso230, format_iso230_report, plot_iso230
 
 
 def _hand_case() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

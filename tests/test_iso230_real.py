@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cmm_comp.compensation.realdata import (
+from cmm_comp.compensation.formats.realdata import (
     error_table_from_run,
     iso230_points_from_log,
     iso230_run_from_points,

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cmm_comp.compensation.realdata import (
+from cmm_comp.compensation.formats.realdata import (
     RealDataError,
     error_table_from_run,
     iso230_points_from_log,

@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 from paper_a1 import CORRECTIONS, PRINTED
 from scipy.spatial.transform import Rotation
 
-from cmm_comp.compensation.components import TABLE_COMPONENTS, parse_component
 from cmm_comp.compensation.kinematics import (
     MODEL_CHAINS,
     Chain,
@@ -18,6 +17,7 @@ from cmm_comp.compensation.kinematics import (
     first_order_jacobian,
     rotation_from_angles,
 )
+from cmm_comp.compensation.parametric_errors import TABLE_COMPONENTS, parse_component
 
 SQ = ("alpha", "beta1", "beta2")
 

@@ -1,4 +1,4 @@
-"""Machine descriptions: FORMATS.md §1 parsing, validation messages, round trips."""
+"""Machine descriptions: docs/formats.md §1 parsing, validation messages, round trips."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from cmm_comp.compensation.machine import Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples" / "machines").glob("*.toml"))
+FORMATS_DOC = ROOT / "docs" / "formats.md"
 
 MINIMAL = """
 format = "cmm-machine/1"
@@ -232,13 +233,10 @@ def test_straightness_criterion_removes_the_reference_line(tmp_path: Path) -> No
 def test_the_formats_example_loads_with_a_warning_for_its_positional_criterion(
     tmp_path: Path,
 ) -> None:
-    """FORMATS.md §1's own example puts ``criterion`` (straightness only) on dx_x: the file loads,
-    the criterion is ignored for that table (a positional error must keep its slope: the scale
-    error) and a warning names the key."""
-    spec = ROOT.parent / "shared" / "spec" / "FORMATS.md"
-    if not spec.is_file():
-        pytest.skip(f"{spec} is absent")
-    text = spec.read_text(encoding="utf-8")
+    """docs/formats.md §1's own example puts ``criterion`` (straightness only) on dx_x: the file
+    loads, the criterion is ignored for that table (a positional error must keep its slope: the
+    scale error) and a warning names the key."""
+    text = FORMATS_DOC.read_text(encoding="utf-8")
     start = text.index("```toml") + len("```toml")
     example = text[start : text.index("```", start)]
     m = Machine.from_toml(write(tmp_path, example))
@@ -248,6 +246,20 @@ def test_the_formats_example_loads_with_a_warning_for_its_positional_criterion(
     # offset (0, 200, 100) from the reference: MB1 has no angular table here, so only the
     # values given remain, unchanged by any line removal
     np.testing.assert_allclose(table.value, [0.0, 1.2, 2.1])
+
+
+def test_every_complete_toml_example_of_the_formats_doc_loads(tmp_path: Path) -> None:
+    """The user documentation's complete machine examples (```toml blocks with a ``format``
+    line) load as written, and there are several of them."""
+    import re
+
+    blocks = re.findall(r"```toml\n(.*?)```", FORMATS_DOC.read_text(encoding="utf-8"), re.S)
+    complete = [b for b in blocks if 'format = "cmm-machine/1"' in b]
+    assert len(complete) >= 4
+    for i, body in enumerate(complete):
+        m = Machine.from_toml(write(tmp_path, body, f"example{i}.toml"))
+        err = m.volumetric_error(np.array([[100.0, 100.0, 100.0]]), m.probe.offset_mm)
+        assert np.all(np.isfinite(err)), body
 
 
 def test_cli_prints_load_warnings(tmp_path: Path) -> None:

@@ -12,7 +12,12 @@ import numpy as np
 import pytest
 
 from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.maps import diagonal_endpoints, diagonals_um, line_report, volumetric_map
+from cmm_comp.compensation.reports.maps import (
+    diagonal_endpoints,
+    diagonals_um,
+    line_report,
+    volumetric_map,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"

@@ -13,7 +13,7 @@ import pytest
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from cmm_comp.daemon.mcap_read import read_messages
+from cmm_comp.daemon.sessionlog.reader import read_messages
 
 ROOT = Path(__file__).resolve().parents[1]
 FLUSH_PERIOD_S = 0.2
@@ -23,7 +23,7 @@ RATE_HZ = 1000
 # flush timer cuts chunks. Prints "ready" once the file is open.
 WRITER = """
 import signal, sys, time
-from cmm_comp.daemon.mcap_log import McapLogger
+from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
 path, flush_s, rate, mode = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
 logger = McapLogger(path, flush_period_s=flush_s, chunk_size=16 * 1024 * 1024)
 if mode == "term":

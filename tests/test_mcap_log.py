@@ -1,4 +1,4 @@
-"""McapLogger + mcap_read: round trip against the mcap package's own reader, rolling,
+"""McapLogger + sessionlog.reader: round trip against the mcap package's own reader, rolling,
 non-blocking behaviour with a slow sink, writer errors, and reading cut files."""
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from cmm_comp.daemon.mcap_log import McapLogger
-from cmm_comp.daemon.mcap_read import load_session, read_messages, session_files
-from cmm_comp.daemon.mcap_schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
+from cmm_comp.daemon.sessionlog.reader import load_session, read_messages, session_files
+from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
+from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
 
 T0_NS = 1_700_000_000_123_456_789
 
@@ -332,7 +332,7 @@ def test_sliced_file_writes_whole_buffers_in_short_system_calls(tmp_path: Path) 
     everything, in order (what the MCAP writer relies on)."""
     import io as _io
 
-    from cmm_comp.daemon.mcap_log import WRITE_SLICE, SlicedFileIO
+    from cmm_comp.daemon.sessionlog.writer import WRITE_SLICE, SlicedFileIO
 
     path = tmp_path / "f.bin"
     raw = SlicedFileIO(path, "xb")

@@ -23,10 +23,10 @@ from test_daemon_support import ROOT, base_config, channel, send_temps
 from test_mcap_log import T0_NS, sample
 
 from cmm_comp.daemon.config import ConfigError, add_override_flags, config_from_dict, load_config
-from cmm_comp.daemon.mcap_process import McapProcessLogger
-from cmm_comp.daemon.mcap_read import read_messages
-from cmm_comp.daemon.mcap_schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
 from cmm_comp.daemon.service import DaemonService
+from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
+from cmm_comp.daemon.sessionlog.reader import read_messages
+from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
 from cmm_comp.sim_controller.controller import CanController, RawReading
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="needs POSIX processes and signals")
@@ -194,7 +194,7 @@ def test_hot_path_drops_and_counts_when_the_queue_is_full(tmp_path: Path) -> Non
 # A parent that logs /cmm/raw at 1 kHz through a McapProcessLogger until it is SIGKILLed.
 PARENT = """
 import sys, time
-from cmm_comp.daemon.mcap_process import McapProcessLogger
+from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
 path, rate = sys.argv[1], float(sys.argv[2])
 logger = McapProcessLogger(path, flush_period_s=0.2, chunk_size=16 * 1024 * 1024)
 print(logger.child_pid, flush=True)

@@ -1,5 +1,5 @@
-"""Compact log records (daemon.mcap_records): the payload the writer builds from a record equals
-the one written out by hand from the CAN message / reading, passes the topic's schema, and a
+"""Compact log records (daemon.sessionlog.records): the payload the writer builds from a record
+equals the one written out by hand from the CAN message / reading, passes the topic's schema, and a
 malformed record is counted as an encode error without stopping the writer."""
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from cmm_comp.daemon.can_endpoint import frame_record
-from cmm_comp.daemon.mcap_log import McapLogger
-from cmm_comp.daemon.mcap_process import McapProcessLogger
-from cmm_comp.daemon.mcap_read import read_messages
-from cmm_comp.daemon.mcap_records import corrected_payload, expand, frame_payload, raw_payload
-from cmm_comp.daemon.mcap_schemas import check_message
+from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
+from cmm_comp.daemon.sessionlog.reader import read_messages
+from cmm_comp.daemon.sessionlog.records import corrected_payload, expand, frame_payload, raw_payload
+from cmm_comp.daemon.sessionlog.schemas import check_message
+from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
 
 T0_S = 1_700_000_000
 

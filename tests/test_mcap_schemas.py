@@ -1,4 +1,4 @@
-"""Time conversions and the topic schemas of the MCAP session log (FORMATS.md §6)."""
+"""Time conversions and the topic schemas of the MCAP session log (docs/formats.md §6)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cmm_comp.daemon.mcap_schemas import (
+from cmm_comp.daemon.sessionlog.schemas import (
     NS_PER_S,
     TOPIC_SCHEMAS,
     check_message,

@@ -1,4 +1,4 @@
-"""Measurements CSV (FORMATS.md §2): round trip, and bad files named by file, line and column."""
+"""Measurements CSV (docs/formats.md §2): round trip, and bad files named by file, line and column."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from cmm_comp.compensation.errors import MeasurementFileError
+from cmm_comp.compensation.formats.measurements import read_measurements, write_measurements
 from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.measurements import read_measurements, write_measurements
 from cmm_comp.sim_controller.sessions import plan_session
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from paper_a2 import LINEAR_TARGETS, PRINTED, SLIPS, SQUARENESS_AGREE, SQUARENESS_TARGETS
 
-from cmm_comp.compensation.components import AXES, AXIS_INDEX, TABLE_COMPONENTS
 from cmm_comp.compensation.kinematics import MODEL_CHAINS, first_order_jacobian
 from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.parametric_errors import AXES, AXIS_INDEX, TABLE_COMPONENTS
 from cmm_comp.compensation.straightness import apply_criterion
 
 MODELS = tuple(MODEL_CHAINS)

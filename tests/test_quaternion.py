@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation, Slerp
 
-from cmm_comp.compensation import quaternion as qt
+from cmm_comp.compensation.grid import quaternion as qt
 
 RNG_SEED = 20240517
 

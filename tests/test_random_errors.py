@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cmm_comp.compensation.components import AXIS_INDEX, TABLE_COMPONENTS
 from cmm_comp.compensation.kinematics import exact_pose
 from cmm_comp.compensation.machine import Machine
+from cmm_comp.compensation.parametric_errors import AXIS_INDEX, TABLE_COMPONENTS
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLES = 20_000

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from test_daemon_support import base_config, channel, daemon_and_controller, npl_grid_path
 
-from cmm_comp.daemon.replay import ReplayError, replay_offline, replay_to_bus
+from cmm_comp.daemon.sessionlog.replay import ReplayError, replay_offline, replay_to_bus
 from cmm_comp.sim_controller.controller import RawReading
 
 

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from cmm_comp.compensation.errors import MachineFileError
-from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.seedfiles import (
+from cmm_comp.compensation.formats.seedfiles import (
     find_seed_machines,
     load_seed_fileset,
     write_seed_fileset,
 )
+from cmm_comp.compensation.machine import Machine
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples" / "machines"
@@ -99,15 +99,15 @@ def test_hand_written_file_set() -> None:
     np.testing.assert_allclose(m.tables["dy_x"].value, [0.0, 0.47, 0.76, 0.47, 0.0], atol=1e-12)
     # at (200, 150, 100) mm, stylus 0: ΔX = δx(x) + z(−β1) = 2 + 0.1·4;
     # ΔY = δy(x) + x(−α + Ez(y)) − z·Ex(x) = 0.76 + 0.2·(−10 + 3) − 0.1·0.4; ΔZ = 0
-    err = m.volumetric_error([[200.0, 150.0, 100.0]])
+    err = m.volumetric_error([[200.0, 150.0, 100.0]], stylus_mm=(0, 0, 0))
     np.testing.assert_allclose(err, [[2.4, -0.68, 0.0]], atol=1e-4)
     # random: X band 0.6 ⊕ probe 0.4; Y: δy(x) 0.3 ⊕ x·Rα = 0.2 ⊕ 0.4; Z: probe 0.4
-    rnd = m.random_error([[200.0, 150.0, 100.0]])
+    rnd = m.random_error([[200.0, 150.0, 100.0]], stylus_mm=(0, 0, 0))
     np.testing.assert_allclose(
         rnd, [[np.hypot(0.6, 0.4), np.sqrt(0.09 + 0.04 + 0.16), 0.4]], rtol=1e-12
     )
     # X scale at 22 °C: 11.5 µm/(m·°C) · 2 °C · 0.2 m
-    hot = m.volumetric_error([[200.0, 150.0, 100.0]], temps_C={"T_x": 22.0})
+    hot = m.volumetric_error([[200.0, 150.0, 100.0]], (0, 0, 0), temps_C={"T_x": 22.0})
     np.testing.assert_allclose(hot - err, [[4.6, 0.0, 0.0]], atol=1e-12)
 
 

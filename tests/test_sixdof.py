@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cmm_comp.compensation import quaternion as qt
 from cmm_comp.compensation.grid import CorrectionGrid
-from cmm_comp.compensation.grid_field import AnalyticErrorField
-from cmm_comp.compensation.sixdof import (
+from cmm_comp.compensation.grid import quaternion as qt
+from cmm_comp.compensation.grid.field import AnalyticErrorField
+from cmm_comp.compensation.reports.sixdof import (
     SixDofLayout,
     grid_from_readings,
     pose_first_order,

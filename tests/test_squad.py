@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import quaternion as npq
 
-from cmm_comp.compensation import quaternion as qt
-from cmm_comp.compensation.squad import squad, squad_control_points
+from cmm_comp.compensation.grid import quaternion as qt
+from cmm_comp.compensation.grid.squad import squad, squad_control_points
 
 
 def _keys(n: int, scale_rad: float, seed: int = 11) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Thermal terms (FORMATS.md §1) against values computed by hand.
+"""Thermal terms (docs/formats.md §1) against values computed by hand.
 
 Axis j adds ``α_j·(T_j − T_ref)·(q_j − ref_j)/1000`` µm to component j; a workpiece adds
 ``−α_wp·(T_wp − T_ref)·(q − fixture)/1000`` µm. The thermal part is isolated as
@@ -87,7 +87,7 @@ def test_reference_temperature_is_the_machines() -> None:
 
 def test_workpiece_grows_from_the_reference_without_a_fixture() -> None:
     """Without ``workpiece_fixture`` the machine uses the reference point (machine.py's choice;
-    FORMATS.md leaves it open): −11·2·(q − (100, 50, 20))/1000 at q = (600, 450, 320)."""
+    docs/formats.md leaves it open): −11·2·(q − (100, 50, 20))/1000 at q = (600, 450, 320)."""
     machine = simple_machine(workpiece_expansion=11.0)
     got = thermal_part(machine, [[600.0, 450.0, 320.0]], {"T_wp": 22.0})
     np.testing.assert_allclose(got, [[-11.0, -8.8, -6.6]], atol=1e-12)

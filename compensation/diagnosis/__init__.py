@@ -2,7 +2,7 @@
 what it gets wrong, extend the model with them and show the gain on held-out data.
 
 Modules: :mod:`.residuals` (residuals and statistics), :mod:`.candidates` (the causes of
-FORMATS.md §4 as fit-ready terms), :mod:`.fitting` (least squares, profiles, grouped CV,
+docs/formats.md §4 as fit-ready terms), :mod:`.fitting` (least squares, profiles, grouped CV,
 F-tests), :mod:`.selection` (greedy out-of-sample selection, :func:`diagnose`),
 :mod:`.unexplained` (structure no cause explains), :mod:`.report` (plots and HTML).
 """

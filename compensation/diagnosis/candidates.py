@@ -1,4 +1,4 @@
-"""Candidate causes (FORMATS.md §4): each a model term linear in its amplitude parameters.
+"""Candidate causes (docs/formats.md §4): each a model term linear in its amplitude parameters.
 
 A :class:`Candidate` gives, for a value ``theta`` of its nonlinear parameter (period, time
 constant, number of lobes; None when it has none), the design ``X`` (N, 3, p): the displacement
@@ -18,22 +18,25 @@ from typing import Any
 
 import numpy as np
 
-from ..components import ANGULAR, AXES, AXIS_INDEX, SQUARENESS, TABLE_COMPONENTS
 from ..effects import (
     CouplingEffect,
+    Effect,
+    EvalContext,
     ParametricEffect,
     PeriodicEffect,
     ProbeLobingEffect,
     ReversalEffect,
+    default_orders,
+)
+from ..parametric_errors import ANGULAR, AXES, AXIS_INDEX, SQUARENESS, TABLE_COMPONENTS
+from ..thermal import (
     ScaleExpansionEffect,
     SquarenessDriftEffect,
     ThermalGradientEffect,
     ThermalLagEffect,
     WorkpieceExpansionEffect,
-    default_orders,
     lag_filter,
 )
-from ..effects_base import Effect, EvalContext
 from .residuals import FloatArray, Residuals
 
 LAG_TIME_CONSTANTS_S: tuple[float, ...] = tuple(
@@ -172,7 +175,7 @@ def _periodic_builder(a: str) -> EffectBuilder:
 
 
 def all_candidates(res: Residuals) -> list[Candidate]:
-    """Every cause of FORMATS.md §4 that the measurements can show (signals present, axis moved)."""
+    """Every cause of docs/formats.md §4 that the measurements can show (signals present, axis moved)."""
     m = res.machine
     ref_c = m.thermal.reference_C
     moved = {a: float(np.ptp(res.q_mm[:, k])) > 1e-6 for k, a in enumerate(AXES)}
@@ -311,7 +314,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
 
 
 def contract_keys(effect: Effect) -> dict[str, Any]:
-    """The FORMATS.md §4 identifying keys of an effect (cause plus component/axis/…)."""
+    """The docs/formats.md §4 identifying keys of an effect (cause plus component/axis/…)."""
     d = effect.describe()
     return {k: v for k, v in d.items() if k != "parameters"}
 

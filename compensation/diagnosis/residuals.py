@@ -15,9 +15,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..formats.measurements import Measurements
 from ..kinematics import first_order_jacobian
 from ..machine import Machine
-from ..measurements import Measurements
+from ..thermal.roles import TEMPERATURE_ROLES
 
 FloatArray = NDArray[np.float64]
 
@@ -78,10 +79,7 @@ def compute_residuals(machine: Machine, data: Measurements) -> Residuals:
         data.indicated_mm, stylus, data.temps_C, inputs=data.inputs()
     )
     ref_c = machine.thermal.reference_C
-    signals: dict[str, FloatArray] = {
-        k: np.full(data.n, ref_c)
-        for k in ("T_x", "T_y", "T_z", "T_wp", "T_top", "T_bottom", "T_air")
-    }
+    signals: dict[str, FloatArray] = {k: np.full(data.n, ref_c) for k in TEMPERATURE_ROLES}
     signals.update(data.temps_C)
     signals.update(data.inputs())
     jac, sq = first_order_jacobian(

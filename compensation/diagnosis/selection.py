@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from ..effects_base import Effect
+from ..effects import Effect
+from ..formats.measurements import Measurements
 from ..machine import Machine
-from ..measurements import Measurements
 from .candidates import Candidate, all_candidates, contract_keys, is_finite_design
 from .fitting import (
     Problem,
@@ -47,7 +47,7 @@ class Diagnosis:
 
     verdict: str
     effects: list[Effect]
-    entries: list[dict[str, Any]]  # FORMATS.md §4 "effects" entries
+    entries: list[dict[str, Any]]  # docs/formats.md §4 "effects" entries
     residuals: Residuals
     fitted_um: Any  # (N, 3) in-sample prediction of the effects found
     heldout_pred_um: Any  # (N, 3) out-of-fold prediction

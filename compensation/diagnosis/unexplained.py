@@ -74,7 +74,7 @@ def _block_candidate(name: str, basis: FloatArray) -> Candidate:
 def unexplained_candidate(
     problem: Problem, accepted: list[Term], alpha: float, min_cv_gain: float, cv_current: float
 ) -> dict[str, Any] | None:
-    """The ``unexplained`` entry (FORMATS.md §4) when a generic model still pays, else None."""
+    """The ``unexplained`` entry (docs/formats.md §4) when a generic model still pays, else None."""
     blocks = generic_blocks(problem.res)
     terms = [Term(_block_candidate(n, b)) for n, b in blocks.items()]
     _, rss0, rank0 = fit(problem, accepted)

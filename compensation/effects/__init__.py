@@ -1,0 +1,43 @@
+"""effects: model terms beyond the rigid-body parametric model, and their registry.
+
+* :mod:`.base` — :class:`Effect`, :class:`EvalContext`, the cause registry and the helpers every
+  effect shares;
+* :mod:`.parametric` — corrections of the parametric errors (``parametric``, ``coupling``,
+  ``reversal``, ``periodic``);
+* :mod:`.probe` — probe lobing.
+
+The temperature-driven effects (``thermal_gradient``, ``thermal_lag``, ``scale_expansion``,
+``workpiece_expansion``, ``squareness_drift``) live with the other thermal terms in
+:mod:`cmm_comp.compensation.thermal`; the registry knows every cause.
+"""
+
+from __future__ import annotations
+
+from .base import Effect, EvalContext, effect_from_table, known_causes, register_effect
+from .parametric import (
+    CouplingEffect,
+    ParametricEffect,
+    PeriodicEffect,
+    ReversalEffect,
+    default_orders,
+    legendre_shape,
+    normalised,
+)
+from .probe import ProbeLobingEffect, lobing_signals
+
+__all__ = [
+    "CouplingEffect",
+    "Effect",
+    "EvalContext",
+    "ParametricEffect",
+    "PeriodicEffect",
+    "ProbeLobingEffect",
+    "ReversalEffect",
+    "default_orders",
+    "effect_from_table",
+    "known_causes",
+    "legendre_shape",
+    "lobing_signals",
+    "normalised",
+    "register_effect",
+]

@@ -1,0 +1,48 @@
+"""grid: the correction grid — exact error poses at the nodes of the working volume,
+interpolated (Squad for rotations, C² tricubic spline for translations).
+
+* :mod:`.correction_grid` — :class:`CorrectionGrid` (correction, batch and single reading);
+* :mod:`.status` — the one status rule both correction paths use;
+* :mod:`.build` — building from a machine model or from measured node poses; default steps;
+* :mod:`.inputs` — the runtime signals the grid reads;
+* :mod:`.file` — the versioned, checksummed grid file;
+* :mod:`.interpolation` — the Squad and spline tables; :mod:`.kernels` — the compiled (numba)
+  evaluation kernels; :mod:`.inverse` — command positions for a target;
+* :mod:`.squad`, :mod:`.quaternion` — quaternion algebra and Squad interpolation;
+* :mod:`.field` — an analytic error field (test and study oracle); :mod:`.study` — the
+  interpolation study (``python -m cmm_comp.compensation.grid.study``).
+
+Units: positions mm, translations µm, rotations as unit quaternions (w, x, y, z).
+"""
+
+from __future__ import annotations
+
+from .build import (
+    DEFAULT_STEPS,
+    MAX_NODES,
+    MAX_STEPS_PER_AXIS,
+    MIN_STEPS_PER_AXIS,
+    MachineLike,
+    default_steps,
+)
+from .correction_grid import CorrectionGrid
+from .file import GridFileError
+from .inputs import GridSignal
+from .interpolation import make_grid_continuous
+from .status import STATUS_DTYPE, VOLUME_TOL_MM, point_status
+
+__all__ = [
+    "DEFAULT_STEPS",
+    "MAX_NODES",
+    "MAX_STEPS_PER_AXIS",
+    "MIN_STEPS_PER_AXIS",
+    "STATUS_DTYPE",
+    "VOLUME_TOL_MM",
+    "CorrectionGrid",
+    "GridFileError",
+    "GridSignal",
+    "MachineLike",
+    "default_steps",
+    "make_grid_continuous",
+    "point_status",
+]

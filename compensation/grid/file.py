@@ -1,0 +1,278 @@
+"""The correction grid file: versioned, self-describing, checksummed, written atomically.
+
+Layout: a NumPy ``.npz`` (zip) archive, read with ``allow_pickle=False``, holding
+
+* ``header``: UTF-8 JSON (as uint8) with ``format = "cmm-grid"``, ``format_version = 1``, the
+  machine (name, model, sha256 of its description), volume, steps, units, reference values of
+  the runtime signals, stylus convention, build time and library version;
+* the payload arrays named in :data:`PAYLOAD_ARRAYS` (node quaternions (w, x, y, z),
+  translations µm, per-signal sensitivity grids);
+* ``sha256``: the hex SHA-256 (as uint8) over every payload array (name, dtype, shape, bytes,
+  in sorted order) followed by the header bytes.
+
+Any problem on reading raises a single :class:`GridFileError` naming the file and the problem.
+:func:`grid_header`, :func:`save_grid` and :func:`load_grid` convert between a
+:class:`CorrectionGrid` and this file (``CorrectionGrid.header/save/load`` delegate here).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import hashlib
+import json
+import os
+import tempfile
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import GridFileError
+from .inputs import GridSignal
+
+if TYPE_CHECKING:
+    from .correction_grid import CorrectionGrid
+
+G = TypeVar("G", bound="CorrectionGrid")
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "PAYLOAD_ARRAYS",
+    "GridFileError",
+    "grid_header",
+    "load_grid",
+    "payload_sha256",
+    "read_grid_file",
+    "save_grid",
+    "write_grid_file",
+]
+
+FORMAT_NAME = "cmm-grid"
+FORMAT_VERSION = 1
+PAYLOAD_ARRAYS = (
+    "q_work_stylus",  # (nx, ny, nz, 4) unit quaternions (w, x, y, z) of the error rotation
+    "translation_um",  # (nx, ny, nz, 3) error translation at stylus offset 0, µm
+    "sensitivity_translation_um",  # (S, nx, ny, nz, 3) µm per unit of each signal
+    "sensitivity_rotation_urad",  # (S, nx, ny, nz, 3) rotation vector, µrad per unit of signal
+)
+
+
+def payload_sha256(arrays: Mapping[str, NDArray[Any]], header_bytes: bytes) -> str:
+    """SHA-256 (hex) over the payload arrays (sorted by name) and the header bytes."""
+    digest = hashlib.sha256()
+    for name in sorted(arrays):
+        arr = np.ascontiguousarray(arrays[name])
+        digest.update(name.encode())
+        digest.update(arr.dtype.str.encode())
+        digest.update(repr(arr.shape).encode())
+        digest.update(arr.tobytes())
+    digest.update(header_bytes)
+    return digest.hexdigest()
+
+
+def write_grid_file(path: str | Path, header: Mapping[str, Any], arrays: Mapping[str, Any]) -> str:
+    """Write atomically (temp file in the same folder, fsync, rename); return the SHA-256."""
+    target = Path(path)
+    payload = {
+        name: np.ascontiguousarray(arrays[name], dtype=np.float64) for name in PAYLOAD_ARRAYS
+    }
+    header_bytes = json.dumps(dict(header), sort_keys=True, indent=1).encode()
+    sha = payload_sha256(payload, header_bytes)
+    members: dict[str, Any] = dict(payload)
+    members["header"] = np.frombuffer(header_bytes, dtype=np.uint8)
+    members["sha256"] = np.frombuffer(sha.encode(), dtype=np.uint8)
+    folder = target.parent if str(target.parent) else Path(".")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, **members)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp_name, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp_name)
+        raise
+    return sha
+
+
+def read_grid_file(path: str | Path) -> tuple[dict[str, Any], dict[str, NDArray[np.float64]], str]:
+    """Read and verify a grid file: ``(header, payload arrays, sha256)``; :class:`GridFileError`."""
+    source = Path(path)
+    if not source.is_file():
+        raise GridFileError(f"{source}: no such grid file")
+    try:
+        with open(source, "rb") as fh, np.load(fh, allow_pickle=False) as npz:
+            names = set(npz.files)
+            missing = [n for n in ("header", "sha256", *PAYLOAD_ARRAYS) if n not in names]
+            if missing:
+                raise GridFileError(
+                    f"{source}: not a complete cmm-comp grid file (missing {', '.join(missing)})"
+                )
+            header_bytes = npz["header"].tobytes()
+            stored_sha = npz["sha256"].tobytes().decode("ascii", errors="replace")
+            arrays = {name: np.asarray(npz[name]) for name in PAYLOAD_ARRAYS}
+    except GridFileError:
+        raise
+    except (
+        OSError,
+        ValueError,
+        EOFError,
+        TypeError,
+        AttributeError,
+        zipfile.BadZipFile,
+        KeyError,
+    ) as exc:
+        raise GridFileError(
+            f"{source}: not a readable grid file (truncated or corrupt: {exc})"
+        ) from None
+    try:
+        header = json.loads(header_bytes.decode())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise GridFileError(f"{source}: header is not valid JSON ({exc})") from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
+        fmt = header.get("format") if isinstance(header, dict) else None
+        raise GridFileError(
+            f"{source}: not a cmm-comp grid (format {fmt!r}, expected {FORMAT_NAME!r})"
+        )
+    version = header.get("format_version")
+    if version != FORMAT_VERSION:
+        raise GridFileError(
+            f"{source}: unsupported grid format version {version!r} "
+            f"(this library reads version {FORMAT_VERSION})"
+        )
+    for name, arr in arrays.items():
+        if arr.dtype != np.float64:
+            raise GridFileError(f"{source}: array {name!r} has dtype {arr.dtype}, expected float64")
+    actual = payload_sha256(arrays, header_bytes)
+    if actual != stored_sha:
+        raise GridFileError(
+            f"{source}: SHA-256 mismatch, the file is corrupt or was modified "
+            f"(stored {stored_sha[:16]}…, computed {actual[:16]}…)"
+        )
+    return header, arrays, actual
+
+
+def _library_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("cmm-comp")
+    except Exception:  # pragma: no cover - not installed
+        return "unknown"
+
+
+def grid_header(grid: CorrectionGrid) -> dict[str, Any]:
+    """The self-describing file header of ``grid`` (JSON-serialisable)."""
+    meta = dict(grid.metadata)
+    machine = meta.pop("machine", {"name": "", "model": "", "sha256": ""})
+    ref_c = next((s.reference for s in grid.signals if s.is_temperature), 20.0)
+    return {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "machine": machine,
+        "volume": {"lower_mm": grid.lower_mm.tolist(), "upper_mm": grid.upper_mm.tolist()},
+        "steps": list(grid.steps),
+        "units": {
+            "position": "mm",
+            "translation": "um",
+            "rotation": "unit quaternion (w, x, y, z)",
+            "sensitivity_translation": "um per signal unit",
+            "sensitivity_rotation": "urad (rotation vector) per signal unit",
+        },
+        "reference_C": ref_c,
+        "stylus_convention": (
+            "error_um = translation_um + 1000 (R - I) p, p = stylus offset (mm) from the "
+            "point the translation refers to; corrected = indicated + error; "
+            "error = true - indicated"
+        ),
+        "interpolation": {
+            "rotation": "tensor-product Squad x, y, z; quadratic end control points",
+            "translation": "tricubic not-a-knot B-spline (C2)",
+        },
+        "signals": [
+            {"name": s.name, "reference": s.reference, "needed": s.needed} for s in grid.signals
+        ],
+        "outside_policy": grid.outside,
+        "built_utc": meta.pop("built_utc", _dt.datetime.now(_dt.UTC).isoformat()),
+        "library_version": meta.pop("library_version", _library_version()),
+        **meta,
+    }
+
+
+def save_grid(grid: CorrectionGrid, path: str | Path) -> str:
+    """Write ``grid`` to ``path`` atomically; return the file's SHA-256 (also set on the grid)."""
+    header = grid_header(grid)
+    grid.metadata.setdefault("built_utc", header["built_utc"])
+    grid.metadata.setdefault("library_version", header["library_version"])
+    arrays = {
+        "q_work_stylus": grid.q_work_stylus,
+        "translation_um": grid.translation_um,
+        "sensitivity_translation_um": grid.sensitivity_translation_um,
+        "sensitivity_rotation_urad": grid.sensitivity_rotation_urad,
+    }
+    grid.sha256 = write_grid_file(path, header, arrays)
+    return grid.sha256
+
+
+def load_grid(
+    cls: type[G], path: str | Path, expect_machine: Any = None, outside: str | None = None
+) -> G:
+    """Read a grid file; :class:`GridFileError` (a ``ValueError``) names file and problem.
+
+    ``expect_machine``: a machine (anything with ``identity_sha256()``) or a sha256 hex
+    string; the file must have been built from that machine description.
+    """
+    header, arrays, sha = read_grid_file(path)
+    try:
+        machine = header["machine"]
+        sigs = [
+            GridSignal(str(s["name"]), float(s["reference"]), bool(s["needed"]))
+            for s in header["signals"]
+        ]
+        grid = cls(
+            header["volume"]["lower_mm"],
+            header["volume"]["upper_mm"],
+            arrays["q_work_stylus"],
+            arrays["translation_um"],
+            sigs,
+            arrays["sensitivity_translation_um"],
+            arrays["sensitivity_rotation_urad"],
+            {
+                k: v
+                for k, v in header.items()
+                if k
+                in (
+                    "machine",
+                    "source",
+                    "reference_mm",
+                    "probe_offset_mm",
+                    "signal_filters",
+                    "nonlinearity",
+                    "built_utc",
+                    "library_version",
+                )
+            },
+            outside or header.get("outside_policy", "refuse"),
+        )
+        if list(grid.steps) != list(header["steps"]):
+            raise ValueError(f"header steps {header['steps']} do not match the arrays {grid.steps}")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise GridFileError(f"{path}: invalid grid content ({exc})") from None
+    if expect_machine is not None:
+        want = (
+            expect_machine if isinstance(expect_machine, str) else expect_machine.identity_sha256()
+        )
+        if machine.get("sha256") != want:
+            raise GridFileError(
+                f"{path}: grid was built for machine {machine.get('name')!r} "
+                f"(description sha256 {str(machine.get('sha256'))[:12]}…), "
+                f"not for the expected one (sha256 {want[:12]}…); rebuild the grid"
+            )
+    grid.sha256 = sha
+    return grid

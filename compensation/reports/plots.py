@@ -1,0 +1,131 @@
+"""PNG plots of what people look at: parametric errors, the 3-D vector map, a 1-D line, diagonals.
+
+Figures are drawn on matplotlib's Agg canvas directly (no global backend is set).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from ..machine import Machine
+from ..parametric_errors import AXES
+from .maps import LineReport, VolumetricMap, diagonal_endpoints
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    FigureCanvasAgg(fig)
+    tmp = out.with_name(f".{out.name}.tmp.png")
+    fig.savefig(tmp, dpi=110)
+    tmp.replace(out)
+    return out
+
+
+def plot_parametric_errors(machine: Machine, path: str | Path, samples: int = 200) -> Path:
+    """One panel per axis and kind (linear µm / angular µrad) with every table and its 2σ band."""
+    fig = Figure(figsize=(13, 8), layout="constrained")
+    axs = fig.subplots(2, 3, squeeze=False)
+    for col, axis in enumerate(AXES):
+        k = col
+        q = np.linspace(machine.volume.lower_mm[k], machine.volume.upper_mm[k], samples)
+        for row, kind in enumerate(("d", "e")):
+            ax = axs[row][col]
+            for name, table in sorted(machine.tables.items()):
+                c = table.component
+                if c.axis != axis or c.kind != kind:
+                    continue
+                v = table.evaluate(q)
+                (line,) = ax.plot(q, v, label=f"{name} (pv {np.ptp(v):.2f})")
+                if table.has_random:
+                    r = table.evaluate_random(q)
+                    ax.fill_between(q, v - r, v + r, color=line.get_color(), alpha=0.15)
+            ax.set_title(f"{'linear' if kind == 'd' else 'angular'} errors of {axis.upper()}")
+            ax.set_xlabel(f"{axis} position / mm")
+            ax.set_ylabel("µm" if kind == "d" else "µrad")
+            ax.grid(True, alpha=0.3)
+            if ax.lines:
+                ax.legend(fontsize=7)
+    fig.suptitle(f"{machine.name} ({machine.model}): parametric errors, shaded = random 2σ")
+    return _save(fig, path)
+
+
+def plot_vector_map(
+    vmap: VolumetricMap, path: str | Path, magnification: float | None = None, title: str = ""
+) -> Path:
+    """Nominal grid (grey) and the grid displaced by the magnified error (red), like the paper's
+    Fig. 2c/3d. ``magnification`` defaults to making the largest error 6 % of the volume size."""
+    pts, err = vmap.points_mm, vmap.error_um / 1000.0
+    size = float(np.max(np.ptp(pts, axis=0)))
+    peak = float(np.max(np.linalg.norm(err, axis=1))) or 1.0
+    mag = magnification if magnification is not None else 0.06 * size / peak
+    nx, ny, nz = vmap.steps
+    nominal = pts.reshape(nx, ny, nz, 3)
+    moved = (pts + mag * err).reshape(nx, ny, nz, 3)
+    fig = Figure(figsize=(9, 8), layout="constrained")
+    ax = fig.add_subplot(projection="3d")
+
+    def on_surface(i: int, n: int) -> bool:
+        return i in (0, n - 1)
+
+    styles = ((nominal, {"color": "0.75", "lw": 0.5}), (moved, {"color": "tab:red", "lw": 0.9}))
+    for grid, style in styles:  # grid lines on the six faces of the volume
+        for i in range(nx):
+            for j in range(ny):
+                if on_surface(i, nx) or on_surface(j, ny):
+                    ax.plot(*grid[i, j, :, :].T, **style)
+        for i in range(nx):
+            for k in range(nz):
+                if on_surface(i, nx) or on_surface(k, nz):
+                    ax.plot(*grid[i, :, k, :].T, **style)
+        for j in range(ny):
+            for k in range(nz):
+                if on_surface(j, ny) or on_surface(k, nz):
+                    ax.plot(*grid[:, j, k, :].T, **style)
+    ax.set_xlabel("x / mm")
+    ax.set_ylabel("y / mm")
+    ax.set_zlabel("z / mm")
+    ax.set_title(
+        f"{title} volumetric error map, magnification ×{mag:.0f} (peak {peak * 1000:.1f} µm)"
+    )
+    return _save(fig, path)
+
+
+def plot_line(report: LineReport, path: str | Path, title: str = "") -> Path:
+    """ΔX, ΔY, ΔZ and the resultant along a line (paper's Fig. 2d / 3e)."""
+    fig = Figure(figsize=(9, 5), layout="constrained")
+    ax = fig.subplots()
+    for i, name in enumerate(("ΔX", "ΔY", "ΔZ")):
+        ax.plot(report.position_mm, report.error_um[:, i], label=name)
+    ax.plot(report.position_mm, report.resultant_um, "k", lw=2, label="resultant")
+    through = ", ".join(f"{v:g}" for v in report.through_mm)
+    ax.set_title(
+        f"{title} line ∥ {report.axis.upper()} through ({through}) mm: "
+        f"bandwidth {report.bandwidth_um:.2f} µm, max {report.max_um:.2f} µm"
+    )
+    ax.set_xlabel(f"{report.axis} / mm")
+    ax.set_ylabel("error / µm")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    return _save(fig, path)
+
+
+def plot_diagonals(machine: Machine, diagonals_um: list[float], path: str | Path) -> Path:
+    """Bar chart of the four space-diagonal length errors."""
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    ax = fig.subplots()
+    labels = []
+    for n, (a, b) in enumerate(diagonal_endpoints(machine), start=1):
+        labels.append(f"d{n}\n({a[0]:g},{a[1]:g},{a[2]:g})→\n({b[0]:g},{b[1]:g},{b[2]:g})")
+    ax.bar(labels, diagonals_um, color="tab:blue")
+    for i, v in enumerate(diagonals_um):
+        ax.annotate(f"{v:.2f}", (i, v), ha="center", va="bottom" if v >= 0 else "top")
+    ax.axhline(0, color="k", lw=0.8)
+    ax.set_ylabel("length error (true − indicated) / µm")
+    ax.set_title(f"{machine.name}: space diagonals")
+    ax.tick_params(axis="x", labelsize=7)
+    return _save(fig, path)

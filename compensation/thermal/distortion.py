@@ -1,0 +1,110 @@
+"""Structural distortion with temperature (docs/formats.md §4 ``thermal_gradient``,
+``squareness_drift``): axes bending with the top–bottom temperature difference, a squareness
+drifting with a temperature. Temperatures °C by role (:mod:`.roles`); angles µrad.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+from ..effects.base import (
+    EvalContext,
+    add_to_component,
+    read_axis,
+    read_number,
+    read_str,
+    register_effect,
+    signal_or,
+)
+from ..parametric_errors import AXIS_INDEX, SQUARENESS
+from .expansion import TemperatureEffect
+from .roles import AIR, BOTTOM, TOP
+
+__all__ = ["SquarenessDriftEffect", "ThermalGradientEffect"]
+
+
+class ThermalGradientEffect(TemperatureEffect):
+    """An axis bends with the temperature difference ``ΔT = T_top − T_bottom``: uniform curvature
+    ``κ = g·ΔT`` (g in µrad/(m·°C)) in the vertical plane (z: in the x-z plane), i.e. an angular
+    error ``g·ΔT·u`` and the consistent straightness ``∓g·ΔT·u²/2`` (u in m from the reference)."""
+
+    cause: ClassVar[str] = "thermal_gradient"
+    #: axis → (angular slot, straightness slot, sign of the straightness)
+    _PLANE: ClassVar[dict[str, tuple[int, int, float]]] = {
+        "x": (4, 2, -1.0),  # pitch ey_x, dz_x = −∫ey
+        "y": (3, 2, 1.0),  # ex_y, dz_y = +∫ex
+        "z": (4, 0, 1.0),  # ey_z, dx_z = +∫ey
+    }
+
+    def __init__(self, axis: str, curvature_urad_per_m_C: float) -> None:
+        self.axis = read_axis(axis)
+        self.curvature = float(curvature_urad_per_m_C)
+
+    def signals(self) -> dict[str, float]:
+        return {TOP: self.reference_C, BOTTOM: self.reference_C}
+
+    def modify_errors(self, ctx: EvalContext) -> None:
+        k = AXIS_INDEX[self.axis]
+        dt = signal_or(ctx, TOP, ctx.reference_C) - signal_or(ctx, BOTTOM, ctx.reference_C)
+        u_m = ctx.u_mm[:, k] / 1000.0
+        ang, lin, sign = self._PLANE[self.axis]
+        ctx.errors[:, k, ang] += self.curvature * dt * u_m
+        ctx.errors[:, k, lin] += sign * self.curvature * dt * u_m**2 / 2.0
+
+    def to_table(self) -> dict[str, Any]:
+        return self._table(axis=self.axis, curvature_urad_per_m_C=self.curvature)
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "cause": self.cause,
+            "axis": self.axis,
+            "parameters": {"curvature_urad_per_m_C": self.curvature},
+        }
+
+    @classmethod
+    def from_table(cls, t: Mapping[str, Any]) -> ThermalGradientEffect:
+        return cls(read_str(t, "axis"), read_number(t, "curvature_urad_per_m_C"))._with_reference(t)
+
+
+class SquarenessDriftEffect(TemperatureEffect):
+    """A squareness changes with temperature: ``+k·(T − T_ref)`` µrad (k µrad/°C, T the signal
+    named ``temperature``, default ``T_air``)."""
+
+    cause: ClassVar[str] = "squareness_drift"
+
+    def __init__(self, component: str, urad_per_C: float, temperature: str = AIR) -> None:
+        if component not in SQUARENESS:
+            raise ValueError(f"component must be one of alpha, beta1, beta2, got {component!r}")
+        self.component = component
+        self.urad_per_C = float(urad_per_C)
+        self.temperature = str(temperature)
+
+    def signals(self) -> dict[str, float]:
+        return {self.temperature: self.reference_C}
+
+    def modify_errors(self, ctx: EvalContext) -> None:
+        dt = signal_or(ctx, self.temperature, ctx.reference_C) - ctx.reference_C
+        add_to_component(ctx, self.component, self.urad_per_C * dt)
+
+    def to_table(self) -> dict[str, Any]:
+        return self._table(
+            component=self.component, urad_per_C=self.urad_per_C, temperature=self.temperature
+        )
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "cause": self.cause,
+            "component": self.component,
+            "parameters": {"urad_per_C": self.urad_per_C, "temperature": self.temperature},
+        }
+
+    @classmethod
+    def from_table(cls, t: Mapping[str, Any]) -> SquarenessDriftEffect:
+        return cls(
+            str(t.get("component")), read_number(t, "urad_per_C"), str(t.get("temperature", AIR))
+        )._with_reference(t)
+
+
+for _cls in (ThermalGradientEffect, SquarenessDriftEffect):
+    register_effect(_cls.cause, _cls.from_table)

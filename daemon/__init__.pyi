@@ -1,0 +1,53 @@
+"""Public API of ``daemon`` (read by lazy_loader: names load on first use)."""
+
+from .config import ConfigError, DaemonConfig
+from .engine import Answer, CorrectionEngine, Reading
+from .grid_slot import GridLoadError, GridSlot, load_grid
+from .metrics import LatencyHistogram, Metrics
+from .service import DaemonService
+from .sessionlog import (
+    TOPIC_SCHEMAS,
+    LoggerStats,
+    McapLogger,
+    McapProcessLogger,
+    ReplayError,
+    ReplayReport,
+    Session,
+    SessionLogger,
+    load_session,
+    ns_from_can_timestamp,
+    ns_from_stamp,
+    read_messages,
+    replay_offline,
+    replay_to_bus,
+    stamp_from_ns,
+)
+
+__all__ = [
+    "TOPIC_SCHEMAS",
+    "Answer",
+    "ConfigError",
+    "CorrectionEngine",
+    "DaemonConfig",
+    "DaemonService",
+    "GridLoadError",
+    "GridSlot",
+    "LatencyHistogram",
+    "LoggerStats",
+    "McapLogger",
+    "McapProcessLogger",
+    "Metrics",
+    "Reading",
+    "ReplayError",
+    "ReplayReport",
+    "Session",
+    "SessionLogger",
+    "load_grid",
+    "load_session",
+    "ns_from_can_timestamp",
+    "ns_from_stamp",
+    "read_messages",
+    "replay_offline",
+    "replay_to_bus",
+    "stamp_from_ns",
+]

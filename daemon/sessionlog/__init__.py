@@ -1,0 +1,21 @@
+"""The daemon's session log: every message of a session in MCAP (JSON messages), and replay.
+
+* :mod:`.schemas` - the topics' JSON Schemas and the log's time conversions;
+* :mod:`.records` - compact record tuples the hot path logs instead of dicts;
+* :mod:`.logger` - :class:`SessionLogger`, the protocol both writers implement, their shared
+  :class:`LogSettings`, :class:`LoggerStats` and never-blocking queue;
+* :mod:`.writer` - one MCAP file: naming, opening, encoding, finishing;
+* :mod:`.thread_writer` - :class:`McapLogger`, a writer thread in the daemon's process;
+* :mod:`.process_writer` - :class:`McapProcessLogger`, the writing in a child process
+  (:mod:`.writer_child` is that child's side);
+* :mod:`.reader` - read sessions back (rolled sets, files cut by a crash);
+* :mod:`.replay` - re-correct a session offline or re-send it to a daemon.
+
+See docs/mcap.md.
+"""
+
+import lazy_loader as _lazy
+
+# Names are listed once, in __init__.pyi (type checkers read it); each loads on first use, so
+# importing one submodule never drags in the whole package.
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

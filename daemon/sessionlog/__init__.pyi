@@ -1,0 +1,43 @@
+"""Public API of ``sessionlog`` (read by lazy_loader: names load on first use)."""
+
+from .logger import LoggerStats, LogSettings, SessionLogger
+from .process_writer import McapProcessLogger, McapWriterProcessError
+from .reader import LoggedMessage, Session, load_session, read_messages, session_files
+from .records import CorrectedRecord, FrameRecord, RawRecord
+from .replay import ReplayError, ReplayReport, replay_offline, replay_to_bus
+from .schemas import (
+    TOPIC_SCHEMAS,
+    TopicSchema,
+    check_message,
+    ns_from_can_timestamp,
+    ns_from_stamp,
+    stamp_from_ns,
+)
+from .thread_writer import McapLogger
+
+__all__ = [
+    "TOPIC_SCHEMAS",
+    "CorrectedRecord",
+    "FrameRecord",
+    "LogSettings",
+    "LoggedMessage",
+    "LoggerStats",
+    "McapLogger",
+    "McapProcessLogger",
+    "McapWriterProcessError",
+    "RawRecord",
+    "ReplayError",
+    "ReplayReport",
+    "Session",
+    "SessionLogger",
+    "TopicSchema",
+    "check_message",
+    "load_session",
+    "ns_from_can_timestamp",
+    "ns_from_stamp",
+    "read_messages",
+    "replay_offline",
+    "replay_to_bus",
+    "session_files",
+    "stamp_from_ns",
+]

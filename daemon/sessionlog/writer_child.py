@@ -1,0 +1,178 @@
+"""The process writer's child side: run a :class:`.thread_writer.McapLogger` fed over a pipe.
+
+:class:`.process_writer.McapProcessLogger` starts a fresh interpreter that calls
+:func:`child_entry`; the first message on the pipe holds the :class:`.logger.LogSettings` and
+the CPU priority, then batches of pickled ``(topic, payload, log_time_ns)`` follow until the
+sentinel :data:`STOP` (or EOF: the parent died). The child reports its counters, files and
+errors back on the same duplex pipe. See :mod:`.process_writer` for the whole design.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import dataclasses
+import logging
+import os
+import pickle
+import signal
+import time
+from multiprocessing.connection import Connection
+
+from cmm_comp.compensation.errors import CmmCompError
+
+from ..osthread import name_os_thread
+from .logger import LogSettings, QueuedMessage
+from .thread_writer import McapLogger
+
+_log = logging.getLogger(__name__)
+
+REPORT_S = 0.1
+"""The child reports its counters at most this often while they change, s."""
+STOP = b""
+"""Sentinel batch: no more messages, finish the file and exit."""
+
+
+class McapWriterProcessError(CmmCompError, RuntimeError):
+    """An error of the writer child that could not be passed on as its own exception type."""
+
+
+def _portable_exc(exc: BaseException) -> BaseException:
+    """``exc`` if it survives pickling, else a :class:`McapWriterProcessError` with its repr."""
+    try:
+        pickle.loads(pickle.dumps(exc))
+    except Exception:
+        return McapWriterProcessError(repr(exc))
+    return exc
+
+
+HELP_HIGH = 8192
+"""Backlog (messages) at which the child's main thread starts writing itself…"""
+HELP_LOW = 1024
+"""…until this many are left."""
+
+
+def expected_priority(priority: str) -> str:
+    """What :func:`lower_priority` will achieve here: ``idle``, ``nice 19`` or ``normal``."""
+    if priority == "normal":
+        return "normal"
+    return "idle" if hasattr(os, "SCHED_IDLE") else "nice 19"
+
+
+def lower_priority(priority: str) -> str:
+    """Lower the calling thread's CPU priority (Linux: policy and nice are per thread);
+    returns what took effect. ``idle``: Linux ``SCHED_IDLE`` (a woken normal task always
+    preempts it, so the writer never delays the daemon's reply path), else nice 19 where
+    SCHED_IDLE is missing; ``normal``: unchanged."""
+    if priority == "normal":
+        return "normal"
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        return "idle"
+    except (AttributeError, OSError):
+        pass
+    try:
+        os.nice(19 - os.nice(0))
+        return "nice 19"
+    except (AttributeError, OSError):
+        return "normal"
+
+
+def child_entry(fd: int, parent_pid: int) -> None:
+    """Child process entry (``python -c``): the pipe end is ``fd``; the first message on it
+    holds the :class:`LogSettings` and the CPU priority."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    name_os_thread("mcap-child")
+    conn = Connection(fd)
+    try:
+        settings, priority = pickle.loads(conn.recv_bytes())
+    except (EOFError, OSError):
+        conn.close()
+        return
+    metadata = {**settings.metadata, "writer_priority": expected_priority(priority)}
+    child_main(conn, dataclasses.replace(settings, metadata=metadata), parent_pid, priority)
+
+
+def child_main(
+    conn: Connection, settings: LogSettings, parent_pid: int, priority: str = "normal"
+) -> None:
+    """Run a McapLogger fed from ``conn`` until the sentinel or EOF, reporting back on it.
+
+    The logger's writer thread runs at ``priority``; this (main) thread keeps the normal
+    priority, takes the batches off the pipe at once, and writes itself while more than
+    :data:`HELP_HIGH` messages wait (a loaded machine can starve an idle-priority writer)."""
+    errors: collections.deque[BaseException] = collections.deque()
+    metadata = {**settings.metadata, "writer_pid": str(os.getpid())}
+    settings = dataclasses.replace(settings, metadata=metadata)
+
+    def writer_setup() -> None:
+        took = lower_priority(priority)
+        if took != expected_priority(priority):
+            _log.warning("MCAP writer priority %r not available: %s", priority, took)
+
+    try:
+        logger = McapLogger.from_settings(settings, errors.append, writer_setup=writer_setup)
+    except BaseException as exc:
+        conn.send_bytes(pickle.dumps(("init_error", _portable_exc(exc))))
+        conn.close()
+        return
+    received = 0
+
+    def report(kind: str) -> None:
+        while errors:
+            conn.send_bytes(pickle.dumps(("error", _portable_exc(errors.popleft()))))
+        st = logger.stats()
+        conn.send_bytes(
+            pickle.dumps(
+                (
+                    kind,
+                    {
+                        "received": received,
+                        "written": st.written,
+                        "dropped": st.dropped,
+                        "encode_errors": st.encode_errors,
+                        "files": st.files,
+                        "queue_len": st.queue_len,
+                        "healthy": logger.healthy,
+                    },
+                )
+            )
+        )
+
+    parent_alive = True
+    try:
+        report("stats")  # "ready": the first file is open
+        last_report = time.monotonic()
+        last_counts: tuple[int, ...] = ()
+        while True:
+            if conn.poll(REPORT_S / 2):
+                data = conn.recv_bytes()
+                if data == STOP:
+                    break
+                batch: list[QueuedMessage] = pickle.loads(data)
+                for topic, payload, t_ns in batch:
+                    logger.log(topic, payload, t_ns)
+                received += len(batch)
+                logger.kick()  # write now, in the gap the daemon's kick announced
+                if logger.backlog > HELP_HIGH:
+                    logger.drain_to(HELP_LOW)
+            elif os.getppid() != parent_pid:  # reparented: the parent died, pipe held elsewhere
+                parent_alive = False
+                break
+            now = time.monotonic()
+            if errors or now - last_report >= REPORT_S:
+                st = logger.stats()
+                counts = (received, st.written, st.dropped, len(st.files))
+                if errors or counts != last_counts:
+                    report("stats")
+                    last_counts = counts
+                last_report = now
+    except (EOFError, OSError):  # the parent died (EOF or broken pipe): finish the file
+        parent_alive = False
+    finally:
+        logger.stop(3600.0)  # the parent bounds the wait (and kills us if it must)
+        if parent_alive:
+            with contextlib.suppress(OSError):
+                report("done")
+        conn.close()
