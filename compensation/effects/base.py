@@ -113,7 +113,9 @@ def effect_from_table(table: Mapping[str, Any]) -> Effect:
 BUILTIN_EFFECT_MODULES: tuple[str, ...] = (
     "cmm_comp.compensation.effects.parametric",
     "cmm_comp.compensation.effects.probe",
-    "cmm_comp.compensation.thermal",
+    "cmm_comp.compensation.thermal.distortion",
+    "cmm_comp.compensation.thermal.expansion",
+    "cmm_comp.compensation.thermal.lag",
 )
 
 
