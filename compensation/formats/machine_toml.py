@@ -10,8 +10,6 @@ together. Nothing here imports the machine module, so there is no import circle.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -24,6 +22,7 @@ from ..errors import MachineFileError
 from ..machine_parts import ArmDeflection, Probe, Volume
 from ..parametric_errors import AXES
 from ..thermal import Thermal
+from .atomic import write_text_atomic
 from .machine_parser import FORMAT, plain_copy
 
 __all__ = ["description_from_parts", "read_machine_toml", "write_machine_toml"]
@@ -49,15 +48,7 @@ def write_machine_toml(description: Mapping[str, Any], path: Path) -> None:
     """Atomic write of a machine's normalised ``description``: nothing is written on failure."""
     data = json.loads(json.dumps(description))
     text = tomli_w.dumps(data)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, text)
 
 
 def description_from_parts(

@@ -17,12 +17,9 @@ Any problem on reading raises a single :class:`GridFileError` naming the file an
 
 from __future__ import annotations
 
-import contextlib
 import datetime as _dt
 import hashlib
 import json
-import os
-import tempfile
 import zipfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -32,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import GridFileError
+from ..formats.atomic import atomic_output
 from .inputs import GridSignal
 
 if TYPE_CHECKING:
@@ -86,18 +84,8 @@ def write_grid_file(path: str | Path, header: Mapping[str, Any], arrays: Mapping
     members: dict[str, Any] = dict(payload)
     members["header"] = np.frombuffer(header_bytes, dtype=np.uint8)
     members["sha256"] = np.frombuffer(sha.encode(), dtype=np.uint8)
-    folder = target.parent if str(target.parent) else Path(".")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **members)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp_name, target)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp_name)
-        raise
+    with atomic_output(target, "wb", fsync=True) as fh:
+        np.savez(fh, **members)
     return sha
 
 
