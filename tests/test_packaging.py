@@ -8,6 +8,7 @@ python-daemon, which the test extras install on purpose: this whole suite runs b
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -74,6 +75,14 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
     # the editable finder of this environment is a .pth *file*, which a path entry does not run.
     outer = sysconfig.get_paths()["purelib"]
     (purelib / "outer.pth").write_text(outer + "\n")
+    # build from a copy: setuptools leaves build/ and *.egg-info in the folder it builds
+    src = tmp_path / "src"
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for name in (*FOLDERS, "pyproject.toml", "README.md"):
+        if (ROOT / name).is_dir():
+            shutil.copytree(ROOT / name, src / name, ignore=ignore)
+        else:
+            shutil.copy2(ROOT / name, src / name)
     wheel_dir = tmp_path / "wheel"
     subprocess.run(
         [
@@ -86,7 +95,7 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
             "-q",
             "-w",
             str(wheel_dir),
-            str(ROOT),
+            str(src),
         ],
         check=True,
         capture_output=True,
