@@ -16,11 +16,13 @@ from typing import Self
 
 from pymodbus.client import AsyncModbusTcpClient
 
+from cmm_comp.compensation.errors import CmmCompError
+
 from . import modbus_map as mm
 from .modbus_codec import AnswerBlock, DaemonBlock, ReadingBlock, TemperatureSlot, decode_output
 
 
-class ModbusExceptionError(RuntimeError):
+class ModbusExceptionError(CmmCompError, RuntimeError):
     """The server answered a Modbus exception response."""
 
     def __init__(self, operation: str, code: int) -> None:
@@ -29,7 +31,7 @@ class ModbusExceptionError(RuntimeError):
         self.code = code
 
 
-class AnswerTimeoutError(TimeoutError):
+class AnswerTimeoutError(CmmCompError, TimeoutError):
     """No answer with the expected seq arrived in time."""
 
 
