@@ -22,9 +22,15 @@ _REGISTRARS: tuple[tuple[str, str], ...] = (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from cmm_comp.compensation.models import model_table
+
     parser = argparse.ArgumentParser(
         prog="cmm-comp",
         description="Volumetric error compensation for coordinate measuring machines.",
+        epilog="kinematic models (machine.toml: model = CODE or alias):\n"
+        + "\n".join(f"  {line}" for line in model_table().splitlines())
+        + "\n\nFile formats and every flag: docs/formats.md",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module_name, func in _REGISTRARS:

@@ -23,8 +23,6 @@ CY1   column_y                vertical ram Z; two-axis table, Y lower, X upper
 
 from __future__ import annotations
 
-from .kinematics import MODEL_CHAINS
-
 __all__ = ["MODEL_ALIASES", "describe_model", "known_models", "model_code", "model_table"]
 
 #: model code → (readable alias, structure in one line)
@@ -52,7 +50,8 @@ _MODELS: dict[str, tuple[str, str]] = {
     "CX1": ("column", "column type: vertical ram Z; two-axis table, X lower, Y upper"),
     "CY1": ("column_y", "column type: vertical ram Z; two-axis table, Y lower, X upper"),
 }
-assert set(_MODELS) == set(MODEL_CHAINS)
+# tests/test_machine_api.py checks that these are exactly the codes of kinematics.MODEL_CHAINS
+# (not imported here: the CLI's --help reads this table without numpy)
 
 #: readable alias → model code (``"moving_bridge"`` → ``"MB1"``)
 MODEL_ALIASES: dict[str, str] = {alias: code for code, (alias, _) in _MODELS.items()}
@@ -61,10 +60,10 @@ MODEL_ALIASES: dict[str, str] = {alias: code for code, (alias, _) in _MODELS.ite
 def model_code(name: str) -> str | None:
     """The model code (``"MB1"``) for a code or an alias (case, ``-`` and spaces ignored in
     aliases), or None when ``name`` names none of the ten models."""
-    if name in MODEL_CHAINS:
+    if name in _MODELS:
         return name
     key = name.strip().lower().replace("-", "_").replace(" ", "_")
-    if key.upper() in MODEL_CHAINS:
+    if key.upper() in _MODELS:
         return key.upper()
     return MODEL_ALIASES.get(key)
 
@@ -78,6 +77,8 @@ def describe_model(name: str) -> str:
     code = model_code(name)
     if code is None:
         raise ValueError(f"unknown model {name!r}; known: {', '.join(_known())}")
+    from .kinematics import MODEL_CHAINS
+
     alias, text = _MODELS[code]
     return f"{code} ({alias}): {text}; {MODEL_CHAINS[code].describe()}"
 

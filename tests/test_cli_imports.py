@@ -60,3 +60,19 @@ def test_model_commands_do_not_load_the_bus_stack(tmp_path: Path, args: list[str
 def test_the_import_parser_sees_a_heavy_import(tmp_path: Path) -> None:
     """The checks above can fail: an import of python-can is seen."""
     assert {"can", "numpy"} <= _imports_of(["-c", "import can, numpy"], tmp_path)
+
+
+def test_help_lists_the_ten_models(tmp_path: Path) -> None:
+    from cmm_comp.compensation import MODEL_ALIASES, MODEL_CHAINS
+
+    run = subprocess.run(
+        [sys.executable, "-m", "cmm_comp.cli", "--help"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=60,
+    )
+    assert run.returncode == 0, run.stderr
+    for alias, code in MODEL_ALIASES.items():
+        assert any(line.split()[:2] == [code, alias] for line in run.stdout.splitlines()), code
+    assert len(MODEL_ALIASES) == len(MODEL_CHAINS) == 10
