@@ -203,22 +203,10 @@ def read_measurements(path: str | Path) -> Measurements:
                 f"columns {', '.join(group_cols)} go together; missing {', '.join(absent)}",
             )
 
-    def stack(cols: Sequence[str]) -> FloatArray | None:
-        return np.column_stack([values[c] for c in cols]) if cols[0] in values else None
-
-    ind, ref = stack(REQUIRED[:3]), stack(REQUIRED[3:])
-    assert ind is not None and ref is not None
-    return Measurements(
-        indicated_mm=ind,
-        reference_mm=ref,
-        t_s=values.get("t"),
-        temps_C={c: values[c] for c in TEMPERATURE_COLUMNS if c in values},
-        directions={c: values[c] for c in DIR_COLUMNS if c in values},
-        normals=stack(NORMAL_COLUMNS),
-        stylus_mm=stack(STYLUS_COLUMNS),
-        group=np.asarray(groups, dtype=str) if "group" in index else None,
-        source=src,
-    )
+    columns: dict[str, Any] = dict(values)
+    if "group" in index:
+        columns["group"] = groups
+    return measurements_from_columns(columns, src)
 
 
 def measurements_from_columns(columns: Mapping[str, Any], source: str = "<memory>") -> Measurements:

@@ -24,21 +24,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..machine_parts import Volume
 from . import quaternion as qt
 
-__all__ = ["AnalyticErrorField", "AnalyticPose", "AnalyticVolume"]
+__all__ = ["AnalyticErrorField", "AnalyticPose"]
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class AnalyticVolume:
-    """Working volume (mm) in the shape of ``machine.volume``."""
-
-    lower_mm: FloatArray
-    upper_mm: FloatArray
-    reference_mm: FloatArray
-    steps: tuple[int, int, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -70,7 +61,7 @@ class AnalyticErrorField:
         hi = np.asarray(upper_mm, dtype=float)
         self.name = name
         self.model = "analytic"
-        self.volume = AnalyticVolume(lo, hi, lo.copy(), (20, 20, 10))
+        self.volume = Volume(lo, hi, lo.copy(), (20, 20, 10))
         self.rotation_urad = float(rotation_urad)
         self.translation_um = float(translation_um)
         self.expansion = float(expansion_um_per_m_C)
