@@ -12,7 +12,7 @@ are written out explicitly and checked against the effects in the tests.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,6 +20,7 @@ import numpy as np
 
 from ..effects import (
     CouplingEffect,
+    DriftEffect,
     Effect,
     EvalContext,
     ParametricEffect,
@@ -82,7 +83,18 @@ class Candidate:
     thetas: tuple[Any, ...] = (None,)
     look_elsewhere: float = 1.0  # effective number of independent theta values tried
     design_fn: Callable[[Residuals, Any], FloatArray] | None = None
+    #: The same cause with a richer shape (more orders, harmonics): used to absorb what a
+    #: mis-shaped accepted cause leaves behind, and reported when the data need it.
+    rich: Candidate | None = None
+    #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional.
+    design_many: Callable[[Residuals, Sequence[Any]], FloatArray] | None = None
     _cache: dict[tuple[int, Any], FloatArray] = field(default_factory=dict, repr=False)
+
+    @property
+    def identity(self) -> tuple[Any, ...]:
+        """(cause, component, axis, varies_with): what the diagnosis names (formats.md §4)."""
+        k = self.keys
+        return (self.cause, k.get("component"), k.get("axis"), k.get("varies_with"))
 
     @property
     def label(self) -> str:
@@ -90,20 +102,23 @@ class Candidate:
         return f"{self.cause}({extra})" if extra else self.cause
 
     def design(self, res: Residuals, theta: Any = None) -> FloatArray:
-        """(N, 3, p) displacement per unit amplitude (cached per data set and theta)."""
+        """(N, 3, p) displacement per unit amplitude (cached per data set and theta: ``res`` must
+        live as long as the candidate — use :meth:`design_uncached` for temporary data)."""
         key = (id(res), theta)
         if key not in self._cache:
-            if self.design_fn is not None:
-                x = self.design_fn(res, theta)
-            else:
-                cols = []
-                for j in range(self.n_params):
-                    amps = [0.0] * self.n_params
-                    amps[j] = 1.0
-                    cols.append(effect_displacement_um(res, self.build(amps, theta)))
-                x = np.stack(cols, axis=2)
-            self._cache[key] = x
+            self._cache[key] = self.design_uncached(res, theta)
         return self._cache[key]
+
+    def design_uncached(self, res: Residuals, theta: Any = None) -> FloatArray:
+        """(N, 3, p) displacement per unit amplitude, computed afresh."""
+        if self.design_fn is not None:
+            return self.design_fn(res, theta)
+        cols = []
+        for j in range(self.n_params):
+            amps = [0.0] * self.n_params
+            amps[j] = 1.0
+            cols.append(effect_displacement_um(res, self.build(amps, theta)))
+        return np.stack(cols, axis=2)
 
 
 def _span(res: Residuals, axis: str) -> tuple[float, float]:
@@ -124,14 +139,36 @@ def _lag_design(res: Residuals, tau: Any) -> FloatArray:
     return x
 
 
-def _periodic_design(axis: str) -> Callable[[Residuals, Any], FloatArray]:
+def _periodic_columns(
+    res: Residuals, axis: str, periods: Sequence[Any], harmonics: int
+) -> FloatArray:
+    """(N, 3, T, 2·harmonics) cos/sin columns of harmonics 1…H for each of T periods, on the
+    axis' positional error, each minus its value at the reference point (PeriodicEffect)."""
+    k = AXIS_INDEX[axis]
+    q = res.q_mm[:, k]
+    ref = float(res.machine.volume.reference_mm[k])
+    w = 2.0 * np.pi / np.asarray([float(p) for p in periods])
+    x = np.zeros((res.n, 3, len(w), 2 * harmonics))
+    for h in range(1, harmonics + 1):
+        ph = np.outer(q, h * w)
+        ph0 = h * w * ref
+        x[:, k, :, 2 * h - 2] = np.cos(ph) - np.cos(ph0)
+        x[:, k, :, 2 * h - 1] = np.sin(ph) - np.sin(ph0)
+    return x
+
+
+def _periodic_design(axis: str, harmonics: int = 1) -> Callable[[Residuals, Any], FloatArray]:
     def design(res: Residuals, period: Any) -> FloatArray:
-        k = AXIS_INDEX[axis]
-        eff = PeriodicEffect(axis, float(period), 1.0, 0.0)
-        c, s = eff.shape(res.q_mm[:, k], float(res.machine.volume.reference_mm[k]))
-        x = np.zeros((res.n, 3, 2))
-        x[:, k, 0], x[:, k, 1] = c, s
-        return x
+        return _periodic_columns(res, axis, [period], harmonics)[:, :, 0, :]
+
+    return design
+
+
+def _periodic_design_many(
+    axis: str, harmonics: int = 1
+) -> Callable[[Residuals, Sequence[Any]], FloatArray]:
+    def design(res: Residuals, periods: Sequence[Any]) -> FloatArray:
+        return _periodic_columns(res, axis, periods, harmonics)
 
     return design
 
@@ -161,9 +198,34 @@ def _parametric_builder(comp: str, span: tuple[float, float], orders: list[int])
 
 
 def _coupling_builder(
-    comp: str, other: str, sa: tuple[float, float], sb: tuple[float, float]
+    comp: str,
+    other: str,
+    sa: tuple[float, float],
+    sb: tuple[float, float],
+    orders: tuple[int, ...],
+    with_orders: tuple[int, ...],
 ) -> EffectBuilder:
-    return lambda a, _t: CouplingEffect(comp, other, a, sa, sb)
+    return lambda a, _t: CouplingEffect(comp, other, a, sa, sb, orders, with_orders)
+
+
+def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuilder:
+    return lambda p, _t: DriftEffect(a, span, p[:order], p[order:])
+
+
+#: Shapes of each family: (default, rich). The default is what a cause usually looks like; the
+#: rich one absorbs what a mis-shaped default leaves behind and is reported when the data need it.
+COUPLING_ORDERS = (((0, 1, 2), (1,)), ((0, 1, 2, 3), (1, 2)))
+PERIODIC_HARMONICS = (1, 3)
+DRIFT_ORDERS = (3, 6)
+
+
+def rich_orders(component: str) -> list[int]:
+    """Legendre orders of a table correction's rich shape (up to 8 along the axis)."""
+    base = default_orders(component)
+    if component in SQUARENESS:
+        return base
+    top = 6 if component in ANGULAR else 8
+    return list(range(base[0], top + 1))
 
 
 def _reversal_builder(a: str, span: tuple[float, float]) -> EffectBuilder:
@@ -171,7 +233,9 @@ def _reversal_builder(a: str, span: tuple[float, float]) -> EffectBuilder:
 
 
 def _periodic_builder(a: str) -> EffectBuilder:
-    return lambda p, period: PeriodicEffect(a, float(period), p[0], p[1])
+    return lambda p, period: PeriodicEffect(
+        a, float(period), p[0], p[1], [p[i : i + 2] for i in range(2, len(p), 2)]
+    )
 
 
 def all_candidates(res: Residuals) -> list[Candidate]:
@@ -185,12 +249,22 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         if comp not in SQUARENESS and not moved[comp[-1]]:
             continue
         span = _span(res, comp[-1]) if comp not in SQUARENESS else (0.0, 1.0)
+        rich = None
+        if comp not in SQUARENESS:
+            r_orders = rich_orders(comp)
+            rich = Candidate(
+                "parametric",
+                {"component": comp},
+                len(r_orders),
+                _parametric_builder(comp, span, r_orders),
+            )
         out.append(
             Candidate(
                 "parametric",
                 {"component": comp},
                 len(orders),
                 _parametric_builder(comp, span, orders),
+                rich=rich,
             )
         )
     for comp in ANGULAR:
@@ -198,12 +272,18 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             if other == comp[-1] or not (moved[other] and moved[comp[-1]]):
                 continue
             sa, sb = _span(res, comp[-1]), _span(res, other)
+            keys = {"component": comp, "varies_with": other}
+            (o1, w1), (o2, w2) = COUPLING_ORDERS
+            rich = Candidate(
+                "coupling", keys, len(o2) * len(w2), _coupling_builder(comp, other, sa, sb, o2, w2)
+            )
             out.append(
                 Candidate(
                     "coupling",
-                    {"component": comp, "varies_with": other},
-                    2,
-                    _coupling_builder(comp, other, sa, sb),
+                    keys,
+                    len(o1) * len(w1),
+                    _coupling_builder(comp, other, sa, sb, o1, w1),
+                    rich=rich,
                 )
             )
 
@@ -212,7 +292,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         return eff
 
     def gradient_builder(a: str) -> EffectBuilder:
-        return lambda p, _t: thermal(ThermalGradientEffect(a, p[0]))
+        return lambda p, _t: thermal(ThermalGradientEffect(a, p[0], p[1]))
 
     def scale_builder(a: str) -> EffectBuilder:
         return lambda p, _t: thermal(ScaleExpansionEffect(a, p[0]))
@@ -228,7 +308,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 Candidate(
                     "thermal_gradient",
                     {"axis": a},
-                    1,
+                    2,
                     gradient_builder(a),
                 )
             )
@@ -244,18 +324,44 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         if res.has(f"dir_{a}"):
             span = _span(res, a)
             out.append(Candidate("reversal", {"axis": a}, 2, _reversal_builder(a, span)))
+        if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
+            t_span = (float(np.min(res.signals["t"])), float(np.max(res.signals["t"])))
+            lo_k, hi_k = DRIFT_ORDERS
+            rich_drift = Candidate("drift", {"axis": a}, 2 * hi_k, _drift_builder(a, t_span, hi_k))
+            out.append(
+                Candidate(
+                    "drift",
+                    {"axis": a},
+                    2 * lo_k,
+                    _drift_builder(a, t_span, lo_k),
+                    rich=rich_drift,
+                )
+            )
         periods, n_eff = periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])
         if not periods:
             continue
+        h_lo, h_hi = PERIODIC_HARMONICS
+        rich_periodic = Candidate(
+            "periodic",
+            {"axis": a},
+            2 * h_hi,
+            _periodic_builder(a),
+            thetas=periods,
+            look_elsewhere=n_eff,
+            design_fn=_periodic_design(a, h_hi),
+            design_many=_periodic_design_many(a, h_hi),
+        )
         out.append(
             Candidate(
                 "periodic",
                 {"axis": a},
-                2,
+                2 * h_lo,
                 _periodic_builder(a),
                 thetas=periods,
                 look_elsewhere=n_eff,
-                design_fn=_periodic_design(a),
+                design_fn=_periodic_design(a, h_lo),
+                design_many=_periodic_design_many(a, h_lo),
+                rich=rich_periodic,
             )
         )
     if res.has("T_wp"):
@@ -334,6 +440,7 @@ __all__ = [
     "LAG_TIME_CONSTANTS_S",
     "LOBES",
     "Candidate",
+    "rich_orders",
     "all_candidates",
     "contract_keys",
     "effect_displacement_um",

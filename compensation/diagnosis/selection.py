@@ -14,6 +14,7 @@ time, temperatures, directions) tests whether structure remains that no cause ex
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,7 +37,8 @@ from .fitting import (
     split_coefficients,
 )
 from .residuals import Residuals, compute_residuals, length_error_e0_um, rms3d
-from .unexplained import unexplained_candidate
+from .alternatives import find_alternatives
+from .unexplained import locate, unexplained_candidate
 
 __all__ = ["Diagnosis", "diagnose"]
 
@@ -58,34 +60,59 @@ class Diagnosis:
         return {"verdict": self.verdict, "effects": self.entries, **self.summary}
 
     def extended_machine(self) -> Machine:
-        return self.residuals.machine.with_effects(self.effects)
+        """The machine with the compensable effects found (a ``drift`` describes the session
+        but cannot be predicted at run time: it is not added)."""
+        return self.residuals.machine.with_effects([e for e in self.effects if e.compensable])
+
+
+@dataclass
+class _Slot:
+    """An accepted cause: its family's default candidate and the term in use (default or rich
+    variant, with its nonlinear parameter)."""
+
+    root: Candidate
+    term: Term
+
+    @property
+    def rich_term(self) -> Term:
+        return Term(self.root.rich or self.root, self.term.theta)
+
+
+def _terms(slots: list[_Slot], rich: bool = False) -> list[Term]:
+    return [s.rich_term if rich else s.term for s in slots]
 
 
 def _round(
     problem: Problem,
-    accepted: list[Term],
+    slots: list[_Slot],
     pool: list[Candidate],
+    n_tried: int,
     alpha: float,
     min_cv_gain: float,
-    cv_base: float,
 ) -> tuple[Term | None, list[dict[str, Any]]]:
+    """One forward step. New candidates are tested against the accepted causes at their *rich*
+    shape, so what a mis-shaped accepted cause leaves behind (same signal, same axis, same Abbe
+    arms) is absorbed by it and never named as a second cause."""
+    base = _terms(slots, rich=True)
     n_obs = problem.y.size
-    _, rss0, rank0 = fit(problem, accepted)
+    _, rss0, rank0 = fit(problem, base)
     rows: list[dict[str, Any]] = []
-    m = max(len(pool), 1)
     for cand in pool:
-        theta, rss1, extra = best_theta(problem, accepted, cand)
+        theta, rss1, extra = best_theta(problem, base, cand)
         p = f_test_p(rss0, rss1, extra, n_obs, rank0 + extra)
-        p_adj = min(1.0, p * m * cand.look_elsewhere)
+        p_adj = min(1.0, p * n_tried * cand.look_elsewhere)
         rows.append(
             {"candidate": cand, "theta": theta, "label": cand.label, "rss": rss1, "p_adj": p_adj}
         )
     eligible = [r for r in rows if r["p_adj"] < alpha]
+    rows.sort(key=lambda r: r["rss"])
+    if not eligible:
+        return None, rows
+    cv_base = cv_mse(problem, base)
     for r in eligible:
-        r["cv_mse"] = cv_mse(problem, [*accepted, Term(r["candidate"], r["theta"])])
+        r["cv_mse"] = cv_mse(problem, [*base, Term(r["candidate"], r["theta"])])
         r["cv_gain"] = (cv_base - r["cv_mse"]) / cv_base if cv_base > 0 else 0.0
     eligible = [r for r in eligible if r["cv_gain"] >= min_cv_gain]
-    rows.sort(key=lambda r: r["rss"])
     if not eligible:
         return None, rows
     best_cv = min(r["cv_mse"] for r in eligible)
@@ -94,66 +121,146 @@ def _round(
     return Term(pick["candidate"], pick["theta"]), rows
 
 
+def _reprofile(problem: Problem, slots: list[_Slot]) -> None:
+    """Re-profile every accepted term's nonlinear parameter given the others."""
+    for i, s in enumerate(slots):
+        if len(s.term.candidate.thetas) > 1:
+            others = _terms(slots[:i] + slots[i + 1 :])
+            theta, _, _ = best_theta(problem, others, s.term.candidate)
+            s.term = Term(s.term.candidate, theta)
+
+
+def _choose_variants(
+    problem: Problem, slots: list[_Slot], alpha: float, min_cv_gain: float
+) -> None:
+    """Each accepted cause takes its rich shape only when the data need it (F-test and CV)."""
+    n_obs = problem.y.size
+    for i, s in enumerate(slots):
+        if s.root.rich is None:
+            continue
+        others = _terms(slots[:i] + slots[i + 1 :])
+        plain, rich = Term(s.root, s.term.theta), s.rich_term
+        _, rss0, rank0 = fit(problem, [*others, plain])
+        _, rss1, rank1 = fit(problem, [*others, rich])
+        p = f_test_p(rss0, rss1, rank1 - rank0, n_obs, rank1)
+        use_rich = p * len(slots) < alpha
+        if use_rich:
+            cv0 = cv_mse(problem, [*others, plain])
+            cv1 = cv_mse(problem, [*others, rich])
+            use_rich = cv0 > 0 and (cv0 - cv1) / cv0 >= min_cv_gain
+        s.term = rich if use_rich else plain
+
+
+def _backward(
+    problem: Problem, slots: list[_Slot], n_tried: int, alpha: float, min_cv_gain: float
+) -> list[_Slot]:
+    """Backward elimination: drop, one at a time, the weakest accepted cause that is no longer
+    needed given the others (F-test at ``alpha`` with the same corrections as when it was added,
+    or a CV gain below ``min_cv_gain``). Returns the dropped slots."""
+    dropped: list[_Slot] = []
+    n_obs = problem.y.size
+    while len(slots) > 1:
+        full = _terms(slots)
+        _, rss1, rank1 = fit(problem, full)
+        cv_full = cv_mse(problem, full)
+        worst: tuple[float, int] | None = None
+        for i, s in enumerate(slots):
+            others = full[:i] + full[i + 1 :]
+            _, rss0, rank0 = fit(problem, others)
+            p = f_test_p(rss0, rss1, rank1 - rank0, n_obs, rank1)
+            p_adj = min(1.0, p * n_tried * s.root.look_elsewhere)
+            cv0 = cv_mse(problem, others)
+            gain = (cv0 - cv_full) / cv0 if cv0 > 0 else 0.0
+            if (p_adj >= alpha or gain < min_cv_gain) and (worst is None or -gain > worst[0]):
+                worst = (-gain, i)
+        if worst is None:
+            break
+        dropped.append(slots.pop(worst[1]))
+        _reprofile(problem, slots)
+    return dropped
+
+
 def diagnose(
     machine: Machine,
     data: Measurements,
     *,
     alpha: float = 1e-3,
     min_cv_gain: float = 0.01,
-    max_effects: int = 4,
+    max_effects: int = 5,
     n_folds: int = 5,
+    progress: Callable[[str], None] | None = None,
 ) -> Diagnosis:
-    """Compare ``machine`` with ``data``, find the causes of what it gets wrong (module docstring)."""
+    """Compare ``machine`` with ``data``, find the causes of what it gets wrong (module docstring).
+
+    ``progress`` (optional) receives one line per step (rounds, alternatives, held-out check)."""
     t0 = time.perf_counter()
+    say = progress or (lambda _msg: None)
     res = compute_residuals(machine, data)
     problem = make_problem(res, n_folds)
     pool = [c for c in all_candidates(res) if is_finite_design(c.design(res, c.thetas[0]))]
-    accepted: list[Term] = []
+    n_tried = max(len(pool), 1)
+    slots: list[_Slot] = []
+    excluded: set[int] = set()
     rounds: list[list[dict[str, Any]]] = []
-    cv_base = cv_mse(problem, [])
-    cv_history = [cv_base]
-    while len(accepted) < max_effects:
-        remaining = [c for c in pool if all(c is not t.candidate for t in accepted)]
-        term, rows = _round(problem, accepted, remaining, alpha, min_cv_gain, cv_history[-1])
+    cv_history = [cv_mse(problem, [])]
+    while len(slots) < max_effects:
+        taken = {id(s.root) for s in slots} | excluded
+        remaining = [c for c in pool if id(c) not in taken]
+        say(f"round {len(rounds) + 1}: {len(remaining)} candidates")
+        term, rows = _round(problem, slots, remaining, n_tried, alpha, min_cv_gain)
         rounds.append(_public_rows(rows))
         if term is None:
             break
-        accepted.append(term)
-        # re-profile the earlier terms' nonlinear parameters given the new one
-        for i, t in enumerate(accepted):
-            if len(t.candidate.thetas) > 1:
-                others = accepted[:i] + accepted[i + 1 :]
-                theta, _, _ = best_theta(problem, others, t.candidate)
-                accepted[i] = Term(t.candidate, theta)
-        cv_history.append(cv_mse(problem, accepted))
+        slots.append(_Slot(term.candidate, term))
+        say(f"  accepted {term.candidate.label}")
+        _reprofile(problem, slots)
+        _choose_variants(problem, slots, alpha, min_cv_gain)
+        for s in _backward(problem, slots, n_tried, alpha, min_cv_gain):
+            excluded.add(id(s.root))
+            say(f"  dropped {s.root.label}: not needed given the others")
+        cv_history.append(cv_mse(problem, _terms(slots)))
 
+    accepted = _terms(slots)
     beta, rss_after, rank_after = fit(problem, accepted)
     fitted = predictions(problem, accepted, beta)
+    say("held-out predictions")
     heldout_pred = cv_predictions(problem, accepted)
     coefs = split_coefficients(accepted, beta)
     effects = [t.candidate.build(c, t.theta) for t, c in zip(accepted, coefs, strict=True)]
     rss_before = float(np.sum(problem.y**2))
+    n_obs = problem.y.size
+    sigma2 = rss_after / max(n_obs - rank_after, 1)
     entries: list[dict[str, Any]] = []
+    if effects:
+        say("alternatives")
     for i, (eff, t) in enumerate(zip(effects, accepted, strict=True)):
-        _, rss_without, _ = fit(problem, accepted[:i] + accepted[i + 1 :])
+        others = accepted[:i] + accepted[i + 1 :]
+        _, rss_without, _ = fit(problem, others)
         entry = {**contract_keys(eff), "parameters": eff.describe().get("parameters", {})}
         entry["explained_fraction"] = (rss_without - rss_after) / rss_before if rss_before else 0.0
         entry["label"] = t.candidate.label
+        alt = find_alternatives(
+            problem, others, t, eff, pool, [s.root for s in slots], rss_after, sigma2, alpha
+        )
+        if alt is not None:
+            entry["alternatives"] = alt["alternatives"]
+            entry["separate_by"] = alt["separate_by"]
+        if not eff.compensable:
+            entry["compensable"] = False
         entries.append(entry)
     order = np.argsort([-e["explained_fraction"] for e in entries], kind="stable")
     entries = [entries[i] for i in order]
     effects = [effects[i] for i in order]
 
     # structure no cause explains?
-    unexplained = unexplained_candidate(problem, accepted, alpha, min_cv_gain, cv_history[-1])
-    if unexplained is not None:
-        entries.append(unexplained)
-
     r_before = res.residual_um
     r_after = r_before - fitted
+    unexplained = unexplained_candidate(problem, accepted, alpha, min_cv_gain, cv_history[-1])
+    if unexplained is not None:
+        unexplained["parameters"].update(locate(res, r_after))
+        entries.append(unexplained)
     r_heldout = r_before - heldout_pred
-    n_obs = problem.y.size
-    sigma = float(np.sqrt(rss_after / max(n_obs - rank_after, 1)))
+    sigma = float(np.sqrt(sigma2))
     summary = {
         "residual_rms_um": {"before": rms3d(r_before), "after": rms3d(r_after)},
         "heldout_rms_um": {"before": rms3d(r_before), "after": rms3d(r_heldout)},
@@ -168,7 +275,7 @@ def diagnose(
         "measured_axes": ["xyz"[k] for k in problem.axes],
         "folds": len(problem.folds),
         "heldout_method": "grouped cross-validation: each fold predicted by the effects fitted "
-        "on the other folds (nonlinear parameters re-profiled)",
+        "on the other folds (nonlinear parameters re-profiled near the full-data value)",
         "cv_mse_um2": cv_history,
         "alpha": alpha,
         "min_cv_gain": min_cv_gain,

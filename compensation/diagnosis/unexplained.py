@@ -102,3 +102,35 @@ def unexplained_candidate(
         },
         "explained_fraction": (rss0 - rss1) / total if total else 0.0,
     }
+
+
+def locate(res: Residuals, remaining_um: FloatArray) -> dict[str, Any]:
+    """Where and when the structure that remains sits: the axis carrying most of it, the centre
+    and extent (mm) of the 10 % of points with the largest remaining residual on that axis
+    (smoothed over each point's 10 nearest neighbours in position, so noise does not pick them),
+    and their time span (s) when the session has times."""
+    r = np.asarray(remaining_um, dtype=float)
+    axis = int(np.argmax(np.sum(r**2, axis=0)))
+    q = res.q_mm
+    span = np.ptp(q, axis=0)
+    span[span == 0] = 1.0
+    qn = q / span
+    n = len(q)
+    k = min(10, n)
+    smooth = np.empty(n)
+    step = max(1, 2_000_000 // max(n, 1))
+    for i0 in range(0, n, step):
+        d = np.sum((qn[i0 : i0 + step, None, :] - qn[None, :, :]) ** 2, axis=2)
+        nn = np.argpartition(d, k - 1, axis=1)[:, :k]
+        smooth[i0 : i0 + step] = np.mean(r[nn, axis], axis=1)
+    top = np.argsort(-np.abs(smooth))[: max(1, n // 10)]
+    out: dict[str, Any] = {
+        "axis": "xyz"[axis],
+        "where_mm": [float(v) for v in np.mean(q[top], axis=0)],
+        "where_extent_mm": [float(v) for v in np.ptp(q[top], axis=0)],
+        "mean_there_um": float(np.mean(smooth[top])),
+    }
+    t = res.data.t_s
+    if t is not None:
+        out["when_s"] = [float(np.min(t[top])), float(np.max(t[top]))]
+    return out

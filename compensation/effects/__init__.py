@@ -4,7 +4,8 @@
   effect shares;
 * :mod:`.parametric` — corrections of the parametric errors (``parametric``, ``coupling``,
   ``reversal``, ``periodic``);
-* :mod:`.probe` — probe lobing.
+* :mod:`.probe` — probe lobing;
+* :mod:`.drift` — an axis' error drifting with time (``drift``: diagnosis only).
 
 The temperature-driven effects (``thermal_gradient``, ``thermal_lag``, ``scale_expansion``,
 ``workpiece_expansion``, ``squareness_drift``) live with the other thermal terms in
@@ -14,6 +15,7 @@ The temperature-driven effects (``thermal_gradient``, ``thermal_lag``, ``scale_e
 from __future__ import annotations
 
 from .base import Effect, EvalContext, effect_from_table, known_causes, register_effect
+from .drift import DriftEffect
 from .parametric import (
     CouplingEffect,
     ParametricEffect,
@@ -27,6 +29,7 @@ from .probe import ProbeLobingEffect, lobing_signals
 
 __all__ = [
     "CouplingEffect",
+    "DriftEffect",
     "Effect",
     "EvalContext",
     "ParametricEffect",

@@ -63,6 +63,9 @@ class Effect:
     """Base class: subclasses set ``cause`` and override the hooks they need."""
 
     cause: ClassVar[str] = ""
+    #: False for effects that describe a session but cannot be predicted at run time (a drift
+    #: with time): ``cmm-comp extend`` leaves them out of the extended machine.
+    compensable: ClassVar[bool] = True
 
     def signals(self) -> dict[str, float]:
         """Runtime signals this effect needs, with their reference (neutral) values."""
@@ -112,6 +115,7 @@ def effect_from_table(table: Mapping[str, Any]) -> Effect:
 #: Modules defining the built-in effects; each registers its causes when imported.
 BUILTIN_EFFECT_MODULES: tuple[str, ...] = (
     "cmm_comp.compensation.effects.parametric",
+    "cmm_comp.compensation.effects.drift",
     "cmm_comp.compensation.effects.probe",
     "cmm_comp.compensation.thermal.distortion",
     "cmm_comp.compensation.thermal.expansion",

@@ -156,10 +156,23 @@ class ParametricEffect(Effect):
 
 
 # ----------------------------------------------------------------------------- coupling
+def _shape_or_one(
+    q_mm: FloatArray, ref_mm: float, span_mm: tuple[float, float], order: int
+) -> FloatArray:
+    """``P_k(s) − P_k(s_ref)`` for k ≥ 1, and 1 for k = 0 (a uniform part)."""
+    if order == 0:
+        return np.ones(np.shape(q_mm))
+    return legendre_shape(q_mm, ref_mm, span_mm, order)
+
+
 class CouplingEffect(Effect):
     """A parametric error of one axis that also varies with another axis' position (non-rigid
-    body: load shift, bridge twist): ``(s_b − s_b,ref)·Σ c_k (P_k(s_a) − P_k(s_a,ref))``, k = 1, 2,
-    added to ``component`` of axis a (µm or µrad), where b is ``varies_with``."""
+    body: load shift, bridge twist):
+    ``Σ_j Σ_k c_jk (P_j(s_b) − P_j(s_b,ref))·S_k(s_a)`` added to ``component`` of axis a (µm or
+    µrad), b = ``varies_with``, ``S_0 = 1`` (a part uniform along a: the carriage of a tilts by the
+    same amount everywhere as b moves — a bridge twist) and ``S_k = P_k(s_a) − P_k(s_a,ref)``
+    (a part growing along a). ``orders`` are the k (default 1, 2), ``with_orders`` the j
+    (default 1: linear in b); coefficients are ordered j-major (for each j, every k)."""
 
     cause: ClassVar[str] = "coupling"
     ORDERS: ClassVar[tuple[int, ...]] = (1, 2)
@@ -171,26 +184,42 @@ class CouplingEffect(Effect):
         coefficients: Sequence[float],
         span_mm: tuple[float, float],
         span_with_mm: tuple[float, float],
+        orders: Sequence[int] | None = None,
+        with_orders: Sequence[int] = (1,),
     ) -> None:
         c = parse_component(component)
         self.component = c.name
         self.varies_with = read_axis(varies_with, "varies_with")
         if self.varies_with == c.axis:
             raise ValueError(f"coupling: {component} cannot vary with its own axis")
-        self.coefficients = read_floats(coefficients, "coefficients", len(self.ORDERS))
+        self.orders = tuple(int(k) for k in (self.ORDERS if orders is None else orders))
+        self.with_orders = tuple(int(j) for j in with_orders)
+        if any(k < 0 for k in self.orders) or any(j < 1 for j in self.with_orders):
+            raise ValueError("coupling: orders must be ≥ 0 and with_orders ≥ 1")
+        n = len(self.orders) * len(self.with_orders)
+        self.coefficients = read_floats(coefficients, "coefficients", n)
         self.span_mm = span_mm
         self.span_with_mm = span_with_mm
 
     def modify_errors(self, ctx: EvalContext) -> None:
         a = AXIS_INDEX[self.component[-1]]
         b = AXIS_INDEX[self.varies_with]
-        sb = normalised(ctx.q_mm[:, b], self.span_with_mm) - normalised(
-            np.array([ctx.reference_mm[b]]), self.span_with_mm
-        )
-        shape = np.zeros(ctx.n)
-        for k, c in zip(self.ORDERS, self.coefficients, strict=True):
-            shape += c * legendre_shape(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
-        add_to_component(ctx, self.component, sb * shape)
+        total = np.zeros(ctx.n)
+        i = 0
+        for j in self.with_orders:
+            sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
+            for k in self.orders:
+                sa = _shape_or_one(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
+                total += self.coefficients[i] * sb * sa
+                i += 1
+        add_to_component(ctx, self.component, total)
+
+    def _names(self) -> list[str]:
+        return [
+            f"legendre_{k}" if self.with_orders == (1,) else f"legendre_{j}_{k}"
+            for j in self.with_orders
+            for k in self.orders
+        ]
 
     def to_table(self) -> dict[str, Any]:
         return {
@@ -199,6 +228,8 @@ class CouplingEffect(Effect):
             "varies_with": self.varies_with,
             "span_mm": list(self.span_mm),
             "span_with_mm": list(self.span_with_mm),
+            "orders": list(self.orders),
+            "with_orders": list(self.with_orders),
             "coefficients": list(self.coefficients),
         }
 
@@ -207,19 +238,21 @@ class CouplingEffect(Effect):
             "cause": self.cause,
             "component": self.component,
             "varies_with": self.varies_with,
-            "parameters": {
-                f"legendre_{k}": c for k, c in zip(self.ORDERS, self.coefficients, strict=True)
-            },
+            "parameters": dict(zip(self._names(), self.coefficients, strict=True)),
         }
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> CouplingEffect:
+        orders = [int(v) for v in read_floats(t.get("orders", cls.ORDERS), "orders")]
+        with_orders = [int(v) for v in read_floats(t.get("with_orders", [1]), "with_orders")]
         return cls(
             str(t.get("component")),
             read_str(t, "varies_with"),
-            read_floats(t.get("coefficients"), "coefficients", len(cls.ORDERS)),
+            read_floats(t.get("coefficients"), "coefficients", len(orders) * len(with_orders)),
             read_span(t.get("span_mm"), "span_mm"),
             read_span(t.get("span_with_mm"), "span_with_mm"),
+            orders,
+            with_orders,
         )
 
 
@@ -275,57 +308,84 @@ class ReversalEffect(Effect):
 
 class PeriodicEffect(Effect):
     """Cyclic positional error along an axis: ``a·cos(2πq/P) + b·sin(2πq/P)`` µm (q the indicated
-    position, P ``period_mm``), minus its value at the reference point."""
+    position, P ``period_mm``) plus optional harmonics ``a_n·cos(2πnq/P) + b_n·sin(2πnq/P)``
+    (n = 2, 3, … in order: ``harmonics_um = [[a_2, b_2], [a_3, b_3], …]``), minus the value at
+    the reference point."""
 
     cause: ClassVar[str] = "periodic"
 
-    def __init__(self, axis: str, period_mm: float, a_cos_um: float, b_sin_um: float) -> None:
+    def __init__(
+        self,
+        axis: str,
+        period_mm: float,
+        a_cos_um: float,
+        b_sin_um: float,
+        harmonics_um: Sequence[Sequence[float]] = (),
+    ) -> None:
         self.axis = read_axis(axis)
-        if not period_mm > 0:
-            raise ValueError(f"period_mm must be > 0, got {period_mm}")
+        if not (math.isfinite(period_mm) and period_mm > 0):
+            raise ValueError(f"period_mm must be finite and > 0, got {period_mm}")
         self.period_mm = float(period_mm)
         self.a_cos_um = float(a_cos_um)
         self.b_sin_um = float(b_sin_um)
+        self.harmonics_um = [tuple(read_floats(h, "harmonics_um", 2)) for h in harmonics_um]
 
-    def shape(self, q_mm: FloatArray, ref_mm: float) -> tuple[FloatArray, FloatArray]:
-        w = 2.0 * math.pi / self.period_mm
+    def shape(
+        self, q_mm: FloatArray, ref_mm: float, harmonic: int = 1
+    ) -> tuple[FloatArray, FloatArray]:
+        """(cos, sin) of harmonic n at ``q_mm``, each minus its value at ``ref_mm``."""
+        w = 2.0 * math.pi * harmonic / self.period_mm
         q = np.asarray(q_mm, dtype=float)
         return np.cos(w * q) - math.cos(w * ref_mm), np.sin(w * q) - math.sin(w * ref_mm)
 
     def modify_errors(self, ctx: EvalContext) -> None:
         k = AXIS_INDEX[self.axis]
-        c, s = self.shape(ctx.q_mm[:, k], float(ctx.reference_mm[k]))
+        ref = float(ctx.reference_mm[k])
+        c, s = self.shape(ctx.q_mm[:, k], ref)
         ctx.errors[:, k, k] += self.a_cos_um * c + self.b_sin_um * s
+        for n, (a_n, b_n) in enumerate(self.harmonics_um, start=2):
+            c, s = self.shape(ctx.q_mm[:, k], ref, n)
+            ctx.errors[:, k, k] += a_n * c + b_n * s
 
     def to_table(self) -> dict[str, Any]:
-        return {
+        t: dict[str, Any] = {
             "cause": self.cause,
             "axis": self.axis,
             "period_mm": self.period_mm,
             "a_cos_um": self.a_cos_um,
             "b_sin_um": self.b_sin_um,
         }
+        if self.harmonics_um:
+            t["harmonics_um"] = [list(h) for h in self.harmonics_um]
+        return t
 
     def describe(self) -> dict[str, Any]:
+        params: dict[str, Any] = {
+            "period_mm": self.period_mm,
+            "amplitude_um": math.hypot(self.a_cos_um, self.b_sin_um),
+            "a_cos_um": self.a_cos_um,
+            "b_sin_um": self.b_sin_um,
+        }
+        for n, (a_n, b_n) in enumerate(self.harmonics_um, start=2):
+            params[f"harmonic_{n}_amplitude_um"] = math.hypot(a_n, b_n)
         return {
             "cause": self.cause,
             "axis": self.axis,
             "period_mm": self.period_mm,
-            "parameters": {
-                "period_mm": self.period_mm,
-                "amplitude_um": math.hypot(self.a_cos_um, self.b_sin_um),
-                "a_cos_um": self.a_cos_um,
-                "b_sin_um": self.b_sin_um,
-            },
+            "parameters": params,
         }
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> PeriodicEffect:
+        harmonics = t.get("harmonics_um", [])
+        if not isinstance(harmonics, list):
+            raise ValueError(f"harmonics_um must be a list of [a, b] pairs, got {harmonics!r}")
         return cls(
             read_str(t, "axis"),
             read_number(t, "period_mm"),
             read_number(t, "a_cos_um"),
             read_number(t, "b_sin_um"),
+            harmonics,
         )
 
 

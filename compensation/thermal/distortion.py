@@ -26,8 +26,13 @@ __all__ = ["SquarenessDriftEffect", "ThermalGradientEffect"]
 
 class ThermalGradientEffect(TemperatureEffect):
     """An axis bends with the temperature difference ``ΔT = T_top − T_bottom``: uniform curvature
-    ``κ = g·ΔT`` (g in µrad/(m·°C)) in the vertical plane (z: in the x-z plane), i.e. an angular
-    error ``g·ΔT·u`` and the consistent straightness ``∓g·ΔT·u²/2`` (u in m from the reference)."""
+    ``κ = g·ΔT`` (g in µrad/(m·°C)) in the vertical plane (z: in the x-z plane). The carriage
+    tilts with the local slope of the guideway: angular error ``ΔT·(g·u + h)`` and the consistent
+    straightness ``∓ΔT·(g·u²/2 + h·u)`` (u in m from the reference point), where ``h``
+    (µrad/°C, ``tilt_urad_per_C``) is the slope at the reference point. It encodes the boundary
+    condition: a guideway simply supported at both ends of its travel bows symmetrically
+    (``h = g·(u_ref − u_mid)``), one clamped at an end is a cantilever (``h = g·(u_ref −
+    u_end)``), ``h = 0`` is a bend about the reference point."""
 
     cause: ClassVar[str] = "thermal_gradient"
     #: axis → (angular slot, straightness slot, sign of the straightness)
@@ -37,9 +42,12 @@ class ThermalGradientEffect(TemperatureEffect):
         "z": (4, 0, 1.0),  # ey_z, dx_z = +∫ey
     }
 
-    def __init__(self, axis: str, curvature_urad_per_m_C: float) -> None:
+    def __init__(
+        self, axis: str, curvature_urad_per_m_C: float, tilt_urad_per_C: float = 0.0
+    ) -> None:
         self.axis = read_axis(axis)
         self.curvature = float(curvature_urad_per_m_C)
+        self.tilt = float(tilt_urad_per_C)
 
     def signals(self) -> dict[str, float]:
         return {TOP: self.reference_C, BOTTOM: self.reference_C}
@@ -49,22 +57,31 @@ class ThermalGradientEffect(TemperatureEffect):
         dt = signal_or(ctx, TOP, ctx.reference_C) - signal_or(ctx, BOTTOM, ctx.reference_C)
         u_m = ctx.u_mm[:, k] / 1000.0
         ang, lin, sign = self._PLANE[self.axis]
-        ctx.errors[:, k, ang] += self.curvature * dt * u_m
-        ctx.errors[:, k, lin] += sign * self.curvature * dt * u_m**2 / 2.0
+        ctx.errors[:, k, ang] += dt * (self.curvature * u_m + self.tilt)
+        ctx.errors[:, k, lin] += sign * dt * (self.curvature * u_m**2 / 2.0 + self.tilt * u_m)
 
     def to_table(self) -> dict[str, Any]:
-        return self._table(axis=self.axis, curvature_urad_per_m_C=self.curvature)
+        return self._table(
+            axis=self.axis, curvature_urad_per_m_C=self.curvature, tilt_urad_per_C=self.tilt
+        )
 
     def describe(self) -> dict[str, Any]:
         return {
             "cause": self.cause,
             "axis": self.axis,
-            "parameters": {"curvature_urad_per_m_C": self.curvature},
+            "parameters": {
+                "curvature_urad_per_m_C": self.curvature,
+                "tilt_urad_per_C": self.tilt,
+            },
         }
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> ThermalGradientEffect:
-        return cls(read_str(t, "axis"), read_number(t, "curvature_urad_per_m_C"))._with_reference(t)
+        return cls(
+            read_str(t, "axis"),
+            read_number(t, "curvature_urad_per_m_C"),
+            read_number(t, "tilt_urad_per_C", 0.0),
+        )._with_reference(t)
 
 
 class SquarenessDriftEffect(TemperatureEffect):
