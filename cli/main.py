@@ -16,6 +16,7 @@ _REGISTRARS: tuple[tuple[str, str], ...] = (
     ("cmm_comp.cli.model", "add_parsers"),
     ("cmm_comp.cli.grid", "add_parsers"),
     ("cmm_comp.cli.diagnosis", "add_parsers"),
+    ("cmm_comp.cli.importing", "add_parsers"),
     ("cmm_comp.cli.daemon", "add_parsers"),
     ("cmm_comp.cli.demo", "add_parsers"),
 )

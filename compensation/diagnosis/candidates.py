@@ -440,10 +440,10 @@ __all__ = [
     "LAG_TIME_CONSTANTS_S",
     "LOBES",
     "Candidate",
-    "rich_orders",
     "all_candidates",
     "contract_keys",
     "effect_displacement_um",
     "is_finite_design",
     "periodic_periods",
+    "rich_orders",
 ]

@@ -23,6 +23,7 @@ import numpy as np
 from ..effects import Effect
 from ..formats.measurements import Measurements
 from ..machine import Machine
+from .alternatives import find_alternatives
 from .candidates import Candidate, all_candidates, contract_keys, is_finite_design
 from .fitting import (
     Problem,
@@ -37,7 +38,6 @@ from .fitting import (
     split_coefficients,
 )
 from .residuals import Residuals, compute_residuals, length_error_e0_um, rms3d
-from .alternatives import find_alternatives
 from .unexplained import locate, unexplained_candidate
 
 __all__ = ["Diagnosis", "diagnose"]
