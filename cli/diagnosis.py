@@ -67,7 +67,15 @@ def cmd_extend(args: argparse.Namespace) -> int:
         extended = diagnosis.extended_machine()
         out = Path(args.output)
         extended.to_toml(out)  # atomic: nothing is written on failure
-        print(f"{out}: {len(diagnosis.effects)} effect(s) added")
+        added = [e for e in diagnosis.effects if e.compensable]
+        print(f"{out}: {len(added)} effect(s) added")
+        for e in diagnosis.effects:
+            if not e.compensable:
+                print(
+                    f"  not added: {e.cause} ({e.describe().get('axis', '')}): it describes this "
+                    "session but cannot be predicted at run time; log the temperature that "
+                    "drives it and diagnose again"
+                )
         return 0
 
     return _run(args, action)

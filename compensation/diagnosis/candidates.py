@@ -13,7 +13,7 @@ are written out explicitly and checked against the effects in the tests.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -86,6 +86,10 @@ class Candidate:
     #: The same cause with a richer shape (more orders, harmonics): used to absorb what a
     #: mis-shaped accepted cause leaves behind, and reported when the data need it.
     rich: Candidate | None = None
+    #: Time-varying signals the cause is driven by (temperatures, time): the cause is only
+    #: named when their *variation* during the session is seen, not just their mean — with the
+    #: signals frozen at their session mean it is a static table change (:meth:`static`).
+    drivers: tuple[str, ...] = ()
     #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional.
     design_many: Callable[[Residuals, Sequence[Any]], FloatArray] | None = None
     _cache: dict[tuple[int, Any], FloatArray] = field(default_factory=dict, repr=False)
@@ -108,6 +112,33 @@ class Candidate:
         if key not in self._cache:
             self._cache[key] = self.design_uncached(res, theta)
         return self._cache[key]
+
+    def static(self, res: Residuals) -> Candidate | None:
+        """This cause with its driving signals frozen at their session mean (None without
+        drivers, or when freezing leaves nothing): what a session sees as a static error."""
+        if not self.drivers:
+            return None
+        key = ("static", id(res))
+        if key not in self._cache:
+            frozen = replace(
+                res,
+                signals={
+                    k: np.full_like(v, float(np.mean(v))) if k in self.drivers else v
+                    for k, v in res.signals.items()
+                },
+            )
+            x = self.design_uncached(frozen, self.thetas[0])
+            self._cache[key] = x
+        x = self._cache[key]
+        if not is_finite_design(x):
+            return None
+        return Candidate(
+            f"{self.cause}_static",
+            self.keys,
+            self.n_params,
+            self.build,
+            design_fn=lambda _r, _t: x,
+        )
 
     def design_uncached(self, res: Residuals, theta: Any = None) -> FloatArray:
         """(N, 3, p) displacement per unit amplitude, computed afresh."""
@@ -205,7 +236,7 @@ def _coupling_builder(
     orders: tuple[int, ...],
     with_orders: tuple[int, ...],
 ) -> EffectBuilder:
-    return lambda a, _t: CouplingEffect(comp, other, a, sa, sb, orders, with_orders)
+    return lambda a, _t: CouplingEffect(comp, other, a[1:], sa, sb, orders, with_orders, a[0])
 
 
 def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuilder:
@@ -224,8 +255,9 @@ def rich_orders(component: str) -> list[int]:
     base = default_orders(component)
     if component in SQUARENESS:
         return base
-    top = 6 if component in ANGULAR else 8
-    return list(range(base[0], top + 1))
+    if component in ANGULAR:  # a constant too: the carriage tilted by the same angle everywhere
+        return list(range(0, 7))
+    return list(range(base[0], 9))
 
 
 def _reversal_builder(a: str, span: tuple[float, float]) -> EffectBuilder:
@@ -275,13 +307,16 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             keys = {"component": comp, "varies_with": other}
             (o1, w1), (o2, w2) = COUPLING_ORDERS
             rich = Candidate(
-                "coupling", keys, len(o2) * len(w2), _coupling_builder(comp, other, sa, sb, o2, w2)
+                "coupling",
+                keys,
+                1 + len(o2) * len(w2),
+                _coupling_builder(comp, other, sa, sb, o2, w2),
             )
             out.append(
                 Candidate(
                     "coupling",
                     keys,
-                    len(o1) * len(w1),
+                    1 + len(o1) * len(w1),
                     _coupling_builder(comp, other, sa, sb, o1, w1),
                     rich=rich,
                 )
@@ -310,6 +345,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     {"axis": a},
                     2,
                     gradient_builder(a),
+                    drivers=("T_top", "T_bottom"),
                 )
             )
         if res.has(f"T_{a}"):
@@ -319,6 +355,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     {"axis": a},
                     1,
                     scale_builder(a),
+                    drivers=(f"T_{a}",),
                 )
             )
         if res.has(f"dir_{a}"):
@@ -335,6 +372,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     2 * lo_k,
                     _drift_builder(a, t_span, lo_k),
                     rich=rich_drift,
+                    drivers=("t",),
                 )
             )
         periods, n_eff = periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])
@@ -377,6 +415,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 {},
                 1,
                 lambda p, _t: thermal(WorkpieceExpansionEffect(p[0], fx)),
+                drivers=("T_wp",),
             )
         )
     if res.has("T_air"):
@@ -387,6 +426,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     {"component": comp},
                     1,
                     squareness_drift_builder(comp),
+                    drivers=("T_air",),
                 )
             )
     if (

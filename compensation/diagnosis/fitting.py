@@ -38,6 +38,9 @@ class Problem:
     res: Residuals
     axes: tuple[int, ...]  # measured axes (residual not identically zero)
     folds: list[NDArray[np.intp]]  # index arrays of held-out points
+    #: Fit a constant offset per measured axis in every model (a nuisance, not a cause): the
+    #: reference instrument's zero is never exactly the machine's reference point.
+    offsets: bool = True
     _q_cache: dict[Any, FloatArray | None] = field(default_factory=dict, repr=False)
 
     def projector(self, base: Sequence[Term], rows: Any) -> FloatArray | None:
@@ -67,10 +70,17 @@ class Problem:
         x = x[rows][:, self.axes, :]
         return x.reshape(-1, x.shape[2])
 
+    @property
+    def n_nuisance(self) -> int:
+        """Leading columns of every stacked design that are nuisance offsets."""
+        return len(self.axes) if self.offsets else 0
+
     def stacked(self, terms: Sequence[Term], rows: Any = slice(None)) -> FloatArray:
-        n = len(self.y[rows]) * len(self.axes)
-        cols = [self.design(t, rows) for t in terms]
-        return np.hstack(cols) if cols else np.zeros((n, 0))
+        """(rows·axes, n_nuisance + Σp) design: the offsets, then each term's columns."""
+        n_rows = len(self.y[rows])
+        cols = [np.tile(np.eye(len(self.axes)), (n_rows, 1))] if self.offsets else []
+        cols += [self.design(t, rows) for t in terms]
+        return np.hstack(cols) if cols else np.zeros((n_rows * len(self.axes), 0))
 
 
 def make_problem(res: Residuals, n_folds: int = 5, seed: int = 0) -> Problem:
@@ -253,7 +263,7 @@ def cv_predictions(problem: Problem, terms: Sequence[Term], rescan: bool = True)
     (nonlinear parameters re-profiled on the training folds when ``rescan``)."""
     res = problem.res
     pred = np.zeros((res.n, 3))
-    if not terms:
+    if not terms and not problem.offsets:
         return pred
     all_rows = np.arange(res.n)
     for test in problem.folds:
@@ -283,13 +293,16 @@ def cv_mse(problem: Problem, terms: Sequence[Term], rescan: bool = True) -> floa
 def predictions(problem: Problem, terms: Sequence[Term], beta: FloatArray) -> FloatArray:
     """(N, 3) fitted displacement of ``terms`` with coefficients ``beta`` at all points."""
     out = np.zeros((problem.res.n, 3))
-    if terms:
+    if beta.size:
         out[:, problem.axes] = (problem.stacked(terms) @ beta).reshape(problem.res.n, -1)
     return out
 
 
-def split_coefficients(terms: Sequence[Term], beta: FloatArray) -> list[list[float]]:
-    out, i = [], 0
+def split_coefficients(
+    problem: Problem, terms: Sequence[Term], beta: FloatArray
+) -> list[list[float]]:
+    """Each term's coefficients (the nuisance offsets first in ``beta`` are skipped)."""
+    out, i = [], problem.n_nuisance
     for t in terms:
         out.append([float(v) for v in beta[i : i + t.candidate.n_params]])
         i += t.candidate.n_params

@@ -154,20 +154,26 @@ def binned_statistics(x: FloatArray, r_um: FloatArray, bins: int = 8) -> dict[st
 
 
 def length_error_e0_um(
-    reference_mm: FloatArray, residual_um: FloatArray, group: NDArray[np.str_] | None
+    reference_mm: FloatArray,
+    residual_um: FloatArray,
+    group: NDArray[np.str_] | None,
+    max_points: int = 600,
 ) -> float:
     """ISO 10360-2-style E0 estimate (µm): max |length error| over point pairs of one artefact.
 
     For points i, j of the same group (artefact position), the length error of the corrected
     coordinates is ``(r_j − r_i)·(p_j − p_i)/|p_j − p_i|`` with r the residual (true − corrected)
     and p the reference positions; pairs closer than 1 mm are skipped. Without groups, blocks of
-    30 consecutive points stand in for artefact positions.
+    30 consecutive points stand in for artefact positions. A group of more than ``max_points``
+    points (a dense record) is thinned to ``max_points`` evenly spaced ones (pairs grow as N²).
     """
     n = len(reference_mm)
     labels = group if group is not None else np.asarray([str(i // 30) for i in range(n)])
     worst = 0.0
     for g in np.unique(labels):
         idx = np.flatnonzero(labels == g)
+        if len(idx) > max_points:
+            idx = idx[np.linspace(0, len(idx) - 1, max_points).round().astype(int)]
         p = reference_mm[idx]
         r = residual_um[idx]
         dp = p[None, :, :] - p[:, None, :]

@@ -100,6 +100,13 @@ def _round(
     for cand in pool:
         theta, rss1, extra = best_theta(problem, base, cand)
         p = f_test_p(rss0, rss1, extra, n_obs, rank0 + extra)
+        static = cand.static(problem.res)
+        if static is not None and p < alpha:
+            # a signal-driven cause must be seen in the signal's variation, not its mean
+            base_s = [*base, Term(static)]
+            _, rss0s, rank0s = fit(problem, base_s)
+            _, rss1s, rank1s = fit(problem, [*base_s, Term(cand, theta)])
+            p = max(p, f_test_p(rss0s, rss1s, rank1s - rank0s, n_obs, rank1s))
         p_adj = min(1.0, p * n_tried * cand.look_elsewhere)
         rows.append(
             {"candidate": cand, "theta": theta, "label": cand.label, "rss": rss1, "p_adj": p_adj}
@@ -225,7 +232,7 @@ def diagnose(
     fitted = predictions(problem, accepted, beta)
     say("held-out predictions")
     heldout_pred = cv_predictions(problem, accepted)
-    coefs = split_coefficients(accepted, beta)
+    coefs = split_coefficients(problem, accepted, beta)
     effects = [t.candidate.build(c, t.theta) for t, c in zip(accepted, coefs, strict=True)]
     rss_before = float(np.sum(problem.y**2))
     n_obs = problem.y.size
@@ -271,6 +278,10 @@ def diagnose(
             "position); 'after' uses out-of-fold predictions",
         },
         "noise_sigma_um": sigma,
+        "offset_um": {
+            "xyz"[k]: float(v)
+            for k, v in zip(problem.axes, beta[: problem.n_nuisance], strict=False)
+        },
         "n_points": int(data.n),
         "measured_axes": ["xyz"[k] for k in problem.axes],
         "folds": len(problem.folds),

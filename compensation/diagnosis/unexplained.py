@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 from numpy.polynomial import legendre
+from scipy.spatial import cKDTree
 
 from .candidates import Candidate
 from .fitting import Problem, Term, cv_mse, f_test_p, fit
@@ -117,12 +118,8 @@ def locate(res: Residuals, remaining_um: FloatArray) -> dict[str, Any]:
     qn = q / span
     n = len(q)
     k = min(10, n)
-    smooth = np.empty(n)
-    step = max(1, 2_000_000 // max(n, 1))
-    for i0 in range(0, n, step):
-        d = np.sum((qn[i0 : i0 + step, None, :] - qn[None, :, :]) ** 2, axis=2)
-        nn = np.argpartition(d, k - 1, axis=1)[:, :k]
-        smooth[i0 : i0 + step] = np.mean(r[nn, axis], axis=1)
+    _, nn = cKDTree(qn).query(qn, k=k)
+    smooth = np.mean(r[np.asarray(nn).reshape(n, k), axis], axis=1)
     top = np.argsort(-np.abs(smooth))[: max(1, n // 10)]
     out: dict[str, Any] = {
         "axis": "xyz"[axis],

@@ -172,7 +172,9 @@ class CouplingEffect(Effect):
     µrad), b = ``varies_with``, ``S_0 = 1`` (a part uniform along a: the carriage of a tilts by the
     same amount everywhere as b moves — a bridge twist) and ``S_k = P_k(s_a) − P_k(s_a,ref)``
     (a part growing along a). ``orders`` are the k (default 1, 2), ``with_orders`` the j
-    (default 1: linear in b); coefficients are ordered j-major (for each j, every k)."""
+    (default 1: linear in b); coefficients are ordered j-major (for each j, every k).
+    ``offset`` (µm or µrad) is the coupled error's value at the reference point: a twist that
+    grows with b from a point other than the reference is already there at the reference."""
 
     cause: ClassVar[str] = "coupling"
     ORDERS: ClassVar[tuple[int, ...]] = (1, 2)
@@ -186,8 +188,12 @@ class CouplingEffect(Effect):
         span_with_mm: tuple[float, float],
         orders: Sequence[int] | None = None,
         with_orders: Sequence[int] = (1,),
+        offset: float = 0.0,
     ) -> None:
         c = parse_component(component)
+        self.offset = float(offset)
+        if not math.isfinite(self.offset):
+            raise ValueError(f"coupling: offset must be finite, got {offset!r}")
         self.component = c.name
         self.varies_with = read_axis(varies_with, "varies_with")
         if self.varies_with == c.axis:
@@ -204,7 +210,7 @@ class CouplingEffect(Effect):
     def modify_errors(self, ctx: EvalContext) -> None:
         a = AXIS_INDEX[self.component[-1]]
         b = AXIS_INDEX[self.varies_with]
-        total = np.zeros(ctx.n)
+        total = np.full(ctx.n, self.offset)
         i = 0
         for j in self.with_orders:
             sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
@@ -231,6 +237,7 @@ class CouplingEffect(Effect):
             "orders": list(self.orders),
             "with_orders": list(self.with_orders),
             "coefficients": list(self.coefficients),
+            "offset": self.offset,
         }
 
     def describe(self) -> dict[str, Any]:
@@ -238,7 +245,10 @@ class CouplingEffect(Effect):
             "cause": self.cause,
             "component": self.component,
             "varies_with": self.varies_with,
-            "parameters": dict(zip(self._names(), self.coefficients, strict=True)),
+            "parameters": {
+                **dict(zip(self._names(), self.coefficients, strict=True)),
+                "offset_at_reference": self.offset,
+            },
         }
 
     @classmethod
@@ -253,6 +263,7 @@ class CouplingEffect(Effect):
             read_span(t.get("span_with_mm"), "span_with_mm"),
             orders,
             with_orders,
+            read_number(t, "offset", 0.0),
         )
 
 

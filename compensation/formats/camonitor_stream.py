@@ -277,7 +277,9 @@ def _fit_map(raw: FloatArray, x: FloatArray, scale: float | None) -> tuple[float
     """Least-squares ``x ≈ gain·raw + offset`` (gain fixed when ``scale`` is given)."""
     if scale is not None:
         return float(scale), float(np.mean(x - scale * raw))
-    if np.ptp(raw) <= 0 or np.ptp(x) <= 0:
+    if np.ptp(x) <= 0:
+        raise RealDataError("the axis does not move in the log: no linear map can be fitted")
+    if np.ptp(raw) <= 0:
         raise RealDataError(
             "the reference does not change with the position: no linear map can be fitted "
             "(is the reference PV right?)"
@@ -286,11 +288,16 @@ def _fit_map(raw: FloatArray, x: FloatArray, scale: float | None) -> tuple[float
     return float(gain), float(offset)
 
 
+def _has_test_numbers(log: Mapping[str, PvSeries], opts: StreamOptions) -> bool:
+    """Whether the cycles come from ISO 230-2 test numbers (else from the motion)."""
+    return bool(opts.test_pv and opts.command_pv and opts.test_pv in log and opts.command_pv in log)
+
+
 def _cycles(
     log: Mapping[str, PvSeries], opts: StreamOptions, t: FloatArray, direction: NDArray[np.int64]
 ) -> tuple[NDArray[np.int64], str]:
     """Cycle of each sample (1-based, 0 = outside the test) and where the cycles came from."""
-    if opts.test_pv and opts.command_pv and opts.test_pv in log and opts.command_pv in log:
+    if _has_test_numbers(log, opts) and opts.test_pv and opts.command_pv:
         points = iso230_points_from_log(
             log, opts.test_pv, opts.command_pv, opts.reference_pv, opts.position_pv
         )
@@ -366,7 +373,7 @@ def align_streams(
     k = motion.interval(tq)
     state = np.where(motion.rest[k], "rest", np.where(motion.steady[k], "steady", "accelerating"))
     direction = motion.direction[k]
-    if opts.test_pv is None or opts.test_pv not in log:
+    if not _has_test_numbers(log, opts):  # the motion's cycles, with the aligned directions
         cycle, cycles_from = _cycles(log, opts, tr, direction)
     v, a = np.where(motion.rest[k], 0.0, motion.v[k]), motion.a[k]
     keep = inside & (direction != 0) & (cycle > 0)
