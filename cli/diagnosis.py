@@ -32,8 +32,12 @@ def _run(args: argparse.Namespace, action: Any) -> int:
     except (CmmCompError, OSError) as exc:
         print(f"cmm-comp {args.command}: {exc}", file=sys.stderr)
         return 2
+
+    def progress(line: str) -> None:
+        print(f"cmm-comp {args.command}: {line}", file=sys.stderr, flush=True)
+
     try:
-        diagnosis = diagnose(machine, data)
+        diagnosis = diagnose(machine, data, progress=progress)
     except ValueError as exc:
         print(f"cmm-comp {args.command}: {args.measurements}: {exc}", file=sys.stderr)
         return 2

@@ -78,9 +78,9 @@ def _variants(res: Residuals) -> list[tuple[str, Residuals]]:
     sideways[::2, 0] = 100.0
     sideways[1::2, 1] = 100.0
     longer = np.zeros((n, 3))
-    longer[:, 2] = -100.0
+    longer[::2, 2] = -100.0  # half the points: a second stylus length beside the first
     out = [
-        ("another stylus length (e.g. 100 mm longer)", _hypothetical(res, stylus_add_mm=longer)),
+        ("a second stylus length (e.g. 100 mm longer)", _hypothetical(res, stylus_add_mm=longer)),
         (
             "styli offset sideways (e.g. ±100 mm in x and y)",
             _hypothetical(res, stylus_add_mm=sideways),

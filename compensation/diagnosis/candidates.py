@@ -92,7 +92,7 @@ class Candidate:
     drivers: tuple[str, ...] = ()
     #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional.
     design_many: Callable[[Residuals, Sequence[Any]], FloatArray] | None = None
-    _cache: dict[tuple[int, Any], FloatArray] = field(default_factory=dict, repr=False)
+    _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
 
     @property
     def identity(self) -> tuple[Any, ...]:
@@ -240,7 +240,7 @@ def _coupling_builder(
 
 
 def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuilder:
-    return lambda p, _t: DriftEffect(a, span, p[:order], p[order:])
+    return lambda p, _t: DriftEffect(a, span, p[:order], p[order:])  # K offsets, K + 1 scales
 
 
 #: Shapes of each family: (default, rich). The default is what a cause usually looks like; the
@@ -248,6 +248,15 @@ def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuild
 COUPLING_ORDERS = (((0, 1, 2), (1,)), ((0, 1, 2, 3), (1, 2)))
 PERIODIC_HARMONICS = (1, 3)
 DRIFT_ORDERS = (3, 6)
+
+
+def candidate_orders(component: str) -> list[int]:
+    """Legendre orders of a table correction's default shape: the effect's defaults, and for an
+    angular table also a constant (a carriage tilted by the same angle everywhere: the table was
+    zeroed elsewhere than at the reference point, which a stylus offset reveals)."""
+    if component in ANGULAR:
+        return [0, *default_orders(component)]
+    return default_orders(component)
 
 
 def rich_orders(component: str) -> list[int]:
@@ -277,7 +286,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
     moved = {a: float(np.ptp(res.q_mm[:, k])) > 1e-6 for k, a in enumerate(AXES)}
     out: list[Candidate] = []
     for comp in (*TABLE_COMPONENTS, *SQUARENESS):
-        orders = default_orders(comp)
+        orders = candidate_orders(comp)
         if comp not in SQUARENESS and not moved[comp[-1]]:
             continue
         span = _span(res, comp[-1]) if comp not in SQUARENESS else (0.0, 1.0)
@@ -327,7 +336,12 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         return eff
 
     def gradient_builder(a: str) -> EffectBuilder:
-        return lambda p, _t: thermal(ThermalGradientEffect(a, p[0], p[1]))
+        # p: curvature, tilt, positional (2), deflection at the reference[, taper]
+        return lambda p, _t: thermal(
+            ThermalGradientEffect(
+                a, p[0], p[1], p[2], p[3], p[5] if len(p) > 5 else 0.0, offset_um_per_C=p[4]
+            )
+        )
 
     def scale_builder(a: str) -> EffectBuilder:
         return lambda p, _t: thermal(ScaleExpansionEffect(a, p[0]))
@@ -343,9 +357,16 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 Candidate(
                     "thermal_gradient",
                     {"axis": a},
-                    2,
+                    5,
                     gradient_builder(a),
                     drivers=("T_top", "T_bottom"),
+                    rich=Candidate(
+                        "thermal_gradient",
+                        {"axis": a},
+                        6,
+                        gradient_builder(a),
+                        drivers=("T_top", "T_bottom"),
+                    ),
                 )
             )
         if res.has(f"T_{a}"):
@@ -364,12 +385,14 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
             t_span = (float(np.min(res.signals["t"])), float(np.max(res.signals["t"])))
             lo_k, hi_k = DRIFT_ORDERS
-            rich_drift = Candidate("drift", {"axis": a}, 2 * hi_k, _drift_builder(a, t_span, hi_k))
+            rich_drift = Candidate(
+                "drift", {"axis": a}, 2 * hi_k + 1, _drift_builder(a, t_span, hi_k)
+            )
             out.append(
                 Candidate(
                     "drift",
                     {"axis": a},
-                    2 * lo_k,
+                    2 * lo_k + 1,
                     _drift_builder(a, t_span, lo_k),
                     rich=rich_drift,
                     drivers=("t",),

@@ -32,7 +32,19 @@ class ThermalGradientEffect(TemperatureEffect):
     (µrad/°C, ``tilt_urad_per_C``) is the slope at the reference point. It encodes the boundary
     condition: a guideway simply supported at both ends of its travel bows symmetrically
     (``h = g·(u_ref − u_mid)``), one clamped at an end is a cantilever (``h = g·(u_ref −
-    u_end)``), ``h = 0`` is a bend about the reference point."""
+    u_end)``), ``h = 0`` is a bend about the reference point. A scale that sits above or below
+    the line about which the carriage tilts reads the tilt as a positional error too (Abbe offset
+    of the scale): ``ΔT·(a·u + b)`` µm on the axis' positional error (``a`` µm/(m·°C),
+    ``positional_um_per_m_C``; ``b`` µm/°C, ``positional_um_per_C``; both ∝ that height).
+    A gradient that is not uniform along the beam adds ``c·u²`` to the tilt and ``∓c·u³/3`` to
+    the straightness (``c`` µrad/(m²·°C), ``taper_urad_per_m2_C``).
+    For an axis that moves the workpiece (a table) the same relation holds in the parametric
+    components: its pads run over the base rail the opposite way to the axis coordinate, and the
+    chain applies a table's errors with the opposite sign — the two cancel.
+
+    ``offset_um_per_C`` (µm/°C): the guideway's deflection at the reference point itself (zero
+    only when a support sits there): ``ΔT·offset`` µm added to the straightness — a table error
+    is zero at the reference by calibration, a bend that changes with ΔT cannot be."""
 
     cause: ClassVar[str] = "thermal_gradient"
     #: axis → (angular slot, straightness slot, sign of the straightness)
@@ -43,11 +55,21 @@ class ThermalGradientEffect(TemperatureEffect):
     }
 
     def __init__(
-        self, axis: str, curvature_urad_per_m_C: float, tilt_urad_per_C: float = 0.0
+        self,
+        axis: str,
+        curvature_urad_per_m_C: float,
+        tilt_urad_per_C: float = 0.0,
+        positional_um_per_m_C: float = 0.0,
+        positional_um_per_C: float = 0.0,
+        taper_urad_per_m2_C: float = 0.0,
+        offset_um_per_C: float = 0.0,
     ) -> None:
+        self.offset = float(offset_um_per_C)
+        self.taper = float(taper_urad_per_m2_C)
         self.axis = read_axis(axis)
         self.curvature = float(curvature_urad_per_m_C)
         self.tilt = float(tilt_urad_per_C)
+        self.positional = (float(positional_um_per_m_C), float(positional_um_per_C))
 
     def signals(self) -> dict[str, float]:
         return {TOP: self.reference_C, BOTTOM: self.reference_C}
@@ -57,12 +79,24 @@ class ThermalGradientEffect(TemperatureEffect):
         dt = signal_or(ctx, TOP, ctx.reference_C) - signal_or(ctx, BOTTOM, ctx.reference_C)
         u_m = ctx.u_mm[:, k] / 1000.0
         ang, lin, sign = self._PLANE[self.axis]
-        ctx.errors[:, k, ang] += dt * (self.curvature * u_m + self.tilt)
-        ctx.errors[:, k, lin] += sign * dt * (self.curvature * u_m**2 / 2.0 + self.tilt * u_m)
+        ctx.errors[:, k, ang] += dt * (self.curvature * u_m + self.tilt + self.taper * u_m**2)
+        ctx.errors[:, k, lin] += (
+            sign
+            * dt
+            * (self.curvature * u_m**2 / 2.0 + self.tilt * u_m + self.taper * u_m**3 / 3.0)
+            + dt * self.offset
+        )
+        ctx.errors[:, k, k] += dt * (self.positional[0] * u_m + self.positional[1])
 
     def to_table(self) -> dict[str, Any]:
         return self._table(
-            axis=self.axis, curvature_urad_per_m_C=self.curvature, tilt_urad_per_C=self.tilt
+            axis=self.axis,
+            curvature_urad_per_m_C=self.curvature,
+            tilt_urad_per_C=self.tilt,
+            positional_um_per_m_C=self.positional[0],
+            positional_um_per_C=self.positional[1],
+            taper_urad_per_m2_C=self.taper,
+            offset_um_per_C=self.offset,
         )
 
     def describe(self) -> dict[str, Any]:
@@ -72,6 +106,10 @@ class ThermalGradientEffect(TemperatureEffect):
             "parameters": {
                 "curvature_urad_per_m_C": self.curvature,
                 "tilt_urad_per_C": self.tilt,
+                "positional_um_per_m_C": self.positional[0],
+                "positional_um_per_C": self.positional[1],
+                "taper_urad_per_m2_C": self.taper,
+                "offset_um_per_C": self.offset,
             },
         }
 
@@ -81,6 +119,10 @@ class ThermalGradientEffect(TemperatureEffect):
             read_str(t, "axis"),
             read_number(t, "curvature_urad_per_m_C"),
             read_number(t, "tilt_urad_per_C", 0.0),
+            read_number(t, "positional_um_per_m_C", 0.0),
+            read_number(t, "positional_um_per_C", 0.0),
+            read_number(t, "taper_urad_per_m2_C", 0.0),
+            read_number(t, "offset_um_per_C", 0.0),
         )._with_reference(t)
 
 
