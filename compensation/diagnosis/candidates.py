@@ -236,7 +236,11 @@ def _coupling_builder(
     orders: tuple[int, ...],
     with_orders: tuple[int, ...],
 ) -> EffectBuilder:
-    return lambda a, _t: CouplingEffect(comp, other, a[1:], sa, sb, orders, with_orders, a[0])
+    # a: offset, the part along a at b's reference (orders 1…n_along), then the products
+    n_along = COUPLING_ALONG[1] if len(orders) > len(COUPLING_ORDERS[0][0]) else COUPLING_ALONG[0]
+    return lambda a, _t: CouplingEffect(
+        comp, other, a[1 + n_along :], sa, sb, orders, with_orders, a[0], a[1 : 1 + n_along]
+    )
 
 
 def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuilder:
@@ -246,6 +250,8 @@ def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuild
 #: Shapes of each family: (default, rich). The default is what a cause usually looks like; the
 #: rich one absorbs what a mis-shaped default leaves behind and is reported when the data need it.
 COUPLING_ORDERS = (((0, 1, 2), (1,)), ((0, 1, 2, 3), (1, 2)))
+#: Orders of the part along a at b's reference position (default, rich).
+COUPLING_ALONG = (1, 3)
 PERIODIC_HARMONICS = (1, 3)
 DRIFT_ORDERS = (3, 6)
 
@@ -318,14 +324,14 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             rich = Candidate(
                 "coupling",
                 keys,
-                1 + len(o2) * len(w2),
+                1 + COUPLING_ALONG[1] + len(o2) * len(w2),
                 _coupling_builder(comp, other, sa, sb, o2, w2),
             )
             out.append(
                 Candidate(
                     "coupling",
                     keys,
-                    1 + len(o1) * len(w1),
+                    1 + COUPLING_ALONG[0] + len(o1) * len(w1),
                     _coupling_builder(comp, other, sa, sb, o1, w1),
                     rich=rich,
                 )

@@ -173,8 +173,10 @@ class CouplingEffect(Effect):
     same amount everywhere as b moves — a bridge twist) and ``S_k = P_k(s_a) − P_k(s_a,ref)``
     (a part growing along a). ``orders`` are the k (default 1, 2), ``with_orders`` the j
     (default 1: linear in b); coefficients are ordered j-major (for each j, every k).
-    ``offset`` (µm or µrad) is the coupled error's value at the reference point: a twist that
-    grows with b from a point other than the reference is already there at the reference."""
+    ``offset`` (µm or µrad) is the coupled error's value at the reference point and ``along``
+    the coefficients ``a_k`` of the part ``Σ a_k (P_k(s_a) − P_k(s_a,ref))`` it has at b's
+    reference position: a twist that grows with b from a point other than b's reference is
+    already there (as a tilt, or a tilt growing along a) where b is at its reference."""
 
     cause: ClassVar[str] = "coupling"
     ORDERS: ClassVar[tuple[int, ...]] = (1, 2)
@@ -189,8 +191,10 @@ class CouplingEffect(Effect):
         orders: Sequence[int] | None = None,
         with_orders: Sequence[int] = (1,),
         offset: float = 0.0,
+        along: Sequence[float] = (),
     ) -> None:
         c = parse_component(component)
+        self.along = read_floats(along, "along")
         self.offset = float(offset)
         if not math.isfinite(self.offset):
             raise ValueError(f"coupling: offset must be finite, got {offset!r}")
@@ -211,6 +215,8 @@ class CouplingEffect(Effect):
         a = AXIS_INDEX[self.component[-1]]
         b = AXIS_INDEX[self.varies_with]
         total = np.full(ctx.n, self.offset)
+        for k, c in enumerate(self.along, start=1):
+            total += c * legendre_shape(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
         i = 0
         for j in self.with_orders:
             sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
@@ -238,6 +244,7 @@ class CouplingEffect(Effect):
             "with_orders": list(self.with_orders),
             "coefficients": list(self.coefficients),
             "offset": self.offset,
+            "along": list(self.along),
         }
 
     def describe(self) -> dict[str, Any]:
@@ -248,6 +255,7 @@ class CouplingEffect(Effect):
             "parameters": {
                 **dict(zip(self._names(), self.coefficients, strict=True)),
                 "offset_at_reference": self.offset,
+                **{f"along_{k}": c for k, c in enumerate(self.along, start=1)},
             },
         }
 
@@ -264,6 +272,7 @@ class CouplingEffect(Effect):
             orders,
             with_orders,
             read_number(t, "offset", 0.0),
+            read_floats(t.get("along", []), "along"),
         )
 
 
