@@ -57,9 +57,9 @@ CASES = [
     ("label", "size", "seed", "model", "design"),
     CASES,
     ids=[
-        f"{c[0]}-{c[1]}x-{c[3]}-{c[4].layout}"
-        if isinstance(c, tuple)
-        else f"{c.values[0]}-{c.values[1]}x-{c.values[3]}"
+        f"{c.values[0]}-{c.values[1]}x-{c.values[3]}"
+        if hasattr(c, "marks")
+        else f"{c[0]}-{c[1]}x-{c[3]}-{c[4].layout}"
         for c in CASES
     ],
 )
