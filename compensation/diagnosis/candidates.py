@@ -90,6 +90,9 @@ class Candidate:
     #: named when their *variation* during the session is seen, not just their mean — with the
     #: signals frozen at their session mean it is a static table change (:meth:`static`).
     drivers: tuple[str, ...] = ()
+    #: For a cause driven by another axis' position (a coupling): its first columns are the part
+    #: that does not vary with that axis (a table of its own axis); it must be needed beyond them.
+    static_columns: int = 0
     #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional.
     design_many: Callable[[Residuals, Sequence[Any]], FloatArray] | None = None
     _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
@@ -116,6 +119,18 @@ class Candidate:
     def static(self, res: Residuals) -> Candidate | None:
         """This cause with its driving signals frozen at their session mean (None without
         drivers, or when freezing leaves nothing): what a session sees as a static error."""
+        if self.static_columns:
+            key = ("static", id(res))
+            if key not in self._cache:
+                self._cache[key] = self.design(res, self.thetas[0])[:, :, : self.static_columns]
+            x = self._cache[key]
+            return Candidate(
+                f"{self.cause}_static",
+                self.keys,
+                self.static_columns,
+                self.build,
+                design_fn=lambda _r, _t: x,
+            )
         if not self.drivers:
             return None
         key = ("static", id(res))
@@ -326,6 +341,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 keys,
                 1 + COUPLING_ALONG[1] + len(o2) * len(w2),
                 _coupling_builder(comp, other, sa, sb, o2, w2),
+                static_columns=1 + COUPLING_ALONG[1],
             )
             out.append(
                 Candidate(
@@ -334,6 +350,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     1 + COUPLING_ALONG[0] + len(o1) * len(w1),
                     _coupling_builder(comp, other, sa, sb, o1, w1),
                     rich=rich,
+                    static_columns=1 + COUPLING_ALONG[0],
                 )
             )
 
