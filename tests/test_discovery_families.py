@@ -130,21 +130,69 @@ def test_drift_is_named_and_extend_leaves_it_out(npl: Machine, tmp_path: Path) -
         CouplingEffect(
             "ez_y", "x", [1.0, 2.0, 3.0, 4.0], (0.0, 1150.0), (0.0, 900.0), (0, 1), (1, 2)
         ),
+        CouplingEffect(
+            "ey_z", "x", [0.5, 1.0], (0.0, 600.0), (0.0, 900.0), (1, 2), (1,), -1.0, [2.0, -0.5]
+        ),
         PeriodicEffect("x", 37.5, 1.0, -0.5, [[0.3, 0.1], [0.0, -0.2]]),
         DriftEffect("y", (0.0, 3600.0), [1.0, 2.0], [0.5, -1.0, 0.25]),
+        ThermalGradientEffect("y", 4.0, -2.0, 0.7, 0.3, 1.1, offset_um_per_C=-0.6),
+    ],
+)
+def _term(npl: Machine, effect, q, signals):
+    """What ``effect``'s own hooks add (errors, squareness, direct), evaluated directly — not
+    through ``Machine.with_effects``, which itself goes through the effect's table."""
+    from cmm_comp.compensation.effects import EvalContext
+
+    n = len(q)
+    ctx = EvalContext(
+        q_mm=q,
+        u_mm=q - npl.volume.reference_mm,
+        signals={k: v.copy() for k, v in signals.items()},
+        errors=np.zeros((n, 3, 6)),
+        squareness_urad=np.zeros((n, 3)),
+        direct_um=np.zeros((n, 3)),
+        reference_C=20.0,
+        reference_mm=npl.volume.reference_mm,
+    )
+    effect.transform_signals(ctx)
+    effect.modify_errors(ctx)
+    effect.add_direct(ctx)
+    return np.concatenate([ctx.errors.ravel(), ctx.squareness_urad.ravel(), ctx.direct_um.ravel()])
+
+
+@pytest.mark.parametrize(
+    "effect",
+    [
+        CouplingEffect(
+            "ey_x", "y", [1.0, -2.0, 0.5], (0.0, 900.0), (0.0, 1150.0), (0, 1, 2), (1,), 3.0
+        ),
+        CouplingEffect(
+            "ez_y", "x", [1.0, 2.0, 3.0, 4.0], (0.0, 1150.0), (0.0, 900.0), (0, 1), (1, 2)
+        ),
+        CouplingEffect(
+            "ey_z", "x", [0.5, 1.0], (0.0, 600.0), (0.0, 900.0), (1, 2), (1,), -1.0, [2.0, -0.5]
+        ),
+        PeriodicEffect("x", 37.5, 1.0, -0.5, [[0.3, 0.1], [0.0, -0.2]]),
+        DriftEffect("y", (0.0, 3600.0), [1.0, 2.0], [0.5, -1.0, 0.25]),
+        ThermalGradientEffect("y", 4.0, -2.0, 0.7, 0.3, 1.1, offset_um_per_C=-0.6),
     ],
 )
 def test_new_effect_shapes_round_trip_through_their_tables(npl: Machine, effect) -> None:
-    """The table an effect writes recreates the same term (what extend → grid relies on)."""
+    """The table an effect writes recreates the same term (what extend → grid relies on): every
+    parameter must survive, so each is given a non-default value above."""
     again = effect_from_table(json.loads(json.dumps(effect.to_table())))
     rng = np.random.default_rng(1)
     lo, hi = npl.volume.lower_mm, npl.volume.upper_mm
     q = lo + rng.random((50, 3)) * (hi - lo)
-    inputs = {"t": rng.uniform(0, 3600, 50)}
-    a = npl.with_effects([effect]).volumetric_error(q, inputs=inputs)
-    b = npl.with_effects([again]).volumetric_error(q, inputs=inputs)
-    assert np.allclose(a, b, atol=1e-12)
-    assert np.max(np.abs(a - npl.volumetric_error(q, inputs=inputs))) > 1e-3
+    signals = {
+        "t": rng.uniform(0, 3600, 50),
+        "T_top": rng.uniform(20.5, 21.5, 50),
+        "T_bottom": np.full(50, 20.0),
+    }
+    a = _term(npl, effect, q, signals)
+    b = _term(npl, again, q, signals)
+    assert np.max(np.abs(a)) > 1e-3
+    assert np.allclose(a, b, rtol=0.0, atol=1e-12)
 
 
 def test_gradient_tilt_follows_the_slope_of_the_straightness(npl: Machine) -> None:

@@ -96,6 +96,7 @@ class Candidate:
     #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional.
     design_many: Callable[[Residuals, Sequence[Any]], FloatArray] | None = None
     _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
+    _statics: dict[int, Candidate | None] = field(default_factory=dict, repr=False)
 
     @property
     def identity(self) -> tuple[Any, ...]:
@@ -116,25 +117,24 @@ class Candidate:
             self._cache[key] = self.design_uncached(res, theta)
         return self._cache[key]
 
+    def with_rich(self, **changes: Any) -> Candidate:
+        """Give this family its rich shape: the same cause with ``changes`` (more parameters, a
+        richer builder or design); returns ``self``."""
+        self.rich = replace(self, rich=None, _cache={}, _statics={}, **changes)
+        return self
+
     def static(self, res: Residuals) -> Candidate | None:
-        """This cause with its driving signals frozen at their session mean (None without
-        drivers, or when freezing leaves nothing): what a session sees as a static error."""
+        """The part of this cause a session sees as a static error (None when it has none): for
+        a signal-driven cause its design with the driving signals frozen at their session mean,
+        for a coupling its columns that do not vary with the other axis. One object per data
+        set (cached)."""
+        key = id(res)
+        if key in self._statics:
+            return self._statics[key]
+        x: FloatArray | None = None
         if self.static_columns:
-            key = ("static", id(res))
-            if key not in self._cache:
-                self._cache[key] = self.design(res, self.thetas[0])[:, :, : self.static_columns]
-            x = self._cache[key]
-            return Candidate(
-                f"{self.cause}_static",
-                self.keys,
-                self.static_columns,
-                self.build,
-                design_fn=lambda _r, _t: x,
-            )
-        if not self.drivers:
-            return None
-        key = ("static", id(res))
-        if key not in self._cache:
+            x = self.design(res, self.thetas[0])[:, :, : self.static_columns]
+        elif self.drivers:
             frozen = replace(
                 res,
                 signals={
@@ -143,17 +143,18 @@ class Candidate:
                 },
             )
             x = self.design_uncached(frozen, self.thetas[0])
-            self._cache[key] = x
-        x = self._cache[key]
-        if not is_finite_design(x):
-            return None
-        return Candidate(
-            f"{self.cause}_static",
-            self.keys,
-            self.n_params,
-            self.build,
-            design_fn=lambda _r, _t: x,
-        )
+        static = None
+        if x is not None and is_finite_design(x):
+            fixed = x
+            static = Candidate(
+                f"{self.cause}_static",
+                self.keys,
+                x.shape[2],
+                self.build,
+                design_fn=lambda _r, _t: fixed,
+            )
+        self._statics[key] = static
+        return static
 
     def design_uncached(self, res: Residuals, theta: Any = None) -> FloatArray:
         """(N, 3, p) displacement per unit amplitude, computed afresh."""
@@ -311,24 +312,13 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         if comp not in SQUARENESS and not moved[comp[-1]]:
             continue
         span = _span(res, comp[-1]) if comp not in SQUARENESS else (0.0, 1.0)
-        rich = None
+        cand = Candidate(
+            "parametric", {"component": comp}, len(orders), _parametric_builder(comp, span, orders)
+        )
         if comp not in SQUARENESS:
             r_orders = rich_orders(comp)
-            rich = Candidate(
-                "parametric",
-                {"component": comp},
-                len(r_orders),
-                _parametric_builder(comp, span, r_orders),
-            )
-        out.append(
-            Candidate(
-                "parametric",
-                {"component": comp},
-                len(orders),
-                _parametric_builder(comp, span, orders),
-                rich=rich,
-            )
-        )
+            cand.with_rich(n_params=len(r_orders), build=_parametric_builder(comp, span, r_orders))
+        out.append(cand)
     for comp in ANGULAR:
         for other in AXES:
             if other == comp[-1] or not (moved[other] and moved[comp[-1]]):
@@ -336,21 +326,17 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             sa, sb = _span(res, comp[-1]), _span(res, other)
             keys = {"component": comp, "varies_with": other}
             (o1, w1), (o2, w2) = COUPLING_ORDERS
-            rich = Candidate(
-                "coupling",
-                keys,
-                1 + COUPLING_ALONG[1] + len(o2) * len(w2),
-                _coupling_builder(comp, other, sa, sb, o2, w2),
-                static_columns=1 + COUPLING_ALONG[1],
-            )
             out.append(
                 Candidate(
                     "coupling",
                     keys,
                     1 + COUPLING_ALONG[0] + len(o1) * len(w1),
                     _coupling_builder(comp, other, sa, sb, o1, w1),
-                    rich=rich,
                     static_columns=1 + COUPLING_ALONG[0],
+                ).with_rich(
+                    n_params=1 + COUPLING_ALONG[1] + len(o2) * len(w2),
+                    build=_coupling_builder(comp, other, sa, sb, o2, w2),
+                    static_columns=1 + COUPLING_ALONG[1],
                 )
             )
 
@@ -383,14 +369,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     5,
                     gradient_builder(a),
                     drivers=("T_top", "T_bottom"),
-                    rich=Candidate(
-                        "thermal_gradient",
-                        {"axis": a},
-                        6,
-                        gradient_builder(a),
-                        drivers=("T_top", "T_bottom"),
-                    ),
-                )
+                ).with_rich(n_params=6)
             )
         if res.has(f"T_{a}"):
             out.append(
@@ -408,33 +387,19 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
             t_span = (float(np.min(res.signals["t"])), float(np.max(res.signals["t"])))
             lo_k, hi_k = DRIFT_ORDERS
-            rich_drift = Candidate(
-                "drift", {"axis": a}, 2 * hi_k + 1, _drift_builder(a, t_span, hi_k)
-            )
             out.append(
                 Candidate(
                     "drift",
                     {"axis": a},
                     2 * lo_k + 1,
                     _drift_builder(a, t_span, lo_k),
-                    rich=rich_drift,
                     drivers=("t",),
-                )
+                ).with_rich(n_params=2 * hi_k + 1, build=_drift_builder(a, t_span, hi_k))
             )
         periods, n_eff = periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])
         if not periods:
             continue
         h_lo, h_hi = PERIODIC_HARMONICS
-        rich_periodic = Candidate(
-            "periodic",
-            {"axis": a},
-            2 * h_hi,
-            _periodic_builder(a),
-            thetas=periods,
-            look_elsewhere=n_eff,
-            design_fn=_periodic_design(a, h_hi),
-            design_many=_periodic_design_many(a, h_hi),
-        )
         out.append(
             Candidate(
                 "periodic",
@@ -445,7 +410,10 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 look_elsewhere=n_eff,
                 design_fn=_periodic_design(a, h_lo),
                 design_many=_periodic_design_many(a, h_lo),
-                rich=rich_periodic,
+            ).with_rich(
+                n_params=2 * h_hi,
+                design_fn=_periodic_design(a, h_hi),
+                design_many=_periodic_design_many(a, h_hi),
             )
         )
     if res.has("T_wp"):

@@ -95,6 +95,7 @@ def _round(
     n_tried: int,
     alpha: float,
     min_cv_gain: float,
+    cv_base: float,
 ) -> tuple[Term | None, list[dict[str, Any]]]:
     """One forward step. New candidates are tested against the accepted causes at their *rich*
     shape, so what a mis-shaped accepted cause leaves behind (same signal, same axis, same Abbe
@@ -124,7 +125,6 @@ def _round(
     # out-of-sample gain against the model as it stands (the rich shapes only absorb leftovers
     # in the significance test: with few points they would overfit the comparison)
     current = _terms(slots)
-    cv_base = cv_mse(problem, current)
     for r in eligible:
         r["cv_mse"] = cv_mse(problem, [*current, Term(r["candidate"], r["theta"])])
         r["cv_gain"] = (cv_base - r["cv_mse"]) / cv_base if cv_base > 0 else 0.0
@@ -233,7 +233,7 @@ def diagnose(
         taken = {id(s.root) for s in slots} | excluded
         remaining = [c for c in pool if id(c) not in taken]
         say(f"round {len(rounds) + 1}: {len(remaining)} candidates")
-        term, rows = _round(problem, slots, remaining, n_tried, alpha, min_cv_gain)
+        term, rows = _round(problem, slots, remaining, n_tried, alpha, min_cv_gain, cv_history[-1])
         rounds.append(_public_rows(rows))
         if term is None:
             break
