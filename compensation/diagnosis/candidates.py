@@ -95,6 +95,10 @@ class Candidate:
     static_columns: int = 0
     #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional.
     design_many: Callable[[Residuals, Sequence[Any]], FloatArray] | None = None
+    #: Ridge penalty (in units of one observation per coefficient) on this term's coefficients
+    #: in fits and cross-validation: a generic local basis must not extrapolate into regions
+    #: the training points do not cover. 0 for the causes (plain least squares).
+    ridge: float = 0.0
     _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
     _statics: dict[int, Candidate | None] = field(default_factory=dict, repr=False)
 

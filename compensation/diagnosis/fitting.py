@@ -125,10 +125,26 @@ def _rows_index(rows: Any) -> Any:
     return slice(None) if rows is None else rows
 
 
-def fit(problem: Problem, terms: Sequence[Term], rows: Any = None) -> tuple[FloatArray, float, int]:
-    """Joint least-squares fit of ``terms`` on ``rows`` (all when None)."""
+def fit(
+    problem: Problem, terms: Sequence[Term], rows: Any = None, ridge: bool = False
+) -> tuple[FloatArray, float, int]:
+    """Joint least-squares fit of ``terms`` on ``rows`` (all when None). With ``ridge``, terms
+    that declare a ridge penalty are shrunk (predictions: cross-validation, the final fit); the
+    significance tests use plain least squares throughout."""
     r = _rows_index(rows)
-    return lstsq(problem.stacked(terms, r), problem.y[r].reshape(-1))
+    x, y = problem.stacked(terms, r), problem.y[r].reshape(-1)
+    if not ridge or not any(t.candidate.ridge for t in terms):
+        return lstsq(x, y)
+    # a ridge prior (coefficients shrink to 0 where the term's columns see no data): penalty
+    # rows appended; the returned RSS is that of the data rows only
+    weights = np.concatenate(
+        [np.zeros(problem.n_nuisance)]
+        + [np.full(t.candidate.n_params, np.sqrt(t.candidate.ridge)) for t in terms]
+    )
+    keep = weights > 0
+    pen = np.diag(weights)[keep]
+    beta, _, rank = lstsq(np.vstack([x, pen]), np.concatenate([y, np.zeros(pen.shape[0])]))
+    return beta, float(np.sum((y - x @ beta) ** 2)), rank
 
 
 def _projector(x: FloatArray) -> FloatArray | None:
@@ -276,7 +292,7 @@ def cv_predictions(problem: Problem, terms: Sequence[Term], rescan: bool = True)
                 fold_terms.append(Term(t.candidate, theta))
             else:
                 fold_terms.append(t)
-        beta, _, _ = fit(problem, fold_terms, train)
+        beta, _, _ = fit(problem, fold_terms, train, ridge=True)
         x_test = problem.stacked(fold_terms, test)
         p = (x_test @ beta).reshape(len(test), len(problem.axes))
         pred[np.ix_(test, np.asarray(problem.axes, dtype=np.intp))] = p

@@ -25,6 +25,7 @@ from ..formats.measurements import Measurements
 from ..machine import Machine
 from .alternatives import find_alternatives
 from .candidates import Candidate, all_candidates, contract_keys, is_finite_design
+from .consistency import spatial_consistency
 from .fitting import (
     Problem,
     Term,
@@ -38,7 +39,14 @@ from .fitting import (
     split_coefficients,
 )
 from .residuals import Residuals, compute_residuals, length_error_e0_um, rms3d
-from .unexplained import locate, unexplained_candidate
+from .unexplained import (
+    is_local,
+    local_candidates,
+    local_entry,
+    local_unexplained,
+    locate,
+    unexplained_candidate,
+)
 
 __all__ = ["Diagnosis", "diagnose"]
 
@@ -61,6 +69,8 @@ class Diagnosis:
     heldout_pred_um: Any  # (N, 3) out-of-fold prediction
     summary: dict[str, Any]
     rounds: list[list[dict[str, Any]]] = field(default_factory=list)
+    terms: list[Term] = field(default_factory=list)  # the accepted terms, in ``effects`` order
+    problem: Problem | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {"verdict": self.verdict, "effects": self.entries, **self.summary}
@@ -96,10 +106,13 @@ def _round(
     alpha: float,
     min_cv_gain: float,
     cv_base: float,
+    local_hits: list[dict[str, Any]],
 ) -> tuple[Term | None, list[dict[str, Any]]]:
     """One forward step. New candidates are tested against the accepted causes at their *rich*
     shape, so what a mis-shaped accepted cause leaves behind (same signal, same axis, same Abbe
-    arms) is absorbed by it and never named as a second cause."""
+    arms) is absorbed by it and never named as a second cause. A pick that fails the volume
+    consistency test (:mod:`.consistency`) is not taken; it is appended to ``local_hits`` and the
+    next eligible candidate is considered."""
     base = _terms(slots, rich=True)
     n_obs = problem.y.size
     _, rss0, rank0 = fit(problem, base)
@@ -129,12 +142,22 @@ def _round(
         r["cv_mse"] = cv_mse(problem, [*current, Term(r["candidate"], r["theta"])])
         r["cv_gain"] = (cv_base - r["cv_mse"]) / cv_base if cv_base > 0 else 0.0
     eligible = [r for r in eligible if r["cv_gain"] >= min_cv_gain]
-    if not eligible:
-        return None, rows
-    best_cv = min(r["cv_mse"] for r in eligible)
-    close = [r for r in eligible if r["cv_mse"] <= best_cv * (1.0 + SIMPLER_WITHIN)]
-    pick = min(close, key=lambda r: (r["candidate"].n_params, r["cv_mse"]))
-    return Term(pick["candidate"], pick["theta"]), rows
+    while eligible:
+        best_cv = min(r["cv_mse"] for r in eligible)
+        close = [r for r in eligible if r["cv_mse"] <= best_cv * (1.0 + SIMPLER_WITHIN)]
+        pick = min(close, key=lambda r: (r["candidate"].n_params, r["cv_mse"]))
+        term = Term(pick["candidate"], pick["theta"])
+        if is_local(term.candidate):
+            return term, rows
+        check = spatial_consistency(problem, [*current, term], len(current))
+        if not check.local:
+            return term, rows
+        # significant, but not the same law across the volume: a local defect soaked up by a
+        # global shape — never named as that cause (reported as unexplained by the caller)
+        pick["local"] = check.ratios
+        local_hits.append(pick)
+        eligible = [r for r in eligible if r is not pick]
+    return None, rows
 
 
 def _reprofile(problem: Problem, slots: list[_Slot]) -> None:
@@ -224,16 +247,21 @@ def diagnose(
     res = compute_residuals(machine, data)
     problem = make_problem(res, n_folds)
     pool = [c for c in all_candidates(res) if is_finite_design(c.design(res, c.thetas[0]))]
+    # the null "a bump somewhere in the volume": every cause must explain more than it
+    pool += local_candidates(res)
     n_tried = max(len(pool), 1)
     slots: list[_Slot] = []
     excluded: set[int] = set()
     rounds: list[list[dict[str, Any]]] = []
     cv_history = [cv_mse(problem, [])]
+    local_hits: list[dict[str, Any]] = []
     while len(slots) < max_effects:
         taken = {id(s.root) for s in slots} | excluded
         remaining = [c for c in pool if id(c) not in taken]
         say(f"round {len(rounds) + 1}: {len(remaining)} candidates")
-        term, rows = _round(problem, slots, remaining, n_tried, alpha, min_cv_gain, cv_history[-1])
+        term, rows = _round(
+            problem, slots, remaining, n_tried, alpha, min_cv_gain, cv_history[-1], local_hits
+        )
         rounds.append(_public_rows(rows))
         if term is None:
             break
@@ -247,26 +275,31 @@ def diagnose(
         cv_history.append(cv_mse(problem, _terms(slots)))
 
     accepted = _terms(slots)
-    beta, rss_after, rank_after = fit(problem, accepted)
+    beta, rss_after, rank_after = fit(problem, accepted, ridge=True)
     fitted = predictions(problem, accepted, beta)
     say("held-out predictions")
     heldout_pred = cv_predictions(problem, accepted)
     coefs = split_coefficients(problem, accepted, beta)
-    effects = [t.candidate.build(c, t.theta) for t, c in zip(accepted, coefs, strict=True)]
+    local = [i for i, t in enumerate(accepted) if is_local(t.candidate)]
+    local_entries = [local_entry(problem, accepted, i, beta) for i in local]
+    causes = [i for i in range(len(accepted)) if i not in local]
+    effects = [accepted[i].candidate.build(coefs[i], accepted[i].theta) for i in causes]
     rss_before = float(np.sum(problem.y**2))
     n_obs = problem.y.size
     sigma2 = rss_after / max(n_obs - rank_after, 1)
     entries: list[dict[str, Any]] = []
+    causes_pool = [c for c in pool if not is_local(c)]
     if effects:
         say("alternatives")
-    for i, (eff, t) in enumerate(zip(effects, accepted, strict=True)):
+    for i, eff in zip(causes, effects, strict=True):
+        t = accepted[i]
         others = accepted[:i] + accepted[i + 1 :]
         _, rss_without, _ = fit(problem, others)
         entry = {**contract_keys(eff), "parameters": eff.describe().get("parameters", {})}
         entry["explained_fraction"] = (rss_without - rss_after) / rss_before if rss_before else 0.0
         entry["label"] = t.candidate.label
         alt = find_alternatives(
-            problem, others, t, eff, pool, [s.root for s in slots], rss_after, sigma2, alpha
+            problem, others, t, eff, causes_pool, [s.root for s in slots], rss_after, sigma2, alpha
         )
         if alt is not None:
             entry["alternatives"] = alt["alternatives"]
@@ -281,10 +314,15 @@ def diagnose(
     # structure no cause explains?
     r_before = res.residual_um
     r_after = r_before - fitted
-    unexplained = unexplained_candidate(problem, accepted, alpha, min_cv_gain, cv_history[-1])
-    if unexplained is not None:
-        unexplained["parameters"].update(locate(res, r_after))
-        entries.append(unexplained)
+    if local_entries:
+        entries.extend(local_entries)
+    else:
+        unexplained = unexplained_candidate(problem, accepted, alpha, min_cv_gain, cv_history[-1])
+        if unexplained is None and local_hits:
+            unexplained = local_unexplained(problem, accepted, local_hits)
+        if unexplained is not None:
+            unexplained["parameters"].update(locate(res, r_after))
+            entries.append(unexplained)
     r_heldout = r_before - heldout_pred
     # "before" is the model as described with the same nuisance offsets removed (in-sample and
     # held out), so before/after differ by the effects found and nothing else
@@ -328,6 +366,8 @@ def diagnose(
         heldout_pred_um=heldout_pred,
         summary=summary,
         rounds=rounds,
+        terms=[accepted[causes[i]] for i in order],
+        problem=problem,
     )
 
 

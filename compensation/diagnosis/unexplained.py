@@ -10,6 +10,7 @@ that carries most of it, never as an effect of the model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from itertools import product
 from typing import Any
 
@@ -72,6 +73,93 @@ def _block_candidate(name: str, basis: FloatArray) -> Candidate:
     return Candidate("unexplained", {"block": name}, 3 * k, lambda _a, _t: None, design_fn=design)  # type: ignore[arg-type,return-value]
 
 
+#: Centres of the local (radial) basis per moved coordinate, in the normalised range [-1, 1],
+#: and the width of each Gaussian (same units): a defect a fifth of the travel wide or more.
+LOCAL_CENTRES = (-1.0, -1.0 / 3.0, 1.0 / 3.0, 1.0)
+LOCAL_WIDTH = 0.45
+#: Ridge penalty of the local basis (one observation's worth per coefficient): a coefficient
+#: whose Gaussian covers no training point shrinks to zero instead of extrapolating.
+LOCAL_RIDGE = 3.0
+#: The finer grid of the local basis' rich shape.
+RICH_CENTRES = (-1.0, -0.5, 0.0, 0.5, 1.0)
+RICH_WIDTH = 0.3
+
+
+def local_basis(
+    res: Residuals, centres: tuple[float, ...] = LOCAL_CENTRES, width: float = LOCAL_WIDTH
+) -> FloatArray | None:
+    """(N, k) Gaussian radial basis on a grid over the moved coordinates (None when fewer than
+    two coordinates moved: along one axis a local defect is a table of that axis)."""
+    moved = [k for k in range(3) if float(np.ptp(res.q_mm[:, k])) > 1e-6]
+    if len(moved) < 2:
+        return None
+    s = [_norm(res.q_mm[:, k]) for k in moved]
+    c = np.asarray(centres)
+    per_axis = [np.exp(-0.5 * ((v[:, None] - c[None, :]) / width) ** 2) for v in s]
+    basis = per_axis[0]
+    for b in per_axis[1:]:
+        basis = (basis[:, :, None] * b[:, None, :]).reshape(res.n, -1)
+    return basis
+
+
+def local_candidates(res: Residuals) -> list[Candidate]:
+    """One generic local candidate per error component (``unexplained``, ``block: local``): the
+    null model "a smooth bump somewhere in the volume" that every cause must beat. Accepted, it
+    is reported as ``unexplained`` with where it sits, never as an effect."""
+    basis = local_basis(res)
+    rich = local_basis(res, RICH_CENTRES, RICH_WIDTH)
+    if basis is None or rich is None:
+        return []
+
+    def design_of(b: FloatArray, a: int) -> Callable[[Residuals, Any], FloatArray]:
+        def design(_res: Residuals, _theta: Any) -> FloatArray:
+            x = np.zeros((b.shape[0], 3, b.shape[1]))
+            x[:, a, :] = b
+            return x
+
+        return design
+
+    out = []
+    for a in range(3):
+        cand = Candidate(
+            "unexplained",
+            {"block": "local", "error_axis": "xyz"[a]},
+            basis.shape[1],
+            lambda _a, _t: None,  # type: ignore[arg-type,return-value]
+            design_fn=design_of(basis, a),
+            ridge=LOCAL_RIDGE,
+        )
+        # its rich shape (a finer grid, in the significance tests only) absorbs what the
+        # smooth bump leaves, so no table is named for the leftovers of a local defect
+        out.append(cand.with_rich(n_params=rich.shape[1], design_fn=design_of(rich, a)))
+    return out
+
+
+def is_local(cand: Candidate) -> bool:
+    return cand.cause == "unexplained"
+
+
+def local_entry(
+    problem: Problem, accepted: list[Term], index: int, beta: FloatArray
+) -> dict[str, Any]:
+    """The ``unexplained`` entry of an accepted local candidate: where its bump sits."""
+    term = accepted[index]
+    start = problem.n_nuisance + sum(t.candidate.n_params for t in accepted[:index])
+    coef = beta[start : start + term.candidate.n_params]
+    contrib = np.zeros((problem.res.n, 3))
+    contrib[:, problem.axes] = (problem.design(term) @ coef).reshape(problem.res.n, -1)
+    _, rss0, _ = fit(problem, accepted[:index] + accepted[index + 1 :])
+    _, rss1, _ = fit(problem, accepted)
+    total = float(np.sum(problem.y**2))
+    params: dict[str, Any] = {"varies_mostly_with": "position", "local": True}
+    params.update(locate(problem.res, contrib))
+    return {
+        "cause": "unexplained",
+        "parameters": params,
+        "explained_fraction": (rss0 - rss1) / total if total else 0.0,
+    }
+
+
 def unexplained_candidate(
     problem: Problem, accepted: list[Term], alpha: float, min_cv_gain: float, cv_current: float
 ) -> dict[str, Any] | None:
@@ -131,3 +219,27 @@ def locate(res: Residuals, remaining_um: FloatArray) -> dict[str, Any]:
     if t is not None:
         out["when_s"] = [float(np.min(t[top])), float(np.max(t[top]))]
     return out
+
+
+def local_unexplained(
+    problem: Problem, accepted: list[Term], local_hits: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """The ``unexplained`` entry for significant structure that only global shapes of the wrong
+    law could fit (candidates refused by the volume consistency test, :mod:`.consistency`)."""
+    first = local_hits[0]
+    _, rss0, _ = fit(problem, accepted)
+    _, rss1, _ = fit(problem, [*accepted, Term(first["candidate"], first["theta"])])
+    total = float(np.sum(problem.y**2))
+    return {
+        "cause": "unexplained",
+        "parameters": {
+            "varies_mostly_with": "position",
+            "local": True,
+            "fits_only_locally": [
+                {"label": h["label"], "heldout_over_insample_gain": h["local"]} for h in local_hits
+            ],
+            "p_value_adjusted": float(first["p_adj"]),
+            "cv_gain": float(first["cv_gain"]),
+        },
+        "explained_fraction": (rss0 - rss1) / total if total else 0.0,
+    }

@@ -1,0 +1,122 @@
+"""Is a cause the same everywhere in the volume? The test that tells a cause from a local defect.
+
+A cause of the model is *global*: a table of an axis is one function of that axis' position, the
+same at every position of the other axes; a drift or an expansion is the same law everywhere. A
+local defect (a dent in a guideway, a loose cover, a blob of error in one corner) is none of them,
+yet a flexible global term (a coupling, a table) fitted to the whole session soaks it up and
+reaches significance. The difference shows when the volume is cut in two across a coordinate the
+cause does *not* depend on: a global cause fitted on one half predicts the other half; a term that
+only soaked up a local defect fitted on the half without it predicts nothing there, and fitted on
+the half with it predicts structure where there is none.
+
+For each accepted term, the others held at their joint full-data fit, the term is refitted on each
+half of every *split coordinate* (x, y, z with a median split; not the axes the cause is a
+function of — its table must not be extrapolated) and scored on the other half. The held-out gain
+(decrease of the sum of squares over both halves) is compared with the in-sample gain. A cause is
+*local* when every split that can be tested gives a held-out gain below ``MIN_RATIO`` of its
+in-sample gain.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .fitting import Problem, Term, fit, lstsq, predictions
+from .residuals import FloatArray
+
+__all__ = ["MIN_RATIO", "Consistency", "own_axes", "spatial_consistency"]
+
+#: A global cause keeps at least this share of its in-sample gain when each half of the volume
+#: predicts the other; a term that soaked up a local defect keeps none (or loses).
+MIN_RATIO = 0.2
+
+#: A half must hold this many observations per parameter of the term to be fitted on.
+_MIN_OBS_PER_PARAM = 4
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """The outcome for one term: held-out/in-sample gain per split coordinate."""
+
+    label: str
+    in_sample_gain_um2: float
+    ratios: dict[str, float]  # split coordinate → held-out gain / in-sample gain
+
+    @property
+    def tested(self) -> bool:
+        return bool(self.ratios)
+
+    @property
+    def local(self) -> bool:
+        """True when every tested split says the term does not carry across the volume."""
+        return self.tested and max(self.ratios.values()) < MIN_RATIO
+
+
+def own_axes(term: Term) -> set[int]:
+    """The axes (0, 1, 2) a candidate's shape is a free function of: its axis, the axis of its
+    component (``ey_x`` → x), the axis it varies with."""
+    keys = term.candidate.keys
+    out: set[int] = set()
+    for name in ("axis", "varies_with"):
+        v = keys.get(name)
+        if isinstance(v, str) and v in "xyz" and len(v) == 1:
+            out.add("xyz".index(v))
+    comp = keys.get("component")
+    if isinstance(comp, str) and "_" in comp and comp[-1] in "xyz":
+        out.add("xyz".index(comp[-1]))
+    return out
+
+
+def _fit_predict(x_train: FloatArray, y_train: FloatArray, x_test: FloatArray) -> FloatArray:
+    beta, _, _ = lstsq(x_train, y_train)
+    return x_test @ beta
+
+
+def spatial_consistency(
+    problem: Problem, terms: Sequence[Term], index: int, beta: FloatArray | None = None
+) -> Consistency:
+    """Split test of ``terms[index]`` given the others (docstring of the module). ``beta`` is the
+    joint full-data fit of ``terms`` (computed when None)."""
+    if beta is None:
+        beta, _, _ = fit(problem, terms)
+    term = terms[index]
+    n_axes = len(problem.axes)
+    # partial residual: everything but the term's own columns (nuisance offsets are refitted)
+    start = problem.n_nuisance + sum(t.candidate.n_params for t in terms[:index])
+    stop = start + term.candidate.n_params
+    beta_others = beta.copy()
+    beta_others[: problem.n_nuisance] = 0.0
+    beta_others[start:stop] = 0.0
+    partial = problem.y - predictions(problem, terms, beta_others)[:, problem.axes]
+    x_term = problem.design(term)  # (N·axes, p)
+    x_off = problem.stacked([])  # (N·axes, offsets)
+    x_full = np.hstack([x_off, x_term])
+    y = partial.reshape(-1)
+    _, rss0, _ = lstsq(x_off, y)
+    _, rss1, _ = lstsq(x_full, y)
+    gain_in = rss0 - rss1
+    ratios: dict[str, float] = {}
+    q = problem.res.q_mm
+    own = own_axes(term)
+    p = x_full.shape[1]
+    for k in range(3):
+        if k in own or float(np.ptp(q[:, k])) <= 1e-6:
+            continue
+        low = q[:, k] <= np.median(q[:, k])
+        if low.all() or not low.any():
+            continue
+        halves = [np.flatnonzero(low), np.flatnonzero(~low)]
+        if min(len(h) for h in halves) * n_axes < _MIN_OBS_PER_PARAM * p:
+            continue
+        gain_out = 0.0
+        for train, test in ((halves[0], halves[1]), (halves[1], halves[0])):
+            rows_tr = (train[:, None] * n_axes + np.arange(n_axes)).reshape(-1)
+            rows_te = (test[:, None] * n_axes + np.arange(n_axes)).reshape(-1)
+            p0 = _fit_predict(x_off[rows_tr], y[rows_tr], x_off[rows_te])
+            p1 = _fit_predict(x_full[rows_tr], y[rows_tr], x_full[rows_te])
+            gain_out += float(np.sum((y[rows_te] - p0) ** 2) - np.sum((y[rows_te] - p1) ** 2))
+        ratios["xyz"[k]] = gain_out / gain_in if gain_in > 0 else 0.0
+    return Consistency(term.candidate.label, float(gain_in), ratios)
