@@ -220,3 +220,35 @@ def test_gradient_tilt_follows_the_slope_of_the_straightness(npl: Machine) -> No
     dz = ctx.errors[:, 0, 2]  # µm
     slope_urad = np.gradient(dz, u / 1000.0)  # µm/m = µrad
     assert np.allclose(-slope_urad[1:-1], ctx.errors[1:-1, 0, 4], atol=1e-3)
+
+
+def _dent_um(
+    q_mm: np.ndarray, centre_mm: np.ndarray, span_mm: np.ndarray, radius: float, depth_um: float
+):
+    """A dent in the z error (raised cosine in the distance normalised by the travel, zero
+    beyond ``radius``): a local defect no global cause has, shaped unlike any candidate basis
+    (compact support, a cosine in r)."""
+    r = np.linalg.norm((q_mm - centre_mm) / span_mm, axis=1)
+    out = np.zeros_like(q_mm)
+    inside = r < radius
+    out[inside, 2] = -depth_um * 0.5 * (1.0 + np.cos(np.pi * r[inside] / radius))
+    return out
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_a_local_dent_is_unexplained_where_it_sits_never_a_cause(npl: Machine, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    plan = plan_session(npl, rng, n_points=600)
+    lo, hi = np.asarray(npl.volume.lower_mm), np.asarray(npl.volume.upper_mm)
+    centre = lo + np.array([0.75, 0.3, 0.7]) * (hi - lo)
+    data = measure_session(npl, plan, 0.3, rng)
+    dent = _dent_um(plan.data.indicated_mm, centre, hi - lo, 0.3, depth_um=3.0)
+    assert np.count_nonzero(dent[:, 2] < -1.5) >= 15  # the session sees the dent
+    data.reference_mm = data.reference_mm + dent / 1000.0
+    d = diagnose(npl, data)
+    assert [e["cause"] for e in d.entries] == ["unexplained"], d.entries
+    where = np.asarray(d.entries[0]["parameters"]["where_mm"])
+    assert d.entries[0]["parameters"]["axis"] == "z"
+    # the located centre lies inside the dent, independent of the basis' grid
+    assert np.linalg.norm((where - centre) / (hi - lo)) < 0.3, (where, centre)
+    assert d.extended_machine().effects == npl.effects  # nothing to compensate

@@ -100,7 +100,7 @@ class Candidate:
     #: the training points do not cover. 0 for the causes (plain least squares).
     ridge: float = 0.0
     _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
-    _statics: dict[int, Candidate | None] = field(default_factory=dict, repr=False)
+    _statics: dict[tuple[int, Any], Candidate | None] = field(default_factory=dict, repr=False)
 
     @property
     def identity(self) -> tuple[Any, ...]:
@@ -127,17 +127,19 @@ class Candidate:
         self.rich = replace(self, rich=None, _cache={}, _statics={}, **changes)
         return self
 
-    def static(self, res: Residuals) -> Candidate | None:
+    def static(self, res: Residuals, theta: Any = None) -> Candidate | None:
         """The part of this cause a session sees as a static error (None when it has none): for
         a signal-driven cause its design with the driving signals frozen at their session mean,
         for a coupling its columns that do not vary with the other axis. One object per data
         set (cached)."""
-        key = id(res)
+        # columns that depend on the nonlinear parameter (a lag's transient) are taken at it
+        at = theta if self.static_columns and len(self.thetas) > 1 else self.thetas[0]
+        key = (id(res), at)
         if key in self._statics:
             return self._statics[key]
         x: FloatArray | None = None
         if self.static_columns:
-            x = self.design(res, self.thetas[0])[:, :, : self.static_columns]
+            x = self.design(res, at)[:, :, : self.static_columns]
         elif self.drivers:
             frozen = replace(
                 res,
@@ -179,14 +181,22 @@ def _span(res: Residuals, axis: str) -> tuple[float, float]:
 
 
 def _lag_design(res: Residuals, tau: Any) -> FloatArray:
-    """Displacement per unit ``fraction``: α_j·(lag_τ(T_j) − T_j)·u_j/1000 on axis j."""
-    x = np.zeros((res.n, 3, 1))
+    """Columns 0–2: the structure's unknown initial state (°C above the sensor at the session's
+    first sample, axis j), decaying as exp(−(t − t₀)/τ): α_j·e^{−(t−t₀)/τ}·u_j/1000 on axis j —
+    a machine is rarely in equilibrium when a session starts, and a lag filter started from
+    the sensor's first value assumes it is. Column 3, per unit ``fraction``:
+    α_j·(lag_τ(T_j) − T_j)·u_j/1000 on axis j (the lag filter started in equilibrium; exact
+    superposition for the linear first-order lag)."""
+    x = np.zeros((res.n, 3, 4))
     t = res.signals["t"]
+    decay = np.exp(-(t - float(np.min(t))) / float(tau))
     for k, a in enumerate(AXES):
         alpha = float(res.machine.thermal.expansion[k])
         temp = res.signals.get(f"T_{a}")
         if alpha and temp is not None:
-            x[:, k, 0] = alpha * (lag_filter(t, temp, float(tau)) - temp) * res.u_mm[:, k] / 1000.0
+            arm = alpha * res.u_mm[:, k] / 1000.0
+            x[:, k, k] = arm * decay
+            x[:, k, 3] = arm * (lag_filter(t, temp, float(tau)) - temp)
     return x
 
 
@@ -456,11 +466,13 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             Candidate(
                 "thermal_lag",
                 {},
-                1,
-                lambda p, tau: ThermalLagEffect(float(tau), p[0]),
+                4,
+                lambda p, tau: ThermalLagEffect(float(tau), p[3]),
                 thetas=LAG_TIME_CONSTANTS_S,
                 look_elsewhere=4.0,
                 design_fn=_lag_design,
+                # the lag must be seen beyond a decaying start-up transient of the scales
+                static_columns=3,
             )
         )
     if res.has("nx", "ny", "nz"):

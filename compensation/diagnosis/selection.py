@@ -120,7 +120,7 @@ def _round(
     for cand in pool:
         theta, rss1, extra = best_theta(problem, base, cand)
         p = f_test_p(rss0, rss1, extra, n_obs, rank0 + extra)
-        static = cand.static(problem.res)
+        static = cand.static(problem.res, theta)
         if static is not None and p < alpha:
             # a signal-driven cause must be seen in the signal's variation, not its mean
             base_s = [*base, Term(static)]
