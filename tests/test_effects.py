@@ -195,3 +195,22 @@ def test_bad_tables_are_rejected_with_the_reason() -> None:
         effect_from_table({"cause": "periodic", "axis": "x", "a_cos_um": 1, "b_sin_um": 0})
     with pytest.raises(ValueError, match="unknown effect cause"):
         effect_from_table({"cause": "gremlins"})
+
+
+def test_lobing_with_radial_power_one_fades_in_proportion_to_rho() -> None:
+    # n = (0.6, 0, 0.8): ρ = 0.6, φ = 0 → C = ρᵖ; by hand: p = 1 → 0.6, p = 2 → 0.36
+    one = lobing_signals([0.6], [0.0], [0.8], 2, radial_power=1)
+    two = lobing_signals([0.6], [0.0], [0.8], 2)
+    np.testing.assert_allclose(one["lobe2r1_c_x"], [0.6 * 0.6])
+    np.testing.assert_allclose(one["lobe2r1_c_z"], [0.8 * 0.6])
+    np.testing.assert_allclose(two["lobe2_c_x"], [0.6 * 0.36])
+    # φ = 45°, horizontal: cos 2φ = 0, sin 2φ = 1 whatever the power
+    h = np.sqrt(0.5)
+    sig = lobing_signals([h], [h], [0.0], 2, radial_power=1)
+    np.testing.assert_allclose(sig["lobe2r1_s_x"], [h], atol=1e-12)
+    np.testing.assert_allclose(sig["lobe2r1_c_y"], [0.0], atol=1e-12)
+    eff = ProbeLobingEffect.from_table(
+        {"lobes": 2, "a_cos_um": 1.0, "b_sin_um": 0.0, "radial_power": 1}
+    )
+    assert eff.to_table()["radial_power"] == 1
+    assert "radial_power" not in ProbeLobingEffect(3, 1.0, 0.0).to_table()

@@ -18,6 +18,7 @@ NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
 
 EFFECTS = [
     {"cause": "probe_lobing", "lobes": 3, "a_cos_um": 1.5, "b_sin_um": -0.8},
+    {"cause": "probe_lobing", "lobes": 2, "a_cos_um": 0.6, "b_sin_um": 0.4, "radial_power": 1},
     {"cause": "reversal", "axis": "x", "half_step_um": [2.0, 0.5], "span_mm": [0.0, 900.0]},
 ]
 
@@ -40,7 +41,7 @@ def test_grid_with_lobing_and_reversal_matches_the_model(
     extended: tuple[Machine, CorrectionGrid],
 ) -> None:
     machine, grid = extended
-    assert {"dir_x", "lobe3_c_x", "lobe3_s_z"} <= {s.name for s in grid.signals}
+    assert {"dir_x", "lobe3_c_x", "lobe3_s_z", "lobe2r1_c_y"} <= {s.name for s in grid.signals}
     rng = np.random.default_rng(4)
     n = 300
     pts = rng.uniform(machine.volume.lower_mm, machine.volume.upper_mm, (n, 3))

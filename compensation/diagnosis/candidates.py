@@ -481,9 +481,10 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 "probe_lobing",
                 {},
                 2,
-                lambda p, lobes: ProbeLobingEffect(int(lobes), p[0], p[1]),
-                thetas=LOBES,
-                look_elsewhere=float(len(LOBES)),
+                lambda p, th: ProbeLobingEffect(int(th[0]), p[0], p[1], int(th[1])),
+                # (lobes, radial power): the lobing fading as ρⁿ or as ρ towards vertical probing
+                thetas=tuple((k, r) for k in LOBES for r in sorted({k, 1})),
+                look_elsewhere=float(2 * len(LOBES)),
             )
         )
     return out

@@ -21,7 +21,7 @@ from ..thermal.roles import is_temperature
 __all__ = ["GridSignal", "derive_lobing_inputs", "lobing_orders", "signal_deviations", "subset"]
 
 FloatArray = NDArray[np.float64]
-_LOBE_SIGNAL = re.compile(r"lobe(\d+)_[cs]_[xyz]")
+_LOBE_SIGNAL = re.compile(r"lobe(\d+)(?:r(\d+))?_[cs]_[xyz]")
 _PROBE_DIRECTION = ("nx", "ny", "nz")
 
 
@@ -81,11 +81,12 @@ def signal_deviations(
     return dev, no_temp, no_input
 
 
-def lobing_orders(signals: Sequence[GridSignal]) -> list[int]:
-    """Lobe counts of the needed probe-lobing signals ``lobe<n>_{c,s}_<axis>`` (sorted)."""
+def lobing_orders(signals: Sequence[GridSignal]) -> list[tuple[int, int]]:
+    """(lobes, radial power) of the needed probe-lobing signals ``lobe<n>[r<p>]_{c,s}_<axis>``
+    (sorted)."""
     return sorted(
         {
-            int(m.group(1))
+            (int(m.group(1)), int(m.group(2) or m.group(1)))
             for sig in signals
             if sig.needed and (m := _LOBE_SIGNAL.fullmatch(sig.name))
         }
@@ -93,11 +94,11 @@ def lobing_orders(signals: Sequence[GridSignal]) -> list[int]:
 
 
 def derive_lobing_inputs(
-    orders: Sequence[int], inputs: Mapping[str, Any] | None
+    orders: Sequence[tuple[int, int]], inputs: Mapping[str, Any] | None
 ) -> Mapping[str, Any] | None:
-    """``inputs`` with the probe-lobing signals of ``orders`` derived from ``nx, ny, nz``
-    (:func:`cmm_comp.compensation.effects.lobing_signals`); anything given explicitly wins;
-    without a probing direction ``inputs`` is returned as is."""
+    """``inputs`` with the probe-lobing signals of ``orders`` (lobes, radial power) derived from
+    ``nx, ny, nz`` (:func:`cmm_comp.compensation.effects.lobing_signals`); anything given
+    explicitly wins; without a probing direction ``inputs`` is returned as is."""
     if not orders or inputs is None:
         return inputs
     if not all(k in inputs and inputs[k] is not None for k in _PROBE_DIRECTION):
@@ -105,8 +106,9 @@ def derive_lobing_inputs(
     from ..effects.probe import lobing_signals
 
     out = dict(inputs)
-    for lobes in orders:
-        for name, value in lobing_signals(inputs["nx"], inputs["ny"], inputs["nz"], lobes).items():
+    for lobes, power in orders:
+        derived = lobing_signals(inputs["nx"], inputs["ny"], inputs["nz"], lobes, power)
+        for name, value in derived.items():
             out.setdefault(name, value)
     return out
 
