@@ -1,6 +1,7 @@
 """Run every benchmark in this folder (``python benchmarks/run.py [name …]``).
 
-Each ``bench_*.py`` prints its own table and writes ``benchmarks/results/<name>.json``.
+Each ``bench_*.py`` prints its own table and writes ``benchmarks/results/<name>.json``. The
+long ones (:data:`ON_REQUEST`, e.g. the 1 h soak) run only when named.
 """
 
 from __future__ import annotations
@@ -11,12 +12,16 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+ON_REQUEST = frozenset({"bench_soak"})
+"""Benchmarks run only when named on the command line (they take an hour)."""
 
 
 def main(argv: list[str]) -> int:
     scripts = sorted(HERE.glob("bench_*.py"))
     if argv:
         scripts = [s for s in scripts if any(a in s.stem for a in argv)]
+    else:
+        scripts = [s for s in scripts if s.stem not in ON_REQUEST]
     failed = []
     for script in scripts:
         print(f"\n=== {script.stem}", flush=True)

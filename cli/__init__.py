@@ -1,8 +1,8 @@
 """The one command line, ``cmm-comp``: one module per command group.
 
-``model`` (map, diagonals, line, report, iso230, seed files), ``grid`` (grid build, correct),
-``diagnosis`` (diagnose, extend), ``daemon`` (daemon, replay), ``demo`` (simulated controller →
-daemon). Each module imports what its commands use only when they run.
+``model`` (map, diagonals, line, report, iso230, seed files), ``grid`` (grid build, correct,
+keygen, sign), ``diagnosis`` (diagnose, extend), ``importing`` (import camonitor), ``daemon``
+(daemon, replay), ``mcap`` (mcap recover), ``demo`` (simulated controller → daemon). Each module imports what its commands use only when they run.
 """
 
 from __future__ import annotations

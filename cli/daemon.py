@@ -61,22 +61,30 @@ def cmd_daemon(args: argparse.Namespace) -> int:
     """Run the daemon until SIGTERM/SIGINT."""
     from cmm_comp.daemon.config import ConfigError, load_config
     from cmm_comp.daemon.grid_slot import GridLoadError, load_grid
-    from cmm_comp.daemon.service import DaemonService
+    from cmm_comp.daemon.grid_trust import GridTrust
 
     try:
         config = load_config(args.config, args)
     except ConfigError as exc:
-        return fail(str(exc))
+        for line in exc.lines:
+            fail(line)
+        return 2
     if args.check:
         if config.grid.path:
             try:
-                loaded = load_grid(config.grid.path, config.grid.expect_machine_sha256)
+                loaded = load_grid(config.grid.path, GridTrust.from_section(config.grid))
             except GridLoadError as exc:
                 return fail(str(exc))
-            print(f"{config.source}: ok; grid {loaded.path} sha256 {loaded.sha256}")
+            signed = f"signed by key {loaded.signed_by}" if loaded.signed_by else "unsigned"
+            print(
+                f"{config.source}: ok; grid {loaded.path} sha256 {loaded.sha256} ({signed}, "
+                f"machine {loaded.machine!r})"
+            )
         else:
             print(f"{config.source}: ok; no grid configured")
         return 0
+    from cmm_comp.daemon.service import DaemonService
+
     # Shorter GIL switch interval: the reply thread gets the interpreter back sooner from
     # the MCAP writer thread (tail latency); process-wide, so only in the daemon's own process.
     sys.setswitchinterval(0.0005)
@@ -118,6 +126,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         report = replay_offline(args.session, args.grid)
     except (ReplayError, ValueError, can.CanError) as exc:
         return fail(str(exc))
+    if report.warning:
+        print(f"cmm-comp: warning: {report.warning}", file=sys.stderr)
     rows = [
         ("session", ", ".join(report.session) + (" (cut by a crash)" if report.truncated else "")),
         ("grid", f"{report.grid_path} ({report.grid_sha256[:12]})"),

@@ -37,14 +37,28 @@ def default_machine_path() -> Path:
 
 
 def demo_config(
-    grid_path: str, channel: str, mcap_path: str, stylus_mm: list[float]
+    grid_path: str,
+    channel: str,
+    mcap_path: str,
+    stylus_mm: list[float],
+    machine_path: str = "",
+    public_key: str = "",
 ) -> DaemonConfig:
-    """Daemon configuration of the demo: virtual CAN, no Modbus, no metrics port."""
+    """Daemon configuration of the demo: virtual CAN, no Modbus, no metrics port.
+
+    The grid the demo builds is signed with ``public_key`` and bound to ``machine_path``. A grid
+    the user brings (no key) may be unsigned and built from another description than the
+    simulated true machine (a model of it): both are allowed, explicitly.
+    """
     from cmm_comp.daemon import DaemonConfig
 
     cfg = DaemonConfig(source="<demo>")
     cfg.grid.path = grid_path
     cfg.grid.stylus_mm = list(stylus_mm)
+    cfg.grid.machine = machine_path
+    cfg.grid.public_key = public_key
+    cfg.grid.allow_unsigned = not public_key
+    cfg.grid.allow_any_machine = not machine_path
     cfg.can.interface = "virtual"
     cfg.can.channel = channel
     cfg.mcap.path = mcap_path
@@ -66,6 +80,7 @@ def run_demo(
     import numpy as np
 
     from cmm_comp.compensation import CorrectionGrid, Machine
+    from cmm_comp.compensation.grid import generate_signing_key, sign_grid
     from cmm_comp.daemon import DaemonService
     from cmm_comp.sim_controller.controller import CanController
     from cmm_comp.sim_controller.runner import build_program, evaluate, make_readings, run_can
@@ -73,7 +88,9 @@ def run_demo(
 
     say = progress or (lambda _msg: None)
     t_start = time.perf_counter()
-    machine = Machine.from_toml(machine_path or default_machine_path())
+    machine_path = Path(machine_path or default_machine_path())
+    machine = Machine.from_toml(machine_path)
+    public_key = bound_machine = ""
     stylus = [float(v) for v in machine.probe.offset_mm]
     with tempfile.TemporaryDirectory(prefix="cmm-demo-") as tmp:
         if grid_path is None:
@@ -84,11 +101,15 @@ def run_demo(
             keep = Path(mcap_path).with_suffix(".grid") if mcap_path is not None else None
             grid_path = keep or Path(tmp) / f"{machine.name}.grid"
             grid.save(grid_path)
+            # signed with a key made for this run, as a production grid would be
+            private_key, public = generate_signing_key(Path(tmp) / "keys")
+            sign_grid(grid_path, private_key)
+            public_key, bound_machine = str(public), str(machine_path)
         mcap = Path(mcap_path) if mcap_path is not None else Path(tmp) / "demo.mcap"
         if mcap.exists():
             mcap.unlink()
         channel = f"cmm-demo-{uuid.uuid4().hex[:8]}"
-        cfg = demo_config(str(grid_path), channel, str(mcap), stylus)
+        cfg = demo_config(str(grid_path), channel, str(mcap), stylus, bound_machine, public_key)
         rng = np.random.default_rng(seed)
         program = build_program(machine.volume.lower_mm, machine.volume.upper_mm, rng, n_random)
         env = Environment()

@@ -1,4 +1,4 @@
-"""``cmm-comp grid build`` and ``cmm-comp correct`` (docs/formats.md §3).
+"""``cmm-comp grid build|keygen|sign`` and ``cmm-comp correct`` (docs/formats.md §3).
 
 Register with ``add_parsers(subparsers)``; each handler takes the parsed arguments and returns
 an exit code. User-file problems raise ``ValueError`` (``GridFileError`` is one) with a message
@@ -20,7 +20,14 @@ from .common import load_machine, write_text_atomic
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["add_parsers", "cmd_correct", "cmd_grid_build", "read_points_csv"]
+__all__ = [
+    "add_parsers",
+    "cmd_correct",
+    "cmd_grid_build",
+    "cmd_grid_keygen",
+    "cmd_grid_sign",
+    "read_points_csv",
+]
 
 DIRECTION_COLUMNS = ("dir_x", "dir_y", "dir_z")
 
@@ -51,6 +58,27 @@ def cmd_grid_build(args: argparse.Namespace) -> int:
         f"wrote {args.output}: {machine.name} ({machine.model}), steps {list(grid.steps)}, "
         f"signals {[s.name for s in grid.signals]}, sha256 {sha[:16]}…"
     )
+    return 0
+
+
+def cmd_grid_keygen(args: argparse.Namespace) -> int:
+    """``cmm-comp grid keygen --out DIR``: a new Ed25519 grid-signing key pair."""
+    from cmm_comp.compensation.grid.signing import generate_signing_key, key_id, load_public_key
+
+    private, public = generate_signing_key(args.out)
+    print(
+        f"wrote {private} (private, keep it with whoever builds grids) and {public} "
+        f"(public, for the daemon's grid.public_key); key id {key_id(load_public_key(public))}"
+    )
+    return 0
+
+
+def cmd_grid_sign(args: argparse.Namespace) -> int:
+    """``cmm-comp grid sign GRID --key PRIVATE.pem``: sign a grid file in place."""
+    from cmm_comp.compensation.grid.signing import sign_grid
+
+    kid = sign_grid(args.grid, args.key)
+    print(f"signed {args.grid} with key {kid}")
     return 0
 
 
@@ -127,6 +155,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
         help="nodes per axis (default: the machine's [volume] steps)",
     )
     b.set_defaults(handler=cmd_grid_build)
+    k = grid_sub.add_parser("keygen", help="make an Ed25519 key pair for signing grids")
+    k.add_argument(
+        "--out", type=Path, required=True, help="folder for the two PEM files (never overwritten)"
+    )
+    k.set_defaults(handler=cmd_grid_keygen)
+    s = grid_sub.add_parser(
+        "sign", help="sign a grid file (Ed25519 over its SHA-256 and header) in place"
+    )
+    s.add_argument("grid", type=Path, help="grid file")
+    s.add_argument("--key", type=Path, required=True, help="private key PEM (grid keygen)")
+    s.set_defaults(handler=cmd_grid_sign)
     c = sub.add_parser("correct", help="correct indicated points with a grid (CSV in, CSV out)")
     c.add_argument("grid", type=Path, help="grid file")
     c.add_argument("--in", dest="input", type=Path, required=True, help="POINTS.csv")

@@ -13,6 +13,7 @@ from __future__ import annotations
 __all__ = [
     "CmmCompError",
     "GridFileError",
+    "GridSignatureError",
     "MachineFileError",
     "MeasurementFileError",
     "RealDataError",
@@ -40,6 +41,10 @@ class MeasurementFileError(CmmCompError, ValueError):
 
 class GridFileError(CmmCompError, ValueError):
     """A grid file cannot be used: the message names the file and the problem."""
+
+
+class GridSignatureError(GridFileError):
+    """A grid is unsigned, its Ed25519 signature does not verify, or a key file is unusable."""
 
 
 class RealDataError(CmmCompError, ValueError):

@@ -2,7 +2,8 @@
 
 from .config import ConfigError, DaemonConfig
 from .engine import Answer, CorrectionEngine, Reading
-from .grid_slot import GridLoadError, GridSlot, load_grid
+from .grid_slot import GridLoadError, GridReloader, GridSlot, load_grid
+from .grid_trust import GridTrust, GridTrustError
 from .metrics import LatencyHistogram, Metrics
 from .service import DaemonService
 from .sessionlog import (
@@ -31,7 +32,10 @@ __all__ = [
     "DaemonConfig",
     "DaemonService",
     "GridLoadError",
+    "GridReloader",
     "GridSlot",
+    "GridTrust",
+    "GridTrustError",
     "LatencyHistogram",
     "LoggerStats",
     "McapLogger",

@@ -1,8 +1,13 @@
 """The daemon's CAN side: receive raw axis frames and temperatures, answer each reading at once.
 
-One supervised thread owns the bus: it receives, assembles X/Y/Z triplets
-(:class:`protocol.TripletAssembler`), corrects (:class:`daemon.engine.CorrectionEngine`),
-sends the three corrected axis frames and the correction-status frame and counts the answer.
+One supervised thread owns the bus: on each wake-up it drains every frame already waiting (up
+to ``_DRAIN_MAX``), assembles X/Y/Z triplets (:class:`protocol.TripletAssembler`), corrects the
+completed readings together (:meth:`daemon.engine.CorrectionEngine.correct_many`: one
+vectorised grid call for a batch, the same answers bit for bit as one at a time), sends the
+three corrected axis frames and the correction-status frame of each in one batch
+(:func:`daemon.can_send.send_batch`) and counts the answers. A temperature frame or an
+``incomplete_reading`` answer first answers the readings completed before it, so the order of
+the wire is kept.
 Everything else about an answered reading (events, MCAP records of the reading, the answer
 and every frame) waits until the bus has been quiet for ``_IDLE_S`` (or ``_DEFER_MAX``
 readings pile up), then the MCAP writer is kicked: the logging work lands in the gap between
@@ -48,9 +53,11 @@ from cmm_comp.protocol import (
     encode_correction_status,
     encode_message,
 )
+from cmm_comp.protocol.can_codec import RawAxisDecoder
 from cmm_comp.protocol.can_ids import MessageKind
 from cmm_comp.protocol.codes import Axis, DaemonState, Status
 
+from .can_send import send_batch
 from .config import CanSection
 from .engine import Answer, CorrectionEngine, Reading
 from .events import EventLog
@@ -62,6 +69,8 @@ from .state import StateBoard
 
 BusFactory = Callable[[CanSection, CanIds], can.BusABC]
 _RECV_POLL_S = 0.01
+_DRAIN_MAX = 512
+"""Frames taken per wake-up at most before the completed readings are answered."""
 _IDLE_S = 0.0002
 """Bookkeeping of answered readings waits until no frame came for this long, s."""
 _DEFER_MAX = 32
@@ -134,11 +143,13 @@ class CanEndpoint(can.Listener):
         self._bus_factory = bus_factory
         self._bus: can.BusABC | None = None
         self._assembler: TripletAssembler[RawAxis] = TripletAssembler(window=config.window)
+        self._decode_raw = RawAxisDecoder(self.ids)  # hot path; decode_message for the rest
         self._probe: OrderedDict[int, tuple[float, float, float]] = OrderedDict()
         # Bookkeeping (counters, events, MCAP records) of answered readings and the frames to
         # log wait until the bus is quiet (or DEFER_MAX readings pile up): off the reply path,
         # and out of the way of the peer that is still taking in the answer.
         self._deferred: list[tuple[Reading, Answer, float]] = []
+        self._ready: list[Reading] = []  # completed, not yet answered (this wake-up)
         self._log_backlog: list[tuple[str, can.Message]] = []
         self._last_axis_s = 0.0
         self._frames_rx = 0  # folded into the metrics by the housekeeping
@@ -193,6 +204,7 @@ class CanEndpoint(can.Listener):
     def on_message_received(self, msg: can.Message) -> None:
         """Handle one received message (any content: never raises on bad input)."""
         self._handle(msg, time.perf_counter())
+        self._answer_ready()
         self._bookkeeping()  # driven by a Notifier: no idle detection, book at once
         self._count_frames()
 
@@ -262,6 +274,8 @@ class CanEndpoint(can.Listener):
                 if msg is not None:
                     t_rx = time.perf_counter()
                     self._handle(msg, t_rx)
+                    self._drain(bus)
+                    self._answer_ready()
                     if len(self._deferred) >= _DEFER_MAX:
                         self._bookkeeping()
                     if t_rx >= self._next_housekeeping_s:
@@ -275,14 +289,28 @@ class CanEndpoint(can.Listener):
                 self._stop.wait(0.01)
 
     # ------------------------------------------------------------------ receive
+    def _drain(self, bus: can.BusABC) -> None:
+        """Handle every frame already waiting (up to ``_DRAIN_MAX``), without blocking."""
+        for _ in range(_DRAIN_MAX - 1):
+            try:
+                msg = bus.recv(0.0)
+            except Exception as exc:  # bus gone: answer what is complete, then reopen
+                self._answer_ready()
+                self._bus_failed(exc)
+                return
+            if msg is None:
+                return
+            self._handle(msg, time.perf_counter())
+
     def _handle(self, msg: can.Message, t_rx: float) -> None:
         self._frames_rx += 1
-        frame = decode_message(msg, self.ids)
-        if isinstance(frame, RawAxis):
+        frame = self._decode_raw(msg) or decode_message(msg, self.ids)
+        if type(frame) is RawAxis:
             self._last_axis_s = t_rx
             for event in self._assembler.feed(frame):
                 self._on_assembler(event, t_rx)
         elif isinstance(frame, TemperatureSample):
+            self._answer_ready()  # readings completed before this sample are corrected without it
             self.engine.temperature(frame.sensor, frame.temp_C, frame.counter, frame.valid, "can")
         elif isinstance(frame, ProbeDirection):
             if frame.present:
@@ -344,11 +372,9 @@ class CanEndpoint(can.Listener):
                 received_s=t_rx,
                 source="can",
             )
-            answer = self.engine.correct(reading)
-            latency_us = self._send_answer(answer, reading.received_s)
-            self.engine.count(answer, latency_us)
-            self._deferred.append((reading, answer, latency_us))  # reported when the bus is quiet
+            self._ready.append(reading)  # answered with the others of this wake-up
         elif isinstance(event, Incomplete | Superseded):
+            self._answer_ready()
             self._answer_incomplete(event.seq, event.reason, t_rx)
         elif isinstance(event, Duplicate):
             self.metrics.fault("duplicate_frame")
@@ -366,20 +392,45 @@ class CanEndpoint(can.Listener):
         self.events.emit("answer_incomplete_reading", "warning", seq=seq, detail=reason)
 
     # ------------------------------------------------------------------ send
-    def _send_answer(self, answer: Answer, t_rx: float) -> float:
+    def _answer_ready(self) -> None:
+        """Correct the readings completed so far (one batch), send every answer (one batch),
+        count them; their reports wait for the bookkeeping."""
+        ready = self._ready
+        if not ready:
+            return
+        self._ready = []
+        answers = self.engine.correct_many(ready)
+        msgs: list[can.Message] = []
+        latencies = [
+            self._answer_frames(a, r.received_s, msgs) for r, a in zip(ready, answers, strict=True)
+        ]
+        self._send_msgs(msgs)
+        count, deferred = self.engine.count, self._deferred
+        for reading, answer, latency_us in zip(ready, answers, latencies, strict=True):
+            count(answer, latency_us)
+            deferred.append((reading, answer, latency_us))  # reported when the bus is quiet
+
+    def _answer_frames(self, answer: Answer, t_rx: float, out: list[can.Message]) -> float:
+        """Append the 4 answer frames of ``answer`` to ``out``; return the latency, µs."""
         seq, st = answer.seq, int(answer.status)
         ids = self._corrected_ids
         x, y, z = encode_corrected_axes(seq, st, answer.position_nm)
-        msgs = [
-            can.Message(arbitration_id=ids[0], is_extended_id=False, data=x),
-            can.Message(arbitration_id=ids[1], is_extended_id=False, data=y),
-            can.Message(arbitration_id=ids[2], is_extended_id=False, data=z),
-        ]
         latency_us = (time.perf_counter() - t_rx) * 1e6
         status = encode_correction_status(
             seq, st, int(answer.applied), latency_us, answer.correction_norm_um
         )
-        msgs.append(can.Message(arbitration_id=ids[3], is_extended_id=False, data=status))
+        out += (
+            can.Message(arbitration_id=ids[0], is_extended_id=False, data=x),
+            can.Message(arbitration_id=ids[1], is_extended_id=False, data=y),
+            can.Message(arbitration_id=ids[2], is_extended_id=False, data=z),
+            can.Message(arbitration_id=ids[3], is_extended_id=False, data=status),
+        )
+        return latency_us
+
+    def _send_answer(self, answer: Answer, t_rx: float) -> float:
+        """Send the 4 frames of one answer now; return the latency in its status frame, µs."""
+        msgs: list[can.Message] = []
+        latency_us = self._answer_frames(answer, t_rx, msgs)
         self._send_msgs(msgs)
         return latency_us
 
@@ -397,13 +448,12 @@ class CanEndpoint(can.Listener):
         if bus is None:
             self.metrics.fault("send_without_bus", len(msgs))
             return
-        for msg in msgs:
-            try:
-                bus.send(msg, timeout=self.config.send_timeout_s)
-            except Exception as exc:
-                self.metrics.fault("send_error")
-                self.on_error(exc)
-                return
+        try:
+            send_batch(bus, msgs, self.config.send_timeout_s)
+        except Exception as exc:
+            self.metrics.fault("send_error")
+            self.on_error(exc)
+            return
         self.metrics.count("frames_tx", len(msgs))
         if self.logger is not None:
             now = time.time()
@@ -422,6 +472,16 @@ class CanEndpoint(can.Listener):
         now = time.perf_counter()
         self._next_housekeeping_s = now + _HOUSEKEEPING_S
         pending = self._assembler.pending_seqs
+        if (
+            pending
+            and now - self._last_axis_s > self.config.triplet_timeout_s
+            and self._bus is not None
+        ):
+            # frames already waiting arrived before the deadline: take them first (a thread
+            # that was not scheduled for a while must not time out readings it holds)
+            self._drain(self._bus)
+            self._answer_ready()
+            pending = self._assembler.pending_seqs
         if pending and now - self._last_axis_s > self.config.triplet_timeout_s:
             timeout_ms = self.config.triplet_timeout_s * 1e3
             for inc in self._assembler.flush(f"no axis frame for {timeout_ms:.0f} ms"):

@@ -19,6 +19,9 @@ from typing import Any, get_args, get_origin, get_type_hints
 
 from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
+from cmm_comp.protocol.can_ids import NODE_STRIDE, STANDARD_ID_MAX
+
+from .config_checks import range_errors
 
 MCAP_WRITERS = ("thread", "process")
 MCAP_WRITER_PRIORITIES = ("idle", "normal")
@@ -26,7 +29,14 @@ MCAP_COMPRESSIONS = ("zstd", "lz4", "none")
 
 
 class ConfigError(CmmCompError, ValueError):
-    """A daemon configuration file or flag is invalid (message names the key and the rule)."""
+    """A daemon configuration file or flag is invalid (message names the key and the rule).
+
+    ``lines``: one line per problem (the message is those lines joined by newlines).
+    """
+
+    def __init__(self, message: str | list[str]) -> None:
+        self.lines = [message] if isinstance(message, str) else list(message)
+        super().__init__("\n".join(self.lines))
 
 
 @dataclass
@@ -37,8 +47,18 @@ class GridSection:
     """Grid file; empty = start without a grid (every answer says ``no_grid``)."""
     stylus_mm: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     """Stylus tip offset used for every reading, mm (X, Y, Z)."""
+    machine: str = ""
+    """The machine description (TOML) the grid must have been built from: its sha256 is
+    computed here and the grid's volume must lie inside the machine's."""
     expect_machine_sha256: str = ""
-    """If set, refuse a grid not built from this machine description."""
+    """Alternatively the machine description's sha256 (hex); both set must agree."""
+    allow_any_machine: bool = False
+    """Accept grids of any machine when neither ``machine`` nor ``expect_machine_sha256`` is set."""
+    public_key: str = ""
+    """Ed25519 public key (PEM) grids must be signed with (``cmm-comp grid sign``)."""
+    allow_unsigned: bool = False
+    """Accept grids without a signature (a signature present is still checked against
+    ``public_key`` when one is set)."""
 
 
 @dataclass
@@ -79,6 +99,12 @@ class ModbusSection:
     port: int = 5020
     """TCP port; 0 = any free port (tests)."""
     device_id: int = 1
+    """Unit id served (besides 0 and 255, the ids of a directly connected server, docs/modbus.md);
+    requests for any other unit id get no response."""
+    idle_timeout_s: float = 60.0
+    """Close a connection that sends nothing for this long, s; 0 = never."""
+    frame_timeout_s: float = 1.0
+    """A request frame begun must be complete within this, else the connection is closed, s."""
 
 
 @dataclass
@@ -161,6 +187,9 @@ class LogSection:
     """``debug``, ``info``, ``warning`` or ``error``."""
     max_per_s: float = 20.0
     """Repeated events of one kind are rate-limited to this many lines per second."""
+    state_repeat_s: float = 10.0
+    """A state line whose only change is its detail text (a stale sensor's age) is repeated at
+    most this often, with the count of changes in between, s."""
 
 
 @dataclass
@@ -178,60 +207,91 @@ class DaemonConfig:
     source: str = "<defaults>"
 
     def check(self) -> DaemonConfig:
-        """Validate cross-field rules; ConfigError naming the key. Returns self."""
+        """Validate ranges and cross-field rules; ConfigError listing every problem (one line
+        each, naming the key). Returns self."""
+        problems = self.problems()
+        if problems:
+            raise ConfigError(problems)
+        return self
+
+    def numeric_values(self) -> dict[str, Any]:
+        """``section.key`` → value of every numeric setting (ints, floats, lists of floats)."""
+        out: dict[str, Any] = {}
+        for section in _SECTIONS:
+            for key, hint in _section_types(section).items():
+                if hint in (int, float) or (
+                    get_origin(hint) is list and get_args(hint)[0] is float
+                ):
+                    out[f"{section}.{key}"] = getattr(getattr(self, section), key)
+        return out
+
+    def problems(self, skip: set[str] | None = None) -> list[str]:
+        """Every rule violated, one line each; keys in ``skip`` (already reported) are left out."""
         where = self.source
+        skip = set(skip or ())
+        ranges = range_errors(where, self.numeric_values(), skip)
+        out = list(ranges.values())
+        bad = skip | set(ranges)
         t = self.temperatures
         for key, role in t.sensors.items():
             if not key.isdigit() or not 0 <= int(key) <= 255:
-                raise ConfigError(f"{where}: temperatures.sensors key {key!r} must be 0..255")
-            if role not in TEMPERATURE_ROLES:
-                raise ConfigError(
+                out.append(f"{where}: temperatures.sensors key {key!r} must be 0..255")
+            elif role not in TEMPERATURE_ROLES:
+                out.append(
                     f"{where}: temperatures.sensors.{key} = {role!r}; allowed: {TEMPERATURE_ROLES}"
                 )
         for role in t.required or []:
             if role not in TEMPERATURE_ROLES:
-                raise ConfigError(f"{where}: temperatures.required has unknown role {role!r}")
+                out.append(f"{where}: temperatures.required has unknown role {role!r}")
         if t.on_fault not in ("reject", "geometry_only"):
-            raise ConfigError(
+            out.append(
                 f"{where}: temperatures.on_fault = {t.on_fault!r}; allowed: reject, geometry_only"
             )
         for name in ("plausible_C", "valid_range_C"):
             lo_hi = getattr(t, name)
-            if len(lo_hi) != 2 or not lo_hi[0] < lo_hi[1]:
-                raise ConfigError(f"{where}: temperatures.{name} = {lo_hi} must be [low, high]")
-        if len(self.grid.stylus_mm) != 3:
-            raise ConfigError(f"{where}: grid.stylus_mm = {self.grid.stylus_mm} needs 3 values")
-        if not 0 < self.limits.warn_um <= self.limits.error_um:
-            raise ConfigError(
+            if f"temperatures.{name}" not in bad and not lo_hi[0] < lo_hi[1]:
+                out.append(f"{where}: temperatures.{name} = {lo_hi} must be [low, high]")
+        lim = self.limits
+        if not {"limits.warn_um", "limits.error_um"} & bad and not lim.warn_um <= lim.error_um:
+            out.append(
                 f"{where}: limits need 0 < warn_um <= error_um, got "
-                f"{self.limits.warn_um} and {self.limits.error_um}"
+                f"{lim.warn_um} and {lim.error_um}"
             )
+        if "can.base_id" not in bad and self.can.base_id % NODE_STRIDE:
+            out.append(
+                f"{where}: can.base_id = {self.can.base_id:#x}; allowed: a multiple of "
+                f"{NODE_STRIDE:#x}"
+            )
+        elif not {"can.base_id", "can.node_id"} & bad:
+            max_node = (STANDARD_ID_MAX + 1 - self.can.base_id) // NODE_STRIDE - 1
+            if self.can.node_id > max_node:
+                out.append(
+                    f"{where}: can.node_id = {self.can.node_id}; allowed: 0 .. {max_node} for "
+                    f"base_id {self.can.base_id:#x} (ids must stay 11-bit)"
+                )
         if self.log.format not in ("json", "logfmt"):
-            raise ConfigError(f"{where}: log.format = {self.log.format!r}; allowed: json, logfmt")
+            out.append(f"{where}: log.format = {self.log.format!r}; allowed: json, logfmt")
         if self.log.level not in ("debug", "info", "warning", "error"):
-            raise ConfigError(f"{where}: log.level = {self.log.level!r}")
+            out.append(
+                f"{where}: log.level = {self.log.level!r}; allowed: debug, info, warning, error"
+            )
         if not (self.can.enabled or self.modbus.enabled):
-            raise ConfigError(f"{where}: enable at least one of can.enabled, modbus.enabled")
-        for name in ("triplet_timeout_s", "send_timeout_s", "heartbeat_s", "reconnect_s"):
-            if getattr(self.can, name) <= 0:
-                raise ConfigError(f"{where}: can.{name} must be > 0 s")
+            out.append(f"{where}: enable at least one of can.enabled, modbus.enabled")
         if self.mcap.writer not in MCAP_WRITERS:
-            raise ConfigError(
+            out.append(
                 f"{where}: mcap.writer = {self.mcap.writer!r}; allowed: {', '.join(MCAP_WRITERS)}"
             )
         if self.mcap.writer_priority not in MCAP_WRITER_PRIORITIES:
-            raise ConfigError(
+            out.append(
                 f"{where}: mcap.writer_priority = {self.mcap.writer_priority!r}; allowed: "
                 f"{', '.join(MCAP_WRITER_PRIORITIES)}"
             )
         if self.mcap.compression not in MCAP_COMPRESSIONS:
-            raise ConfigError(
+            out.append(
                 f"{where}: mcap.compression = {self.mcap.compression!r}; allowed: "
                 f"{', '.join(MCAP_COMPRESSIONS)}"
             )
-        if self.metrics.period_s <= 0 or self.mcap.flush_s <= 0:
-            raise ConfigError(f"{where}: metrics.period_s and mcap.flush_s must be > 0 s")
-        return self
+        return out
 
     def sensor_roles(self) -> dict[int, str]:
         """Sensor id → role."""
@@ -246,6 +306,12 @@ def _section_types(section: str) -> dict[str, Any]:
     return get_type_hints(cls)
 
 
+def _short(value: Any, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters (a flag may be any length)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 1]}…"
+
+
 def _coerce(where: str, value: Any, hint: Any) -> Any:
     """Check/convert a TOML or flag value to the field's type."""
     origin = get_origin(hint)
@@ -258,26 +324,29 @@ def _coerce(where: str, value: Any, hint: Any) -> Any:
     if hint is bool:
         if isinstance(value, bool):
             return value
-        raise ConfigError(f"{where}: {value!r} must be true or false")
+        raise ConfigError(f"{where}: {_short(value)} must be true or false")
     if hint is int:
         if isinstance(value, int) and not isinstance(value, bool):
             return value
-        raise ConfigError(f"{where}: {value!r} must be an integer")
+        raise ConfigError(f"{where}: {_short(value)} must be an integer")
     if hint is float:
         if isinstance(value, int | float) and not isinstance(value, bool):
-            return float(value)
-        raise ConfigError(f"{where}: {value!r} must be a number")
+            try:
+                return float(value)
+            except OverflowError:
+                raise ConfigError(f"{where}: {_short(value)} is too large") from None
+        raise ConfigError(f"{where}: {_short(value)} must be a number")
     if hint is str:
         if isinstance(value, str):
             return value
-        raise ConfigError(f"{where}: {value!r} must be a string")
+        raise ConfigError(f"{where}: {_short(value)} must be a string")
     if origin is list:
         if not isinstance(value, list):
-            raise ConfigError(f"{where}: {value!r} must be a list")
+            raise ConfigError(f"{where}: {_short(value)} must be a list")
         return [_coerce(f"{where}[{i}]", v, args[0]) for i, v in enumerate(value)]
     if origin is dict:
         if not isinstance(value, dict):
-            raise ConfigError(f"{where}: {value!r} must be a table")
+            raise ConfigError(f"{where}: {_short(value)} must be a table")
         return {
             str(k): (v if args[1] is Any else _coerce(f"{where}.{k}", v, args[1]))
             for k, v in value.items()
@@ -286,22 +355,38 @@ def _coerce(where: str, value: Any, hint: Any) -> Any:
 
 
 def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> DaemonConfig:
-    """Build and validate a config from parsed TOML; unknown sections or keys are errors."""
+    """Build and validate a config from parsed TOML; unknown sections or keys are errors.
+
+    Every problem is collected (one line each: unknown section/key, wrong type, out of range,
+    cross-field rule) and raised together as one :class:`ConfigError`.
+    """
     cfg = DaemonConfig(source=source)
+    errors: list[str] = []
+    reported: set[str] = set()
     for section, table in data.items():
         if section not in _SECTIONS:
-            raise ConfigError(f"{source}: unknown section [{section}]; allowed: {_SECTIONS}")
+            errors.append(f"{source}: unknown section [{section}]; allowed: {', '.join(_SECTIONS)}")
+            continue
         if not isinstance(table, dict):
-            raise ConfigError(f"{source}: [{section}] must be a table")
+            errors.append(f"{source}: [{section}] must be a table")
+            continue
         types = _section_types(section)
         obj = getattr(cfg, section)
         for key, value in table.items():
             if key not in types:
-                raise ConfigError(
-                    f"{source}: unknown key {section}.{key}; allowed: {sorted(types)}"
+                errors.append(
+                    f"{source}: unknown key {section}.{key}; allowed: {', '.join(sorted(types))}"
                 )
-            setattr(obj, key, _coerce(f"{source}: {section}.{key}", value, types[key]))
-    return cfg.check()
+                continue
+            try:
+                setattr(obj, key, _coerce(f"{source}: {section}.{key}", value, types[key]))
+            except ConfigError as exc:
+                errors.append(str(exc))
+                reported.add(f"{section}.{key}")
+    errors += cfg.problems(skip=reported)
+    if errors:
+        raise ConfigError(errors)
+    return cfg
 
 
 def add_override_flags(parser: argparse.ArgumentParser) -> None:
@@ -323,11 +408,11 @@ def _parse_flag(text: str, hint: Any) -> Any:
     if hint in (int, float) or get_origin(hint) is not None or hint is Any:
         try:
             return tomllib.loads(f"v = {text}")["v"]
-        except tomllib.TOMLDecodeError:
+        except (tomllib.TOMLDecodeError, RecursionError):
             if get_origin(hint) is not None:
                 try:
                     return json.loads(text)
-                except json.JSONDecodeError:
+                except (json.JSONDecodeError, RecursionError):
                     pass
             return text
     return text
@@ -345,6 +430,10 @@ def load_config(path: str | Path | None, args: argparse.Namespace | None = None)
             raise ConfigError(f"{source}: configuration file not found") from None
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+        except RecursionError:
+            raise ConfigError(f"{source}: not valid TOML: nested too deeply") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{source}: cannot read the configuration file ({exc})") from None
     if args is not None:
         for name, value in vars(args).items():
             if not name.startswith("cfg__") or value is None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +40,10 @@ _GRID_STATUS = {
 }
 _SCALE_ROLES = frozenset(STRUCTURE_ROLES)
 _DIR_KEYS = ("dir_x", "dir_y", "dir_z")
+BATCH_MIN = 8
+"""Fewer readings than this are corrected one at a time (a vectorised call costs more)."""
+BATCH_MAX = 128
+"""Readings per vectorised grid call (below the grid's parallel threshold)."""
 _PROBE_KEYS = ("nx", "ny", "nz")
 
 
@@ -154,6 +159,22 @@ class CorrectionEngine:
         else:
             out, st = grid.correct(np.array([p]), self._stylus, temps, inputs or None)
             c, label = tuple(out[0].tolist()), str(st[0])
+        has_dir = r.directions != (0, 0, 0)
+        return self._finish(r, p, c, label, loaded, temps, has_dir, r.probe is not None)
+
+    def _finish(
+        self,
+        r: Reading,
+        p: tuple[float, float, float],
+        c: tuple[float, float, float],
+        label: str,
+        loaded: LoadedGrid,
+        temps: dict[str, float] | None,
+        has_dir: bool,
+        has_probe: bool,
+    ) -> Answer:
+        """The answer from the grid's corrected position ``c`` (mm) and status ``label`` of
+        indicated ``p`` (mm): limits, applied terms, rounding to nm."""
         status = _GRID_STATUS.get(label, Status.INTERNAL_ERROR)
         if not status.geometric_correction_applied:
             return self._raw(r, status, f"grid status {label}")
@@ -167,9 +188,60 @@ class CorrectionEngine:
         detail = ""
         if norm > self._warn_um:
             detail = f"|correction| {norm:.1f} µm > warning limit {self._warn_um} µm"
-        applied = self._applied(loaded, temps, inputs, status)
+        applied = self._applied(loaded, temps, has_dir, has_probe, status)
         pos = nm3_from_mm(c)
         return Answer(r.seq, status, pos, applied, d_um, detail)
+
+    def correct_many(self, readings: Sequence[Reading], now_s: float | None = None) -> list[Answer]:
+        """Answers to ``readings``, equal bit for bit to :meth:`correct` of each at ``now_s``
+        (monotonic s): a batch of at least :data:`BATCH_MIN` plain readings (valid, no probing
+        direction) under usable temperatures is corrected in one vectorised grid call, the
+        rest one at a time. Never raises."""
+        now = time.monotonic() if now_s is None else now_s
+        if len(readings) < BATCH_MIN:
+            return [self.correct(r, now) for r in readings]
+        try:
+            return self._correct_batch(readings, now)
+        except Exception as exc:  # the batch failed as a whole: each reading on its own
+            self.metrics.fault("batch_fallback")
+            self.events.emit("batch_fallback", "error", error=repr(exc))
+            return [self.correct(r, now) for r in readings]
+
+    def _correct_batch(self, readings: Sequence[Reading], now_s: float) -> list[Answer]:
+        loaded = self.grids.current
+        if loaded is None or not hasattr(loaded.grid, "correct_point"):
+            return [self.correct(r, now_s) for r in readings]
+        verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
+        if verdict.status is not None:  # faults, geometry-only: the single path says why
+            return [self.correct(r, now_s) for r in readings]
+        self.last_temperature_fault = None
+        temps: dict[str, float] = verdict.temps_C
+        if temps and (filters := getattr(loaded.grid, "signal_filters", None)):
+            temps = self.temperatures.effective(temps, filters, now_s)
+        answers: list[Answer | None] = [None] * len(readings)
+        plain = [i for i, r in enumerate(readings) if r.probe is None and all(r.valid)]
+        for start in range(0, len(plain), BATCH_MAX):
+            idx = plain[start : start + BATCH_MAX]
+            rs = [readings[i] for i in idx]
+            pts = [mm3_from_nm(r.position_nm) for r in rs]
+            inputs: dict[str, np.ndarray] = {}
+            for k, key in enumerate(_DIR_KEYS):
+                signs = [r.directions[k] for r in rs]
+                if any(signs):  # 0 (unknown) is an absent input, as in correct(): NaN
+                    inputs[key] = np.array([float(v) if v else math.nan for v in signs])
+            out, st = loaded.grid.correct(
+                np.array(pts), self._stylus, temps, inputs or None, outside=None
+            )
+            rows = out.tolist()
+            labels = st.tolist()
+            for j, i in enumerate(idx):
+                r = rs[j]
+                c = (rows[j][0], rows[j][1], rows[j][2])
+                has_dir = r.directions != (0, 0, 0)
+                answers[i] = self._finish(r, pts[j], c, labels[j], loaded, temps, has_dir, False)
+        return [
+            a if a is not None else self.correct(readings[i], now_s) for i, a in enumerate(answers)
+        ]
 
     def required_roles(self, loaded: LoadedGrid) -> tuple[str, ...]:
         req = self.config.temperatures.required
@@ -179,12 +251,11 @@ class CorrectionEngine:
         self,
         loaded: LoadedGrid,
         temps: dict[str, float] | None,
-        inputs: dict[str, float],
+        has_dir: bool,
+        has_probe: bool,
         st: Status,
     ) -> Applied:
         """Terms that went into the answer (cached per grid and input pattern)."""
-        has_dir = any(k in inputs for k in _DIR_KEYS)
-        has_probe = "nx" in inputs
         key = (id(loaded), bool(temps), has_dir and st != Status.MISSING_DIRECTION, has_probe)
         cached = self._applied_cache.get(key)
         if cached is not None:
@@ -260,13 +331,19 @@ class CorrectionEngine:
     def temperature(
         self, sensor: int, temp_C: float, counter: int, valid: bool, source: str
     ) -> None:
-        """Store one temperature sample (any transport) and log it."""
+        """Store one temperature sample (any transport) and log it. A frame repeating the
+        previous counter of its sensor is not a sample: ignored, counted as
+        ``temperature_repeats`` (docs/can.md)."""
         state = self.temperatures.update(sensor, temp_C, counter, valid, time.monotonic())
-        self.metrics.count("temperature_samples")
         if state is None:
+            self.metrics.count("temperature_samples")
             self.metrics.fault("unknown_sensor")
             self.events.emit("unknown_sensor", "warning", sensor=sensor, source=source)
             return
+        if state.repeated:
+            self.metrics.count("temperature_repeats")
+            return
+        self.metrics.count("temperature_samples")
         if state.fault is not None:
             self.metrics.fault(f"temperature_{state.fault.label}")
             self.events.emit("temperature_fault", "warning", sensor=sensor, detail=state.detail)

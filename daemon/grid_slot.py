@@ -1,17 +1,21 @@
 """The active correction grid: loaded from a file, checked, swapped atomically on reload.
 
-:func:`load_grid` reads a grid file (``compensation.grid.CorrectionGrid.load``), then checks it
-can actually correct: a point at the centre of its volume, at the reference temperatures,
-must come back finite with status ``ok``. A file that fails any of this raises
-:class:`GridLoadError` and changes nothing. :class:`GridSlot` holds the active grid; readers
-take one reference (``slot.current``) per reading, so a reload between two readings never
-mixes two grids inside one answer.
+:func:`load_grid` reads a grid file (``compensation.grid.CorrectionGrid.load``), checks that it
+is trusted (:mod:`.grid_trust`: signature, machine, volume), then checks it can actually
+correct: a point at the centre of its volume, at the reference temperatures, must come back
+finite with status ``ok``. A file that fails any of this raises :class:`GridLoadError` and
+changes nothing. :class:`GridSlot` holds the active grid; readers take one reference
+(``slot.current``) per reading, so a reload between two readings never mixes two grids inside
+one answer. :class:`GridReloader` prepares a reload (read, verify, build) in its own thread and
+ends it with one reference swap: the reply path never waits for a reload.
 """
 
 from __future__ import annotations
 
+import os
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,7 +24,11 @@ import numpy as np
 
 from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.compensation.grid.file import GridContents
 from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
+
+from .grid_trust import GridTrust
+from .osthread import name_os_thread
 
 
 class GridLoadError(CmmCompError, ValueError):
@@ -41,6 +49,10 @@ class LoadedGrid:
     """Other signals the grid needs (dir_x …, nx …)."""
     machine: str
     model: str
+    signed_by: str = ""
+    """Key id of the verified signature; empty when the grid was accepted unsigned."""
+    loaded_by_pid: int = 0
+    """Process that read, verified and built it (a SIGHUP reload: the loader process)."""
 
     def identity(self) -> dict[str, Any]:
         """The /cmm/grid payload (without stamp)."""
@@ -56,15 +68,26 @@ class LoadedGrid:
         }
 
 
-def load_grid(path: str | Path, expect_machine_sha256: str = "") -> LoadedGrid:
-    """Load and check ``path``; :class:`GridLoadError` naming the file on any problem."""
+def load_grid(path: str | Path, trust: GridTrust | None = None) -> LoadedGrid:
+    """Load and check ``path``; :class:`GridLoadError` naming the file on any problem.
+
+    ``trust``: the daemon's trust rules (:class:`GridTrust`); None = no signature or machine
+    check (offline tools only).
+    """
     path = Path(path)
+    signer = [""]
     try:
-        grid = CorrectionGrid.load(path, expect_machine=expect_machine_sha256 or None)
+        machine_ref = trust.resolve_machine() if trust is not None else None
+
+        def verify(contents: GridContents) -> None:
+            if trust is not None:
+                signer[0] = trust.check(contents, machine_ref)
+
+        grid = CorrectionGrid.load(path, verify=verify)
     except FileNotFoundError:
         raise GridLoadError(f"{path}: grid file not found") from None
-    except (ValueError, OSError, KeyError, TypeError) as exc:
-        raise GridLoadError(f"{path}: {exc}") from None
+    except (ValueError, OSError, KeyError, TypeError, RecursionError) as exc:
+        raise GridLoadError(f"{path}: {exc}" if str(path) not in str(exc) else str(exc)) from None
     needed = [s for s in grid.signals if s.needed]
     temps = {s.name: s.reference for s in needed if s.name in TEMPERATURE_ROLES}
     inputs = {s.name: s.reference for s in needed if s.name not in TEMPERATURE_ROLES}
@@ -89,6 +112,8 @@ def load_grid(path: str | Path, expect_machine_sha256: str = "") -> LoadedGrid:
         input_signals=tuple(inputs),
         machine=str(machine.get("name", "")),
         model=str(machine.get("model", "")),
+        signed_by=signer[0],
+        loaded_by_pid=os.getpid(),
     )
 
 
@@ -104,13 +129,77 @@ class GridSlot:
         """The active grid; take it once per reading."""
         return self._current
 
-    def reload(self, path: str | Path, expect_machine_sha256: str = "") -> LoadedGrid:
-        """Load ``path`` and make it active; on GridLoadError the old grid stays active."""
+    def reload(
+        self,
+        path: str | Path,
+        trust: GridTrust | None = None,
+        loader: Callable[[str | Path, GridTrust | None], LoadedGrid] = load_grid,
+    ) -> LoadedGrid:
+        """Load ``path`` and make it active; on GridLoadError the old grid stays active.
+
+        The load runs in the calling thread; readers keep using the old grid until the one
+        reference swap at the end.
+        """
         with self._lock:
-            loaded = load_grid(path, expect_machine_sha256)
+            loaded = loader(path, trust)
             self._current = loaded
             return loaded
 
     def clear(self) -> None:
         """Drop the active grid (answers say ``no_grid``)."""
         self._current = None
+
+
+class GridReloader:
+    """A thread that performs requested reloads (``request()``, e.g. from SIGHUP) off the
+    reply path. Requests that arrive during a reload are merged into one more reload.
+
+    :param reload: does one reload (load, verify, build, swap, report); must not raise.
+    Context manager; ``stop(timeout_s)``.
+    """
+
+    def __init__(self, reload: Callable[[], object]) -> None:
+        self._reload = reload
+        self._wake = threading.Event()
+        self._stopping = False
+        self._thread = threading.Thread(target=self._run, name="grid-reload", daemon=True)
+        self.completed = 0
+        """Reloads finished (successful or refused)."""
+        self.errors: list[str] = []
+        """Unexpected exceptions of ``reload`` (it should report its own problems)."""
+
+    def start(self) -> GridReloader:
+        """Start the thread."""
+        self._thread.start()
+        return self
+
+    def request(self) -> None:
+        """Ask for a reload (returns at once; safe from a signal handler)."""
+        self._wake.set()
+
+    def _run(self) -> None:
+        name_os_thread()
+        while True:
+            self._wake.wait()
+            if self._stopping:
+                return
+            self._wake.clear()
+            try:
+                self._reload()
+            except Exception as exc:  # never let the thread die silently
+                self.errors.append(repr(exc))
+            self.completed += 1
+
+    def stop(self, timeout_s: float = 5.0) -> bool:
+        """Stop after the reload in progress (if any); True if the thread ended in time."""
+        self._stopping = True
+        self._wake.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout_s)
+        return not self._thread.is_alive()
+
+    def __enter__(self) -> GridReloader:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

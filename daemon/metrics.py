@@ -2,7 +2,10 @@
 
 :class:`Metrics` is what the hot path touches: ``count(name)``, ``answer(status_label,
 latency_us)``, ``fault(kind)``; each is a dict update under one uncontended lock (well under
-a microsecond). :class:`MetricsServer` serves ``GET /metrics`` (Prometheus text format 0.0.4)
+a microsecond). Every statistic is finite by construction: a latency that is not a finite
+number ≥ 0 (or ``None``: an answer without a reply latency, e.g. a reading that never
+completed) is counted apart and never enters the histogram; a quantile in the overflow bin is
+the largest latency seen, not infinity; an empty histogram has no quantile (``None``). :class:`MetricsServer` serves ``GET /metrics`` (Prometheus text format 0.0.4)
 from a tiny ``http.server`` thread bound to 127.0.0.1 by default; it is a context manager
 with ``stop(timeout_s)``.
 """
@@ -11,11 +14,10 @@ from __future__ import annotations
 
 import bisect
 import http.server
+import math
 import threading
 from collections.abc import Callable
 from typing import Any
-
-import numpy as np
 
 #: Histogram bin upper edges, µs: 5 µs steps to 200 µs, then roughly 10 % steps to 100 ms.
 LATENCY_EDGES_US: tuple[float, ...] = tuple(
@@ -25,37 +27,46 @@ LATENCY_EDGES_US: tuple[float, ...] = tuple(
 
 
 class LatencyHistogram:
-    """Counts of latencies (µs) per bin; the last bin is everything above the top edge."""
+    """Counts of latencies (µs) per bin; the last bin is everything above the top edge.
+    Values that are not finite numbers ≥ 0 are counted in ``invalid``, not binned."""
 
     def __init__(self, edges_us: tuple[float, ...] = LATENCY_EDGES_US) -> None:
         self.edges_us = edges_us
         self.counts = [0] * (len(edges_us) + 1)
         self.total = 0
         self.sum_us = 0.0
+        self.max_us = 0.0
+        self.invalid = 0
 
     def add(self, latency_us: float) -> None:
-        """Record one latency, µs."""
+        """Record one latency, µs (NaN, ±inf, negative: counted in ``invalid`` only)."""
+        if not 0.0 <= latency_us < math.inf:  # False for NaN too
+            self.invalid += 1
+            return
         self.counts[bisect.bisect_left(self.edges_us, latency_us)] += 1
         self.total += 1
         self.sum_us += latency_us
+        if latency_us > self.max_us:
+            self.max_us = latency_us
 
-    def quantile(self, q: float) -> float:
-        """Approximate quantile (upper edge of the bin holding it), µs; NaN when empty."""
+    def quantile(self, q: float) -> float | None:
+        """Approximate quantile (upper edge of the bin holding it; in the overflow bin the
+        largest latency seen), µs; None when empty. Always finite."""
         if self.total == 0:
-            return float("nan")
+            return None
         target = q * self.total
         acc = 0
         for i, c in enumerate(self.counts):
             acc += c
             if acc >= target and c:
-                return self.edges_us[i] if i < len(self.edges_us) else float("inf")
-        return float("inf")
+                return min(self.edges_us[i], self.max_us) if i < len(self.edges_us) else self.max_us
+        return self.max_us
 
     def copy(self) -> LatencyHistogram:
         """An independent snapshot."""
         h = LatencyHistogram(self.edges_us)
         h.counts = list(self.counts)
-        h.total, h.sum_us = self.total, self.sum_us
+        h.total, h.sum_us, h.max_us, h.invalid = self.total, self.sum_us, self.max_us, self.invalid
         return h
 
 
@@ -80,10 +91,16 @@ class Metrics:
         with self._lock:
             self.faults[kind] = self.faults.get(kind, 0) + n
 
-    def answer(self, status_label: str, latency_us: float) -> None:
-        """Count one answer with its status and reply latency, µs."""
+    def answer(self, status_label: str, latency_us: float | None) -> None:
+        """Count one answer with its status and reply latency, µs; ``None`` for an answer
+        without a reply latency (a reading that never completed, answered when it expired):
+        counted in ``answers_<status>`` and ``answers_without_latency``, not in the histogram."""
         with self._lock:
             self.answers[status_label] = self.answers.get(status_label, 0) + 1
+            if latency_us is None:
+                c = self.counters
+                c["answers_without_latency"] = c.get("answers_without_latency", 0) + 1
+                return
             self.latency.add(latency_us)
             self._period.add(latency_us)
 
@@ -123,15 +140,19 @@ class Metrics:
             counters = dict(self.counters)
             counters.update({f"answers_{k}": v for k, v in self.answers.items()})
             counters.update({f"faults_{k}": v for k, v in self.faults.items()})
+            if self.latency.invalid:
+                counters["latency_invalid"] = self.latency.invalid
         p50, p99 = period.quantile(0.5), period.quantile(0.99)
         out: dict[str, Any] = {
             "counters": counters,
             "latency_edges_us": [0.0, *period.edges_us],
             "latency_counts": period.counts[:-1],
+            "latency_over_top": period.counts[-1],
         }
-        if np.isfinite(p50):
+        if p50 is not None and p99 is not None:
             out["latency_p50_us"] = p50
             out["latency_p99_us"] = p99
+            out["latency_max_us"] = period.max_us
         return out
 
     def prometheus(self, extra: dict[str, float] | None = None) -> str:
@@ -168,7 +189,7 @@ class Metrics:
         lines.append(f"cmm_comp_reply_latency_us_sum {hist.sum_us:.1f}")
         lines.append(f"cmm_comp_reply_latency_us_count {hist.total}")
         for name, value in sorted((extra or {}).items()):
-            lines += [f"# TYPE {name} gauge", f"{name} {value:g}"]
+            lines += [f"# TYPE {name} gauge", f"{name} {value:g}"]  # Prometheus takes NaN/Inf
         return "\n".join(lines) + "\n"
 
 

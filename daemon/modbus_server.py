@@ -1,35 +1,41 @@
-"""The daemon's Modbus TCP side: a pymodbus 3.16 server implementing protocol's register map.
+"""The daemon's Modbus TCP side: protocol's register map served by protocol's MBAP server.
 
 The controller writes a reading into READING (100..119; the write that includes SEQ commits
 it) and temperatures into TEMPERATURE slots (200..263); the commit is corrected inside the
 request, so the ANSWER block (300..316) already holds the answer when the controller's next
-read arrives. Request validation, exception codes and the register layout come from
-:func:`protocol.build_sim_device`; this module adds temperature handling, the DAEMON block and
-logging (scheduled after the response). The server runs its own asyncio loop in one thread,
-bound to 127.0.0.1 unless configured otherwise; it is a context manager with ``stop(timeout_s)``.
+read arrives. Framing, exception codes, unit-id policy, idle and bad-frame handling come from
+:class:`protocol.MbapServer` and :class:`protocol.MapDevice` (docs/modbus.md); this module
+wires them to the engine, fills the DAEMON block and the device identification, counts what
+goes wrong (metrics) and logs it (one line per kind per 10 s at most, with the number of
+events folded into it). MCAP logging is scheduled after the response. The server runs its own
+asyncio loop in one thread, bound to 127.0.0.1 unless configured otherwise; it is a context
+manager with ``stop(timeout_s)``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib.metadata
 import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
-from pymodbus.pdu import ModbusPDU
-from pymodbus.server import ModbusTcpServer
-from pymodbus.simulator import SimDevice
-
 from cmm_comp.protocol import (
+    DIRECT_UNIT_IDS,
     AnswerBlock,
     DaemonBlock,
+    DeviceIdentity,
+    Handled,
+    MapDevice,
+    MbapListener,
+    MbapServer,
     ReadingBlock,
     TemperatureSlot,
-    build_sim_device,
 )
 from cmm_comp.protocol import modbus_map as mm
+from cmm_comp.protocol.modbus_devid import OBJ_GRID_SHA256, object_value
 
 from .config import ModbusSection
 from .engine import CorrectionEngine, Reading
@@ -37,6 +43,84 @@ from .events import EventLog
 from .metrics import Metrics
 from .osthread import name_os_thread
 from .sessionlog.logger import SessionLogger
+
+LOG_INTERVAL_S = 10.0
+"""At most one log line per kind of Modbus trouble this often, s (the rest are counted)."""
+
+
+def package_identity() -> DeviceIdentity:
+    """Device identification objects of this package (version and URL from its metadata)."""
+    try:
+        meta = importlib.metadata.metadata("cmm-comp")
+        version = meta["Version"] or "unknown"
+        urls = [u.split(",", 1)[-1].strip() for u in meta.get_all("Project-URL") or []]
+        url = ((meta.get_all("Home-page") or [""])[0] or (urls[0] if urls else "")).strip()
+    except importlib.metadata.PackageNotFoundError:
+        version, url = "unknown", ""
+    return DeviceIdentity(
+        vendor_name="cmm-comp project",
+        product_code="cmm-comp",
+        revision=version,
+        vendor_url=url,
+        product_name="cmm-comp volumetric compensation daemon",
+        model_name=f"Modbus register map v{mm.MAP_VERSION}",
+    )
+
+
+class LogThrottle:
+    """One event line per kind per ``interval_s``; lines carry how many were folded in."""
+
+    def __init__(self, events: EventLog, interval_s: float = LOG_INTERVAL_S) -> None:
+        self.events = events
+        self.interval_s = interval_s
+        self._last: dict[str, float] = {}
+        self._folded: dict[str, int] = {}
+
+    def emit(self, kind: str, level: str, **fields: Any) -> None:
+        """Log ``kind`` now, or count it for the next line of that kind."""
+        now = time.monotonic()
+        last = self._last.get(kind)
+        if last is not None and now - last < self.interval_s:
+            self._folded[kind] = self._folded.get(kind, 0) + 1
+            return
+        self._last[kind] = now
+        folded = self._folded.pop(kind, 0)
+        self.events.emit(kind, level, **fields, not_logged=folded)
+
+
+class _Listener(MbapListener):
+    """Counts and logs what the MBAP server saw besides well-formed requests."""
+
+    def __init__(self, metrics: Metrics, throttle: LogThrottle, served: list[int]) -> None:
+        self.metrics = metrics
+        self.throttle = throttle
+        self.served = served
+
+    def on_connect(self, peer: str) -> None:
+        self.metrics.count("modbus_connections")
+
+    def on_bad_frame(self, peer: str, reason: str) -> None:
+        self.metrics.fault("modbus_bad_frame")
+        self.throttle.emit("modbus_bad_frame", "warning", peer=peer, reason=reason)
+
+    def on_idle_close(self, peer: str) -> None:
+        self.metrics.count("modbus_idle_closed")
+        self.throttle.emit("modbus_idle_closed", "info", peer=peer)
+
+    def on_wrong_unit(self, peer: str, unit_id: int) -> None:
+        self.metrics.fault("modbus_wrong_unit")
+        self.throttle.emit(
+            "modbus_wrong_unit",
+            "warning",
+            peer=peer,
+            unit_id=unit_id,
+            served=self.served,
+            action="no response",
+        )
+
+    def on_error(self, exc: BaseException) -> None:
+        self.metrics.fault("modbus_handler_error")
+        self.throttle.emit("modbus_handler_error", "error", error=repr(exc))
 
 
 class ModbusEndpoint:
@@ -63,10 +147,19 @@ class ModbusEndpoint:
         self.port: int = config.port
         self.host: str = config.host
         self._input_errors = 0
+        self._throttle = LogThrottle(events)
+        self._identity = package_identity().objects()
         self._ready = threading.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_event: asyncio.Event | None = None
         self.error: BaseException | None = None
+        self.device = MapDevice(
+            on_commit=self._on_commit,
+            daemon_block=self._block,
+            on_temperature=self._on_temperature,
+            identity=self._identity_objects,
+        )
+        self.served_unit_ids = sorted({config.device_id, *DIRECT_UNIT_IDS})
         self._thread = threading.Thread(target=self._run, name="modbus-server", daemon=True)
 
     # ------------------------------------------------------------------ lifecycle
@@ -110,79 +203,75 @@ class ModbusEndpoint:
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop_event = asyncio.Event()
-        server = ModbusTcpServer(
-            self._device(),
-            address=(self.config.host, self.config.port),
-            trace_pdu=self._trace_pdu,
+        server = MbapServer(
+            self._handle,
+            self.served_unit_ids,
+            idle_timeout_s=self.config.idle_timeout_s,
+            frame_timeout_s=self.config.frame_timeout_s,
+            listener=_Listener(self.metrics, self._throttle, self.served_unit_ids),
         )
-        await server.serve_forever(background=True)
+        await server.start(self.config.host, self.config.port)
         try:
-            sockets = getattr(server.transport, "sockets", None) or []
-            if sockets:
-                self.host, self.port = sockets[0].getsockname()[:2]
-            self.events.emit("modbus_listening", host=self.host, port=self.port)
+            self.host, self.port = server.host, server.port
+            self.events.emit(
+                "modbus_listening", host=self.host, port=self.port, unit_ids=self.served_unit_ids
+            )
             self._ready.set()
             await self._stop_event.wait()
         finally:
-            await server.shutdown()
-            for conn in list(getattr(server, "active_connections", {}).values()):
-                conn.close()
-            await asyncio.sleep(0)
+            await server.close()
 
-    # ------------------------------------------------------------------ device
-    def _device(self) -> SimDevice:
-        base = build_sim_device(
-            self.config.device_id,
-            on_commit=self._on_commit,
-            daemon_block=self._block,
-            on_invalid_commit=self._on_invalid_commit,
+    # ------------------------------------------------------------------ requests
+    def _handle(self, pdu: bytes) -> bytes:
+        handled = self.device.handle(pdu)
+        if handled.code is not None:
+            self._rejected(handled)
+        if self.logger is not None and handled.request is not None:
+            loop = self._loop
+            if loop is not None:  # log after the response has gone out
+                loop.call_soon(self._log, handled)
+        return handled.response
+
+    def _rejected(self, handled: Handled) -> None:
+        """Count every exception response the server sends (bad function, address, value)."""
+        assert handled.code is not None
+        self._input_errors += 1
+        fc = handled.response[0] & 0x7F
+        self.metrics.fault("modbus_rejected_request")
+        if handled.error is not None:
+            self.metrics.fault("modbus_handler_error")
+            self._throttle.emit("modbus_handler_error", "error", error=repr(handled.error))
+        self._throttle.emit(
+            "modbus_rejected_request",
+            "warning",
+            function_code=fc,
+            code=int(handled.code),
+            meaning=mm.describe_exception(handled.code),
         )
-        inner = base.action
-        assert inner is not None
 
-        async def action(
-            function_code: int,
-            start_address: int,
-            address: int,
-            count: int,
-            registers: list[int],
-            set_values: list[int] | list[bool] | None,
-        ) -> Any:
-            result = await inner(
-                function_code, start_address, address, count, registers, set_values
-            )
-            if result is None and set_values is not None:
-                self._temperatures(start_address, address, registers, [int(v) for v in set_values])
-            if self.logger is not None:
-                self.logger.log(
-                    "/cmm/modbus",
-                    {
-                        "op": "read" if set_values is None else "write",
-                        "function_code": function_code,
-                        "device_id": self.config.device_id,
-                        "address": address,
-                        "count": count,
-                        "values": [] if set_values is None else [int(v) for v in set_values],
-                        "ok": result is None,
-                        "error": "" if result is None else str(result),
-                    },
-                )
-            return result
+    def _log(self, handled: Handled) -> None:
+        request = handled.request
+        if self.logger is None or request is None or request.function_code == mm.FC_READ_DEVICE_ID:
+            return
+        values = request.values
+        self.logger.log(
+            "/cmm/modbus",
+            {
+                "op": "read" if values is None else "write",
+                "function_code": request.function_code,
+                "device_id": self.config.device_id,
+                "address": request.address,
+                "count": request.count,
+                "values": [] if values is None else list(values),
+                "ok": handled.code is None,
+                "error": "" if handled.code is None else mm.describe_exception(handled.code),
+            },
+        )
 
-        return SimDevice(base.id, simdata=base.simdata, action=action)
-
-    def _trace_pdu(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU:
-        """Count every exception response the server sends (bad address, value, function)."""
-        if sending and pdu.isError():
-            self._input_errors += 1
-            self.metrics.fault("modbus_rejected_request")
-            self.events.emit(
-                "modbus_rejected_request",
-                "warning",
-                function_code=pdu.function_code & 0x7F,
-                code=int(getattr(pdu, "exception_code", 0)),
-            )
-        return pdu
+    def _identity_objects(self) -> dict[int, bytes]:
+        loaded = self.engine.grids.current
+        sha = loaded.sha256 if loaded is not None else ""
+        return {**self._identity, OBJ_GRID_SHA256: object_value(sha)}
 
     def _block(self) -> DaemonBlock:
         block = self._daemon_block()
@@ -226,25 +315,5 @@ class ModbusEndpoint:
             loop.call_soon(self.engine.record, reading, answer, latency_us)
         return out
 
-    def _on_invalid_commit(self, regs: list[int], error: ValueError) -> None:
-        self._input_errors += 1
-        self.metrics.fault("modbus_invalid_commit")
-        self.events.emit("modbus_invalid_commit", "warning", error=str(error))
-
-    def _temperatures(
-        self, start: int, address: int, registers: list[int], values: list[int]
-    ) -> None:
-        lo, hi = mm.TEMPERATURE_START, mm.TEMPERATURE_START + mm.TEMPERATURE_SIZE
-        end = address + len(values)
-        if end <= lo or address >= hi:
-            return
-        first = (max(address, lo) - lo) // mm.TEMPERATURE_SLOT_SIZE
-        last = (min(end, hi) - 1 - lo) // mm.TEMPERATURE_SLOT_SIZE
-        for sensor in range(first, last + 1):
-            slot_addr = mm.temperature_address(sensor)
-            regs = registers[slot_addr - start : slot_addr - start + mm.TEMPERATURE_SLOT_SIZE]
-            for i in range(mm.TEMPERATURE_SLOT_SIZE):
-                if address <= slot_addr + i < end:
-                    regs[i] = values[slot_addr + i - address]
-            slot = TemperatureSlot.from_registers(sensor, regs)
-            self.engine.temperature(sensor, slot.temp_C, slot.counter, slot.valid, "modbus")
+    def _on_temperature(self, slot: TemperatureSlot) -> None:
+        self.engine.temperature(slot.sensor, slot.temp_C, slot.counter, slot.valid, "modbus")

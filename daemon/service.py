@@ -5,8 +5,9 @@
     # leaving the block stops endpoints, then flushes and closes the MCAP file
 
 :meth:`DaemonService.run_forever` is the process main loop: SIGTERM/SIGINT stop cleanly
-(MCAP finished), SIGHUP reloads the grid atomically (a bad new grid is refused and the old one
-stays active). Configuration and grids change only through files on the host; nothing on the
+(MCAP finished), SIGHUP reloads the grid atomically (a bad or untrusted new grid is refused and
+the old one stays active); the reload is prepared in its own thread (:class:`GridReloader`) and
+ends with one reference swap, so answers keep flowing with the old grid meanwhile. Configuration and grids change only through files on the host; nothing on the
 bus can change them. A missing or bad grid at start is not fatal: the daemon runs and every
 answer says ``no_grid`` until a good grid is loaded.
 """
@@ -17,6 +18,8 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TextIO
 
 from mcap.writer import CompressionType
@@ -28,7 +31,9 @@ from .can_endpoint import BusFactory, CanEndpoint, open_bus
 from .config import DaemonConfig
 from .engine import CorrectionEngine
 from .events import EventLog
-from .grid_slot import GridLoadError, GridSlot
+from .grid_slot import GridLoadError, GridReloader, GridSlot, LoadedGrid, load_grid
+from .grid_trust import GridTrust
+from .grid_worker import ProcessGridLoader
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
 from .osthread import name_os_thread
@@ -49,6 +54,9 @@ class DaemonService:
 
     :param events_stream: where the structured log lines go (stdout by default, None = off).
     :param bus_factory: opens the CAN bus (tests inject failing buses).
+    :param grid_loader: reads, verifies and builds a grid (tests inject a slow one); by
+        default the start-up load and ``reload_grid`` run :func:`.grid_slot.load_grid` in the
+        calling thread and SIGHUP reloads run it in a worker process (:mod:`.grid_worker`).
     """
 
     def __init__(
@@ -56,6 +64,7 @@ class DaemonService:
         config: DaemonConfig,
         events_stream: TextIO | None = sys.stdout,
         bus_factory: BusFactory = open_bus,
+        grid_loader: Callable[[str | Path, GridTrust | None], LoadedGrid] | None = None,
     ) -> None:
         self.config = config
         self.events = EventLog(
@@ -64,8 +73,13 @@ class DaemonService:
         self.metrics = Metrics()
         self.logger: SessionLogger | None = None
         self.grids = GridSlot()
+        self.grid_trust = GridTrust.from_section(config.grid)
+        self._grid_loader = grid_loader or load_grid
+        self._process_loader = ProcessGridLoader() if grid_loader is None else None
+        self._reload_loader = grid_loader or self._process_loader or load_grid
+        self.reloader = GridReloader(self._background_reload)
         self.temperatures = TemperatureTable(config.temperatures, config.sensor_roles())
-        self.state = StateBoard(self._on_state_change)
+        self.state = StateBoard(self._on_state_change, config.log.state_repeat_s)
         self.engine: CorrectionEngine | None = None
         self.can: CanEndpoint | None = None
         self.modbus: ModbusEndpoint | None = None
@@ -101,6 +115,13 @@ class DaemonService:
                     compression=_COMPRESSION[cfg.mcap.compression],
                     **extra,
                 )
+                if cfg.mcap.path.endswith(".mcap"):
+                    first = self.logger.files[0] if self.logger.files else None
+                    if first is not None and first.name != Path(cfg.mcap.path).name:
+                        # an existing file is never overwritten: the log went to a new name
+                        self.events.emit(
+                            "mcap_rotated", "warning", requested=cfg.mcap.path, path=str(first)
+                        )
             self.engine = CorrectionEngine(
                 cfg, self.grids, self.temperatures, self.metrics, self.events, self.logger
             )
@@ -138,6 +159,7 @@ class DaemonService:
                 target=self._housekeeping, name="daemon-housekeep", daemon=True
             )
             self._housekeeper.start()
+            self.reloader.start()
             self.state.set_phase(DaemonState.READY)
         except BaseException:
             self.stop()
@@ -162,6 +184,9 @@ class DaemonService:
         if self.metrics_server is not None:
             ok &= self.metrics_server.stop(max(0.1, deadline - time.monotonic()))
         self._stop.set()
+        ok &= self.reloader.stop(max(0.1, deadline - time.monotonic()))
+        if self._process_loader is not None:
+            ok &= self._process_loader.stop(max(0.1, deadline - time.monotonic()))
         if self._housekeeper is not None:
             self._housekeeper.join(max(0.1, deadline - time.monotonic()))
             ok &= not self._housekeeper.is_alive()
@@ -189,17 +214,23 @@ class DaemonService:
         signal.signal(signal.SIGTERM, on_term)
         signal.signal(signal.SIGINT, on_term)
         signal.signal(signal.SIGHUP, on_hup)
+        if self._process_loader is not None:
+            self._process_loader.prewarm()  # the first SIGHUP then finds it ready
         while not self._stop.wait(0.05):
             if self._reload_requested.is_set():
                 self._reload_requested.clear()
-                self.reload_grid()
+                self.request_reload()
         self.stop()
         return 0
 
     # ------------------------------------------------------------------ grid
-    def _load_grid(self, path: str) -> bool:
+    def _load_grid(
+        self,
+        path: str,
+        loader: Callable[[str | Path, GridTrust | None], LoadedGrid] | None = None,
+    ) -> bool:
         try:
-            loaded = self.grids.reload(path, self.config.grid.expect_machine_sha256)
+            loaded = self.grids.reload(path, self.grid_trust, loader or self._grid_loader)
         except GridLoadError as exc:
             self.metrics.fault("grid_refused")
             old = self.grids.current
@@ -217,6 +248,7 @@ class DaemonService:
             path=loaded.path,
             sha256=loaded.sha256,
             machine=loaded.machine,
+            signed_by=loaded.signed_by or "unsigned (allowed)",
             signals=list(loaded.temperature_roles + loaded.input_signals),
         )
         if self.logger is not None:
@@ -224,9 +256,19 @@ class DaemonService:
         self._status_log(self.state.state, f"grid loaded: {loaded.path}")
         return True
 
+    def request_reload(self) -> None:
+        """Reload the configured grid in the reload thread (what SIGHUP does): returns at once;
+        answers use the old grid until the new one is verified and built, then one swap."""
+        self.reloader.request()
+
+    def _background_reload(self) -> None:
+        """One SIGHUP reload, in the reload thread, with the work in the loader process."""
+        self._load_grid(self.config.grid.path, self._reload_loader)
+        self.state.set_grid(self.grids.current is not None)
+
     def reload_grid(self, path: str | None = None) -> bool:
-        """Reload the grid from ``path`` (default: the configured file). On failure the old
-        grid stays active and False is returned."""
+        """Reload the grid from ``path`` (default: the configured file) in the calling thread.
+        On failure the old grid stays active and False is returned."""
         ok = self._load_grid(path or self.config.grid.path)
         self.state.set_grid(self.grids.current is not None)
         return ok
@@ -258,13 +300,16 @@ class DaemonService:
                 {"state": state.label, "detail": detail, "grid_sha256": self._grid_sha()},
             )
 
-    def _on_state_change(self, state: DaemonState, detail: str) -> None:
+    def _on_state_change(self, state: DaemonState, detail: str, repeats: int = 0) -> None:
         level = (
             "info"
             if state in (DaemonState.READY, DaemonState.STARTING, DaemonState.STOPPING)
             else "warning"
         )
-        self.events.emit("state", level, state=state.label, detail=detail, grid=self._grid_sha())
+        extra = {"repeats": repeats} if repeats else {}
+        self.events.emit(
+            "state", level, state=state.label, detail=detail, grid=self._grid_sha(), **extra
+        )
         self._status_log(state, detail)
 
     def _on_mcap_error(self, exc: BaseException) -> None:
@@ -277,7 +322,9 @@ class DaemonService:
             for s in DaemonState
         }
         if self.logger is not None:
-            extra["cmm_comp_mcap_dropped"] = float(self.logger.stats().dropped)
+            # exact per-topic drops and encode errors of the session log (docs/mcap.md)
+            for k, v in self.logger.stats().counters().items():
+                extra[f"cmm_comp_{k}"] = float(v)
         return self.metrics.prometheus(extra)
 
     def _publish_counters(self) -> None:

@@ -1,10 +1,11 @@
 """Latest temperature of each sensor and the checks that decide whether it may be used.
 
-A sample is usable when its sensor reports it valid, it is within the plausible range (a
+A frame repeating the previous counter of its sensor is not a new sample: it is ignored
+(nothing stored, whatever its value; :attr:`SensorState.repeated` tells the caller, who counts
+it). A sample is usable when its sensor reports it valid, it is within the plausible range (a
 sensor fault otherwise), it did not jump faster than ``max_rate_C_per_s`` from the previous
 sample, it is within the range the compensation is valid for, and its sample counter changed
-within ``stale_s`` (a repeated counter means the controller re-sent an old value). Time is a
-monotonic clock in s supplied by the caller, so tests can step it.
+within ``stale_s``. Time is a monotonic clock in s supplied by the caller, so tests can step it.
 
 :meth:`TemperatureTable.inputs` returns the ``temps_C`` mapping for the grid and, when a
 required role is not usable, the status that says why (first reason in the order of roles).
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from cmm_comp.compensation.thermal import FIRST_ORDER_LAG, FirstOrderLag, SignalFilter
 from cmm_comp.protocol.codes import Status
@@ -38,6 +39,9 @@ class SensorState:
     fault: Status | None
     """Why this sample is unusable (apart from staleness), or None."""
     detail: str
+    repeated: bool = False
+    """True on the state returned for an ignored frame that repeated the previous counter
+    (the state is the previous sample's, unchanged)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -68,14 +72,19 @@ class TemperatureTable:
     def update(
         self, sensor: int, temp_C: float, counter: int, valid: bool, now_s: float
     ) -> SensorState | None:
-        """Store a sample; return its state (None for a sensor id not in the configuration)."""
+        """Store a sample; return its state (None for a sensor id not in the configuration).
+
+        A frame whose counter equals the previous sample's is ignored: the previous state is
+        returned with ``repeated=True`` and nothing changes."""
         role = self.roles.get(sensor)
         if role is None:
             return None
         cfg = self.config
         with self._lock:
             prev = self._sensors.get(sensor)
-            changed_s = now_s if prev is None or prev.counter != counter else prev.changed_s
+            if prev is not None and prev.counter == counter:
+                return replace(prev, repeated=True)
+            changed_s = now_s
             fault: Status | None = None
             detail = ""
             if not valid:
@@ -89,7 +98,6 @@ class TemperatureTable:
             elif (
                 prev is not None
                 and prev.valid
-                and prev.counter != counter
                 and now_s > prev.received_s
                 and abs(temp_C - prev.temp_C) / (now_s - prev.received_s) > cfg.max_rate_C_per_s
             ):

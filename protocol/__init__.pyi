@@ -34,10 +34,14 @@ from .can_ids import CanIds, MessageKind, dbc_text
 from .codes import Applied, Axis, DaemonState, Direction, Status, grid_id_from_sha256, seq_distance
 from .modbus_client import AnswerTimeoutError, ControllerClient, ModbusExceptionError
 from .modbus_codec import AnswerBlock, DaemonBlock, ReadingBlock, TemperatureSlot, decode_output
-from .modbus_device import build_sim_device
+from .modbus_device import Handled, MapDevice
+from .modbus_devid import DeviceIdentity, device_id_response
 from .modbus_map import ExceptionCode, check_request, check_write, commits_reading
+from .modbus_pdu import FrameError, Request, parse_request
+from .modbus_tcp import DIRECT_UNIT_IDS, MbapListener, MbapServer
 
 __all__ = [
+    "DIRECT_UNIT_IDS",
     "AnswerBlock",
     "AnswerTimeoutError",
     "Applied",
@@ -52,12 +56,18 @@ __all__ = [
     "DaemonBlock",
     "DaemonState",
     "DecodeResult",
+    "DeviceIdentity",
     "Direction",
     "Duplicate",
     "ExceptionCode",
     "Frame",
+    "FrameError",
+    "Handled",
     "Heartbeat",
     "Incomplete",
+    "MapDevice",
+    "MbapListener",
+    "MbapServer",
     "MessageKind",
     "ModbusExceptionError",
     "NotData",
@@ -65,6 +75,7 @@ __all__ = [
     "ProbeDirection",
     "RawAxis",
     "ReadingBlock",
+    "Request",
     "Status",
     "Superseded",
     "TemperatureSample",
@@ -73,16 +84,17 @@ __all__ = [
     "TripletAssembler",
     "Undecodable",
     "UnknownId",
-    "build_sim_device",
     "check_request",
     "check_write",
     "commits_reading",
     "dbc_text",
     "decode_message",
     "decode_output",
+    "device_id_response",
     "encode_corrected_axes",
     "encode_correction_status",
     "encode_message",
     "grid_id_from_sha256",
+    "parse_request",
     "seq_distance",
 ]

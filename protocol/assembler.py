@@ -4,23 +4,33 @@
 :class:`CorrectedAxis` on the controller side) and returns events: a :class:`Triplet` when X, Y
 and Z of one seq are all there, and typed reports (never exceptions) for everything else:
 
-- :class:`Duplicate`: an axis arrived twice for a pending or just-emitted seq (first one kept);
-- :class:`OutOfOrder`: a frame for a seq that is already finished (emitted, superseded or
-  dropped), i.e. it arrived too late to be used;
+- :class:`Duplicate`: an axis arrived twice for a pending seq (first one kept), or a frame
+  byte-identical to the one of its axis in a recently finished reading (a retransmission);
+- :class:`OutOfOrder`: a frame for a recently dropped seq (superseded or incomplete) of an axis
+  that reading lacked, i.e. the missing frame arriving too late to be used;
 - :class:`Superseded`: a pending, incomplete seq dropped because a newer seq completed first;
 - :class:`Incomplete`: a pending seq dropped because the window of pending seqs was full, or
   by :meth:`TripletAssembler.flush` (e.g. on a timeout the caller measures).
 
-Seqs are uint16 and wrap: "newer" is decided modulo 2**16 relative to the last finished seq. A
-frame up to ``late_horizon`` seqs behind it is late (:class:`OutOfOrder`); anything further
-behind is taken as a jump forward (e.g. the controller restarted its counter), so the assembler
-resynchronises instead of rejecting everything until the counter catches up.
-Memory is bounded: at most ``window`` pending seqs and ``window`` remembered finished seqs.
+Every complete reading is emitted, whatever its seq: a controller that restarts its counter
+(back to 0, or anywhere) is served from its first reading. A frame whose seq is not pending
+starts a new reading unless that seq is among the last ``memory`` finished ones and the frame
+is a retransmission (:class:`Duplicate`, byte-identical to the frame already used) or the late
+missing frame of a dropped reading (:class:`OutOfOrder`). So a seq finished recently is
+answered again only when a frame with new content for it arrives (a restarted controller); the
+frames of one emitted triplet always share one seq, and a pending reading keeps the first frame
+of each axis.
+
+Seqs are uint16 and wrap: "newer" (for superseding) is decided modulo 2**16 relative to the
+last finished seq; a completed seq supersedes the incomplete pending seqs at most
+``late_horizon`` behind it, never those ahead of it (a counter jump leaves them to the window
+or the caller's timeout). Memory is bounded: at most ``window`` pending seqs and ``memory``
+remembered finished seqs.
 """
 
 from __future__ import annotations
 
-from collections import OrderedDict, deque
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
 
@@ -99,19 +109,23 @@ class TripletAssembler(Generic[F]):
     """Collect axis frames into same-seq triplets; see the module docstring for the events.
 
     ``window``: maximum number of pending (incomplete) seqs kept; ``late_horizon``: how many
-    seqs behind the last finished one still count as late rather than as a counter jump.
+    seqs behind a completed one an incomplete pending seq is superseded by it; ``memory``: how
+    many finished seqs are remembered to recognise retransmissions and late frames.
     """
 
-    def __init__(self, window: int = 4, late_horizon: int = 256) -> None:
+    def __init__(self, window: int = 4, late_horizon: int = 256, memory: int = 64) -> None:
         if window < 1:
             raise ValueError(f"window {window} must be >= 1")
         if not 1 <= late_horizon < SEQ_MODULUS // 2:
             raise ValueError(f"late_horizon {late_horizon} out of range 1..{SEQ_MODULUS // 2 - 1}")
+        if memory < 1:
+            raise ValueError(f"memory {memory} must be >= 1")
         self.window = window
         self.late_horizon = late_horizon
+        self.memory = memory
         self._pending: OrderedDict[int, dict[Axis, F]] = OrderedDict()
-        self._emitted: deque[int] = deque(maxlen=window)
-        self._emitted_frames: dict[int, Triplet[F]] = {}
+        # finished seq -> (frames it had, emitted?); oldest first, at most `memory`
+        self._finished: OrderedDict[int, tuple[dict[Axis, F], bool]] = OrderedDict()
         self._last_finished: int | None = None
         self._anchor: int | None = None
 
@@ -127,17 +141,20 @@ class TripletAssembler(Generic[F]):
 
     def feed(self, frame: F) -> list[AssemblerEvent[F]]:
         """Add one axis frame; return the events it causes (possibly none)."""
-        seq, axis = frame.seq, Axis(frame.axis)
+        seq, axis = frame.seq, frame.axis
+        if type(axis) is not Axis:
+            axis = Axis(axis)
         events: list[AssemblerEvent[F]] = []
         if self._anchor is None:
             self._anchor = (seq - self.late_horizon - 1) % SEQ_MODULUS
-        if self._is_finished(seq):
-            events.append(self._late(frame))
-            return events
-        if seq not in self._pending:
-            self._pending[seq] = {}
+        parts = self._pending.get(seq)
+        if parts is None:
+            late = self._late(frame)
+            if late is not None:
+                events.append(late)
+                return events
+            parts = self._pending[seq] = {}
             self._sort_pending()
-        parts = self._pending[seq]
         if axis in parts:
             same = parts[axis] == frame
             why = "identical repeat" if same else "different payload; first kept"
@@ -159,23 +176,34 @@ class TripletAssembler(Generic[F]):
 
     # -- internals ------------------------------------------------------------------------
 
-    def _is_finished(self, seq: int) -> bool:
-        if self._last_finished is None:
-            return False
-        behind = seq_distance(self._last_finished, seq)
-        return behind <= self.late_horizon and seq not in self._pending
-
-    def _late(self, frame: F) -> Duplicate | OutOfOrder:
+    def _late(self, frame: F) -> Duplicate | OutOfOrder | None:
+        """The report for a frame of a recently finished seq that must not start a new
+        reading (retransmission, late missing frame), else None."""
         seq, axis = frame.seq, Axis(frame.axis)
-        assert self._last_finished is not None
-        if seq in self._emitted_frames:
-            first = getattr(self._emitted_frames[seq], axis.name.lower())
-            same = first == frame
-            why = "identical repeat" if same else "different payload; ignored"
-            msg = f"{axis.name} of seq {seq} after its triplet was emitted: {why}"
-            return Duplicate(seq, axis, same, msg)
-        msg = f"seq {seq} is already finished (newest finished: {self._last_finished}); dropped"
-        return OutOfOrder(seq, axis, self._last_finished, msg)
+        known = self._finished.get(seq)
+        if known is None:
+            return None
+        parts, emitted = known
+        first = parts.get(axis)
+        if first is None:
+            newest = seq if self._last_finished is None else self._last_finished
+            msg = (
+                f"{axis.name} of seq {seq} after that reading was dropped incomplete "
+                f"(newest finished: {newest}); ignored"
+            )
+            return OutOfOrder(seq, axis, newest, msg)
+        if first == frame:
+            when = "after its triplet was emitted" if emitted else "after it was dropped"
+            msg = f"{axis.name} of seq {seq} {when}: identical repeat; ignored"
+            return Duplicate(seq, axis, True, msg)
+        return None  # new content for a finished seq: a new reading (controller restart)
+
+    def _remember(self, seq: int, parts: dict[Axis, F], emitted: bool) -> None:
+        finished = self._finished
+        finished.pop(seq, None)
+        finished[seq] = (parts, emitted)
+        if len(finished) > self.memory:
+            finished.popitem(last=False)
 
     def _key(self, seq: int) -> int:
         """Age order of pending seqs: distance ahead of the last finished seq (or the anchor)."""
@@ -198,18 +226,17 @@ class TripletAssembler(Generic[F]):
             present, missing = _split(parts)
             msg = f"seq {old_seq} dropped incomplete (missing {_names(missing)}): {seq} completed"
             events.append(Superseded(old_seq, present, missing, seq, msg))
+            self._remember(old_seq, parts, False)
         parts = self._pending.pop(seq)
         triplet = Triplet(seq, parts[Axis.X], parts[Axis.Y], parts[Axis.Z])
         events.append(triplet)
         self._last_finished = seq
-        if len(self._emitted) == self._emitted.maxlen:
-            self._emitted_frames.pop(self._emitted[0], None)
-        self._emitted.append(seq)
-        self._emitted_frames[seq] = triplet
+        self._remember(seq, parts, True)
         self._sort_pending()
         return events
 
     def _incomplete(self, seq: int, parts: dict[Axis, F], reason: str) -> Incomplete:
+        self._remember(seq, parts, False)
         present, missing = _split(parts)
         return Incomplete(seq, present, missing, f"seq {seq} missing {_names(missing)}: {reason}")
 

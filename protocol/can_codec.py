@@ -6,8 +6,9 @@ from dataclasses import dataclass
 
 import can
 
-from .can_frames import FRAME_CLASS, PAYLOAD_SIZE, Frame
+from .can_frames import FRAME_CLASS, PAYLOAD_SIZE, Frame, RawAxis
 from .can_ids import CanIds, MessageKind
+from .codes import Axis
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,6 +93,34 @@ def decode_message(msg: can.Message, ids: CanIds) -> DecodeResult:
         if kind is None:  # the message object itself is malformed
             return UnknownId(can_id, False)
         return BadValue(can_id, kind, str(exc))
+
+
+class RawAxisDecoder:
+    """:func:`decode_message` cut down to the daemon's hot path: ``decoder(msg)`` is the
+    :class:`RawAxis` that ``decode_message(msg, ids)`` returns for a clean RAW_X/Y/Z frame of
+    node ``ids``, and None for any other message (call :func:`decode_message`, which says what
+    it is). Never raises."""
+
+    __slots__ = ("_axes",)
+
+    def __init__(self, ids: CanIds) -> None:
+        self._axes: dict[int, Axis] = {}
+        for kind in (MessageKind.RAW_X, MessageKind.RAW_Y, MessageKind.RAW_Z):
+            assert kind.axis is not None
+            self._axes[ids.id_of(kind)] = kind.axis
+
+    def __call__(self, msg: can.Message) -> RawAxis | None:
+        try:
+            axis = self._axes.get(msg.arbitration_id)
+            if axis is None or msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
+                return None
+            data = msg.data
+            if data is None or len(data) != PAYLOAD_SIZE:
+                return None
+            frame = RawAxis.decode(bytes(data))
+        except (ValueError, TypeError, AttributeError, OverflowError):
+            return None
+        return frame if frame.axis is axis else None
 
 
 def encode_message(frame: Frame, ids: CanIds, timestamp_s: float = 0.0) -> can.Message:

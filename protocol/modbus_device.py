@@ -1,27 +1,49 @@
-"""The register map as a pymodbus 3.16 ``SimDevice``: a reference server-side binding.
+"""The register map as a Modbus server device: request PDU in, response PDU out (no I/O).
 
-:func:`build_sim_device` lays out the map (INFO preset, READING/TEMPERATURE writable, ANSWER/
-DAEMON read-only, everything else undefined) and validates every request with
-:func:`protocol.modbus_map.check_request` / :func:`check_write`, answering the standard
-exception codes. On a commit (a write including SEQ) it calls ``on_commit(reading)``; a returned
-:class:`AnswerBlock` is stored at once, so the controller's next read sees it. Answers computed
-elsewhere are pulled from ``answer_block()`` and the DAEMON block from ``daemon_block()`` on
-every read that touches them. The daemon engineer may
-use this directly with ``pymodbus.server.ModbusTcpServer(build_sim_device(...), address=…)``.
+:class:`MapDevice` holds the registers of :mod:`protocol.modbus_map` (INFO preset, READING/
+TEMPERATURE writable, ANSWER/DAEMON read-only, everything else undefined) and answers each
+request PDU exactly per the Modbus Application Protocol V1.1b3: the function-level checks of
+:func:`protocol.modbus_pdu.parse_request` (01, 03), then the map's address and value checks
+(02, 03), then the operation; a hook that raises gives 04 SERVER_DEVICE_FAILURE. FC43/MEI 14
+answers the device identification (:mod:`protocol.modbus_devid`).
 
-Hooks run inside the server's event loop: keep them short (or hand off and return None).
+Hooks (all optional) run inside the request, so keep them short:
+
+* ``on_commit(reading) -> AnswerBlock | None``: a validated write including SEQ; a returned
+  answer is stored at once, so the controller's next read sees it.
+* ``answer_block() -> AnswerBlock | None``: pulled on every read touching ANSWER (None keeps
+  the stored answer): lets a daemon that computes elsewhere publish its answers.
+* ``daemon_block() -> DaemonBlock``: pulled on every read touching DAEMON.
+* ``on_temperature(slot)``: each temperature slot a validated write touched, as it is after it.
+* ``identity() -> {object id: bytes}``: device identification objects, per request (None:
+  FC43 is not implemented, exception 01).
+
+:class:`protocol.MbapServer` serves a device over TCP.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
-from pymodbus.constants import ExcCodes
-from pymodbus.simulator import DataType, SimData, SimDevice
+from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 from . import modbus_map as mm
 from .codes import Status
-from .modbus_codec import AnswerBlock, DaemonBlock, ReadingBlock, info_registers
+from .modbus_codec import (
+    AnswerBlock,
+    DaemonBlock,
+    ReadingBlock,
+    TemperatureSlot,
+    info_registers,
+)
+from .modbus_devid import device_id_response
+from .modbus_pdu import (
+    Request,
+    exception_pdu,
+    parse_request,
+    read_response,
+    write_multiple_response,
+    write_single_response,
+)
 
 INITIAL_ANSWER = AnswerBlock(0, Status.NOT_READY, (0, 0, 0))
 """ANSWER block before the first answer: an all-zero block would read as "seq 0, ok"."""
@@ -29,92 +51,124 @@ INITIAL_ANSWER = AnswerBlock(0, Status.NOT_READY, (0, 0, 0))
 CommitHook = Callable[[ReadingBlock], AnswerBlock | None]
 DaemonHook = Callable[[], DaemonBlock]
 AnswerHook = Callable[[], AnswerBlock | None]
-InvalidCommitHook = Callable[[list[int], ValueError], None]
+TemperatureHook = Callable[[TemperatureSlot], None]
+IdentityHook = Callable[[], Mapping[int, bytes]]
+
+_SIZE = mm.DAEMON_START + mm.DAEMON_SIZE
+_TEMP_END = mm.TEMPERATURE_START + mm.TEMPERATURE_SIZE
+
+
+class Handled(NamedTuple):
+    """What :meth:`MapDevice.handle` did: the response PDU, the request (None if it did not
+    parse), the exception code answered (None = success) and the hook error behind a 04."""
+
+    response: bytes
+    request: Request | None
+    code: mm.ExceptionCode | None
+    error: BaseException | None = None
 
 
 def _overlaps(address: int, count: int, start: int, size: int) -> bool:
     return address < start + size and address + count > start
 
 
-def _simdata(block: mm.RegisterBlock, values: list[int] | None = None) -> SimData:
-    return SimData(
-        block.start,
-        values=values if values is not None else [0] * block.size,
-        datatype=DataType.REGISTERS,
-        readonly=not block.writable,
-    )
+class MapDevice:
+    """The cmm-comp register map answering Modbus request PDUs (see the module docstring)."""
 
+    def __init__(
+        self,
+        on_commit: CommitHook | None = None,
+        daemon_block: DaemonHook | None = None,
+        answer_block: AnswerHook | None = None,
+        on_temperature: TemperatureHook | None = None,
+        identity: IdentityHook | None = None,
+    ) -> None:
+        self.on_commit = on_commit
+        self.daemon_block = daemon_block
+        self.answer_block = answer_block
+        self.on_temperature = on_temperature
+        self.identity = identity
+        self.registers = [0] * _SIZE
+        """Register contents, index = address (undefined addresses are never served)."""
+        self.registers[mm.INFO_START : mm.INFO_START + mm.INFO_SIZE] = info_registers()
+        self._store(mm.ANSWER_START, INITIAL_ANSWER.to_registers())
+        if daemon_block is not None:
+            self._store(mm.DAEMON_START, daemon_block().to_registers())
 
-def build_sim_device(
-    device_id: int = 1,
-    on_commit: CommitHook | None = None,
-    daemon_block: DaemonHook | None = None,
-    on_invalid_commit: InvalidCommitHook | None = None,
-    answer_block: AnswerHook | None = None,
-) -> SimDevice:
-    """A ``SimDevice`` implementing the cmm-comp register map for Modbus unit ``device_id``.
+    def _store(self, address: int, values: list[int]) -> None:
+        self.registers[address : address + len(values)] = values
 
-    ``on_commit(reading)``: called after a committing write has been validated, with the
-    READING block as it will be after the write. ``daemon_block()``: current DAEMON block.
-    ``on_invalid_commit(regs, error)``: a commit whose READING block does not decode.
-    ``answer_block()``: latest answer (or None to keep the stored one), pulled on every read
-    touching ANSWER; lets a daemon that computes outside the hook publish its answers.
-    """
-    blocks = {b.name: b for b in mm.BLOCKS}
-    simdata = [
-        _simdata(blocks["INFO"], info_registers()),
-        _simdata(blocks["READING"]),
-        _simdata(blocks["TEMPERATURE"]),
-        _simdata(blocks["ANSWER"], INITIAL_ANSWER.to_registers()),
-        _simdata(blocks["DAEMON"]),
-    ]
+    def handle_pdu(self, pdu: bytes) -> bytes:
+        """Response PDU to ``pdu`` (the :class:`protocol.MbapServer` handler)."""
+        return self.handle(pdu).response
 
-    async def action(
-        function_code: int,
-        start_address: int,
-        address: int,
-        count: int,
-        registers: list[int],
-        set_values: list[int] | list[bool] | None,
-    ) -> ExcCodes | None:
-        if set_values is None:
-            code = mm.check_request(function_code, address, count)
-        else:
-            code = mm.check_write(function_code, address, [int(v) for v in set_values])
-        if code is not None:
-            return ExcCodes(int(code))
-        if set_values is not None and mm.commits_reading(function_code, address, count):
-            _commit(start_address, address, registers, [int(v) for v in set_values])
-        if set_values is None:
-            _refresh(start_address, address, count, registers)
-        return None
-
-    def _refresh(start: int, address: int, count: int, registers: list[int]) -> None:
-        """Pull ANSWER / DAEMON from the hooks when a read touches them."""
-        if answer_block is not None and _overlaps(address, count, mm.ANSWER_START, mm.ANSWER_SIZE):
-            answer = answer_block()
-            if answer is not None:
-                a = mm.ANSWER_START - start
-                registers[a : a + mm.ANSWER_SIZE] = answer.to_registers()
-        if daemon_block is not None and _overlaps(address, count, mm.DAEMON_START, mm.DAEMON_SIZE):
-            d = mm.DAEMON_START - start
-            registers[d : d + mm.DAEMON_SIZE] = daemon_block().to_registers()
-
-    def _commit(start: int, address: int, registers: list[int], values: list[int]) -> None:
-        base = mm.READING_START - start
-        after = registers[base : base + mm.READING_SIZE]
-        for i, value in enumerate(values):
-            offset = address + i - mm.READING_START
-            if 0 <= offset < mm.READING_SIZE:
-                after[offset] = value
+    def handle(self, pdu: bytes) -> Handled:
+        """Answer one request PDU (function code + data, 1..253 bytes)."""
+        request = parse_request(pdu)
+        if isinstance(request, mm.ExceptionCode):
+            return Handled(exception_pdu(pdu[0], request), None, request)
+        fc = request.function_code
         try:
-            reading = ReadingBlock.from_registers(after)
-        except ValueError as exc:  # check_write makes this unreachable; kept as a guard
-            if on_invalid_commit is not None:
-                on_invalid_commit(after, exc)
-            return
-        if on_commit is not None and (answer := on_commit(reading)) is not None:
-            a = mm.ANSWER_START - start
-            registers[a : a + mm.ANSWER_SIZE] = answer.to_registers()
+            if fc == mm.FC_READ_DEVICE_ID:
+                result = self._identify(request)
+            elif request.values is None:
+                result = self._read(request)
+            else:
+                result = self._write(request)
+        except Exception as exc:  # a hook failed: the spec's SERVER DEVICE FAILURE
+            code = mm.ExceptionCode.SERVER_DEVICE_FAILURE
+            return Handled(exception_pdu(fc, code), request, code, exc)
+        if isinstance(result, mm.ExceptionCode):
+            return Handled(exception_pdu(fc, result), request, result)
+        return Handled(result, request, None)
 
-    return SimDevice(device_id, simdata=simdata, action=action)
+    def _read(self, request: Request) -> bytes | mm.ExceptionCode:
+        address, count = request.address, request.count
+        if code := mm.check_request(request.function_code, address, count):
+            return code
+        if self.answer_block is not None and _overlaps(
+            address, count, mm.ANSWER_START, mm.ANSWER_SIZE
+        ):
+            answer = self.answer_block()
+            if answer is not None:
+                self._store(mm.ANSWER_START, answer.to_registers())
+        if self.daemon_block is not None and _overlaps(
+            address, count, mm.DAEMON_START, mm.DAEMON_SIZE
+        ):
+            self._store(mm.DAEMON_START, self.daemon_block().to_registers())
+        return read_response(request.function_code, self.registers[address : address + count])
+
+    def _write(self, request: Request) -> bytes | mm.ExceptionCode:
+        fc, address, values = request.function_code, request.address, list(request.values or ())
+        if code := mm.check_write(fc, address, values):
+            return code
+        self._store(address, values)
+        end = address + len(values)
+        if self.on_temperature is not None and address < _TEMP_END and end > mm.TEMPERATURE_START:
+            self._temperatures(address, end)
+        if mm.commits_reading(fc, address, len(values)):
+            self._commit()
+        if fc == mm.FC_WRITE_SINGLE:
+            return write_single_response(address, values[0])
+        return write_multiple_response(address, len(values))
+
+    def _commit(self) -> None:
+        block = self.registers[mm.READING_START : mm.READING_START + mm.READING_SIZE]
+        reading = ReadingBlock.from_registers(block)  # check_write made it decodable
+        if self.on_commit is not None and (answer := self.on_commit(reading)) is not None:
+            self._store(mm.ANSWER_START, answer.to_registers())
+
+    def _temperatures(self, address: int, end: int) -> None:
+        assert self.on_temperature is not None
+        size = mm.TEMPERATURE_SLOT_SIZE
+        first = (max(address, mm.TEMPERATURE_START) - mm.TEMPERATURE_START) // size
+        last = (min(end, _TEMP_END) - 1 - mm.TEMPERATURE_START) // size
+        for sensor in range(first, last + 1):
+            slot_address = mm.temperature_address(sensor)
+            regs = self.registers[slot_address : slot_address + size]
+            self.on_temperature(TemperatureSlot.from_registers(sensor, regs))
+
+    def _identify(self, request: Request) -> bytes | mm.ExceptionCode:
+        if self.identity is None:
+            return mm.ExceptionCode.ILLEGAL_FUNCTION
+        return device_id_response(self.identity(), request.address, request.count)

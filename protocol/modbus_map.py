@@ -15,8 +15,9 @@ significant word first** (big-endian word order), so an int64 in registers r0..r
 
 Commit: a write request that includes ``SEQ`` (119) commits the reading block as it is after
 that request; write 100..119 in one FC16 request, or the values first and ``SEQ`` last.
-Reads may use FC3 or FC4 (same registers); writes FC6 or FC16; any other function code is
-ILLEGAL_FUNCTION. All reads of ANSWER+DAEMON (300..323, 24 registers) are one request.
+Reads may use FC3 or FC4 (same registers); writes FC6 or FC16; FC43/MEI 14 reads the device
+identification (:mod:`protocol.modbus_devid`); any other function code is ILLEGAL_FUNCTION.
+All reads of ANSWER+DAEMON (300..323, 24 registers) are one request.
 """
 
 from __future__ import annotations
@@ -28,11 +29,13 @@ from .codes import Direction
 
 
 class ExceptionCode(enum.IntEnum):
-    """Standard Modbus exception codes this map produces (same values as pymodbus ExcCodes)."""
+    """Standard Modbus exception codes this server produces (Modbus Application Protocol V1.1b3
+    section 7; same values as pymodbus ExcCodes)."""
 
     ILLEGAL_FUNCTION = 1
     ILLEGAL_DATA_ADDRESS = 2
     ILLEGAL_DATA_VALUE = 3
+    SERVER_DEVICE_FAILURE = 4
 
 
 MAP_VERSION = 1
@@ -45,6 +48,10 @@ FC_READ_HOLDING = 3
 FC_READ_INPUT = 4
 FC_WRITE_SINGLE = 6
 FC_WRITE_MULTIPLE = 16
+FC_READ_DEVICE_ID = 0x2B
+"""Encapsulated Interface Transport (43); served only with MEI type 14."""
+MEI_READ_DEVICE_ID = 0x0E
+"""MEI type 14: Read Device Identification."""
 READ_FUNCTIONS = frozenset({FC_READ_HOLDING, FC_READ_INPUT})
 WRITE_FUNCTIONS = frozenset({FC_WRITE_SINGLE, FC_WRITE_MULTIPLE})
 MAX_READ_COUNT = 125

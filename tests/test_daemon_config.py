@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import re
+import subprocess
+import sys
 
 import pytest
 from hypothesis import given
@@ -142,3 +145,156 @@ def test_temperature_verdict_reuse_equals_a_fresh_check(ops) -> None:
             required = role_sets[which]
             got = table.inputs(required, t)
             assert got == table._check(required, t)
+
+
+# --------------------------------------------------------------------------- numeric ranges
+# The allowed ranges as documented (examples/daemon.toml, docs/daemon.md "Configuration"),
+# written out here independently of daemon/config_checks.py: key -> (kind, zero allowed).
+# Every key's lower bound is >= 0, so -1 is never allowed for a scalar; NaN, inf, a huge value
+# and a string never are. List keys get the probe value as their first element.
+NUMERIC_KEYS: dict[str, tuple[str, bool]] = {
+    "grid.stylus_mm": ("list3", True),
+    "can.bitrate": ("int", True),
+    "can.node_id": ("int", True),
+    "can.base_id": ("int", True),
+    "can.triplet_timeout_s": ("float", False),
+    "can.window": ("int", False),
+    "can.send_timeout_s": ("float", False),
+    "can.heartbeat_s": ("float", False),
+    "can.reconnect_s": ("float", False),
+    "modbus.port": ("int", True),
+    "modbus.device_id": ("int", False),  # 1..247 (docs/modbus.md; 0 and 255 always served)
+    "modbus.idle_timeout_s": ("float", True),  # 0 = never
+    "modbus.frame_timeout_s": ("float", False),
+    "temperatures.stale_s": ("float", False),
+    "temperatures.plausible_C": ("pair", True),
+    "temperatures.valid_range_C": ("pair", True),
+    "temperatures.max_rate_C_per_s": ("float", False),
+    "limits.warn_um": ("float", False),
+    "limits.error_um": ("float", False),
+    "mcap.roll_mb": ("float", True),
+    "mcap.roll_s": ("float", True),
+    "mcap.flush_s": ("float", False),
+    "metrics.port": ("int", True),
+    "metrics.period_s": ("float", False),
+    "log.max_per_s": ("float", True),
+    "log.state_repeat_s": ("float", False),
+}
+PROBES = {"nan": "nan", "inf": "inf", "-1": "-1", "0": "0", "huge": None, "string": "'fast'"}
+
+
+def _toml_value(key: str, probe: str) -> str:
+    kind, _ = NUMERIC_KEYS[key]
+    text = PROBES[probe] or ("1000000000000000" if kind == "int" else "1e300")
+    if kind == "list3":
+        return f"[{text}, 0.0, 0.0]"
+    if kind == "pair":
+        return f"[{text}, 35.0]"
+    return text
+
+
+def _allowed(key: str, probe: str) -> bool:
+    kind, zero_ok = NUMERIC_KEYS[key]
+    if probe == "0":
+        return zero_ok
+    if probe == "-1":
+        return kind in ("list3", "pair")  # -1 mm stylus offset, -1 °C lower bound are fine
+    return False
+
+
+def _toml(keys: dict[str, str]) -> str:
+    sections: dict[str, list[str]] = {}
+    for key, value in keys.items():
+        section, name = key.split(".")
+        sections.setdefault(section, []).append(f"{name} = {value}")
+    return "".join(f"[{s}]\n" + "\n".join(lines) + "\n" for s, lines in sections.items())
+
+
+def test_every_numeric_setting_has_a_documented_range() -> None:
+    """A new numeric key must be added to this table (and so get a range)."""
+    from cmm_comp.daemon.config import DaemonConfig
+    from cmm_comp.daemon.config_checks import NUMERIC_RULES
+
+    assert set(DaemonConfig().numeric_values()) == set(NUMERIC_KEYS) == set(NUMERIC_RULES)
+
+
+@pytest.mark.parametrize("probe", list(PROBES))
+@pytest.mark.parametrize("key", list(NUMERIC_KEYS))
+def test_numeric_setting_probe(tmp_path, key: str, probe: str) -> None:
+    path = tmp_path / "d.toml"
+    path.write_text(_toml({key: _toml_value(key, probe)}))
+    if _allowed(key, probe):
+        load_config(path)
+        return
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert len(info.value.lines) == 1, info.value.lines
+    assert key in info.value.lines[0] and str(path) in info.value.lines[0]
+
+
+def _check(args: list[str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "cmm_comp.cli", "daemon", "--check", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+@pytest.mark.parametrize("probe", list(PROBES))
+def test_check_lists_every_bad_key_once(tmp_path, probe: str) -> None:
+    """The real CLI: every numeric key set to one bad probe value at once → exit 2 and exactly
+    one stderr line per bad key (naming it), no traceback."""
+    bad = {k: _toml_value(k, probe) for k in NUMERIC_KEYS if not _allowed(k, probe)}
+    path = tmp_path / "d.toml"
+    path.write_text(_toml(bad))
+    proc = _check(["--config", str(path)])
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == len(bad), lines
+    for key in bad:
+        assert sum(f" {key}" in line for line in lines) == 1, (key, lines)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("a = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
+        ("[grid]\nstylus_mm = [0, 0\n", "not valid TOML"),
+        ("[can]\nheartbeat = 0.1\n", "unknown key can.heartbeat; allowed: "),
+        ("[modbus]\nport = 5020.5\n", "modbus.port: 5020.5 must be an integer"),
+        ("can = 3\n", r"\[can\] must be a table"),
+        ("\xff = 1\n", "not valid TOML"),
+    ],
+)
+def test_malformed_toml_is_one_line(tmp_path, text: str, match: str) -> None:
+    path = tmp_path / "d.toml"
+    path.write_text(text, encoding="utf-8")
+    proc = _check(["--config", str(path)])
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and re.search(match, lines[0]), lines
+
+
+def test_bad_flags_are_checked_like_the_file() -> None:
+    proc = _check(["--can-heartbeat-s", "nan", "--modbus-port", "70000", "--can-node-id", "200"])
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 3, lines
+    assert "can.heartbeat_s = nan" in lines[0] or any("can.heartbeat_s = nan" in x for x in lines)
+    assert any("modbus.port = 70000; allowed: 0 .. 65535" in x for x in lines)
+    assert any("can.node_id = 200" in x for x in lines)
+
+
+def test_node_id_range_depends_on_base_id(tmp_path) -> None:
+    """Ids base_id + 0x10·node_id … + 0xF must stay 11-bit (docs/can.md: nodes 0..95 at 0x200)."""
+    path = tmp_path / "d.toml"
+    path.write_text("[can]\nnode_id = 95\n")
+    assert load_config(path).can.node_id == 95
+    path.write_text("[can]\nnode_id = 96\n")
+    with pytest.raises(ConfigError, match=r"can\.node_id = 96; allowed: 0 \.\. 95"):
+        load_config(path)
+    path.write_text("[can]\nbase_id = 0x205\n")
+    with pytest.raises(ConfigError, match=r"can\.base_id = 0x205; allowed: a multiple of 0x10"):
+        load_config(path)

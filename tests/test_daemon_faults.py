@@ -30,7 +30,8 @@ def _reading(seq: int, pos=CENTRE_MM, **kw) -> RawReading:
     return RawReading(seq, pos, **kw)
 
 
-def _wait(pred, timeout_s: float = 2.0) -> bool:
+def _wait(pred, timeout_s: float = 10.0) -> bool:
+    """Poll ``pred`` until true (generous timeout: only a failing test waits that long)."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout_s:
         if pred():
@@ -115,21 +116,60 @@ def test_temperature_faults_reject(temps, valid, expected) -> None:
 
 
 def test_stale_and_jumping_temperatures() -> None:
+    """Staleness: the reading right after a sample is fresh (stale_s 1 s is far more than one
+    exchange takes, even on a loaded machine); one after sleeping past stale_s is stale."""
     cfg = base_config(channel())
-    cfg.temperatures.stale_s = 0.2
-    cfg.temperatures.max_rate_C_per_s = 1.0
+    cfg.temperatures.stale_s = 1.0
+    cfg.temperatures.max_rate_C_per_s = 0.5
     with daemon_and_controller(cfg) as (_d, ctl, _bus):
         send_temps(ctl, 20.5)
-        time.sleep(0.02)
         assert ctl.exchange(_reading(1)).status == "ok"
-        time.sleep(0.3)
+        time.sleep(1.2)
         assert ctl.exchange(_reading(2)).status == "stale_temperature"
         send_temps(ctl, 20.5)
-        time.sleep(0.02)
         assert ctl.exchange(_reading(3)).status == "ok"
-        send_temps(ctl, 25.0)  # +4.5 °C within ~0.05 s
-        time.sleep(0.02)
+        send_temps(ctl, 25.0)  # +4.5 °C: > 0.5 °C/s unless 9 s passed since the last sample
         assert ctl.exchange(_reading(4)).status == "implausible_temperature"
+
+
+def test_repeated_temperature_counter_is_not_a_new_sample() -> None:
+    """docs/can.md: a repeated counter is not a new sample. A frame with the previous counter
+    and another value changes nothing (the answer equals the one before, bit for bit) and is
+    counted; the next counter is used."""
+    from cmm_comp.protocol import TemperatureSample
+
+    cfg = base_config(channel())
+    cfg.temperatures.max_rate_C_per_s = 1000.0  # 0.05 °C in two exchanges: always plausible
+    with daemon_and_controller(cfg) as (d, ctl, bus):
+        send_temps(ctl, 20.5)  # counter 1 for every sensor
+        before = ctl.exchange(_reading(1))
+        assert before.status == "ok"
+        bus.send(encode_message(TemperatureSample.from_celsius(3, 22.0, 1, True), IDS))
+        same = ctl.exchange(_reading(2))
+        assert (same.status, same.corrected_mm) == ("ok", before.corrected_mm)
+        assert d.metrics.get("temperature_repeats") == 1
+        bus.send(encode_message(TemperatureSample.from_celsius(3, 20.55, 2, True), IDS))
+        used = ctl.exchange(_reading(3))
+        assert used.status == "ok" and used.corrected_mm != before.corrected_mm
+        assert d.metrics.get("temperature_samples") == 5
+
+
+def test_a_restarted_controller_is_answered_from_its_first_reading() -> None:
+    """The controller restarts its seq counter (back to 0, within 256 of the last finished
+    seq, and onto recently answered seqs): every complete reading is answered, with its own
+    position (oracle: corrected lies within 0.1 mm of this run's indicated position, 5 mm away
+    from the previous run's reading with the same seq)."""
+    with daemon_and_controller(base_config(channel())) as (_d, ctl, _bus):
+        send_temps(ctl)
+        first = [ctl.exchange(_reading(s, (400.0 + s, 575.0, 200.0))) for s in range(40)]
+        assert [a.status for a in first] == ["ok"] * 40
+        for restart in range(2):
+            x0 = 405.0 + 5.0 * restart
+            for s in (*range(10), *range(30, 40)):
+                ans = ctl.exchange(_reading(s, (x0 + s, 575.0, 200.0)))
+                assert ans.status == "ok", (restart, s, ans)
+                assert ans.corrected_mm is not None
+                assert abs(ans.corrected_mm[0] - (x0 + s)) < 0.1
 
 
 def test_geometry_only_mode() -> None:
@@ -169,12 +209,12 @@ def test_incomplete_superseded_out_of_order_duplicate() -> None:
         send_temps(ctl)
         time.sleep(0.02)
         _send_axes(bus, 10, (Axis.X, Axis.Y))  # Z never comes
-        ans = ctl.wait_answer(10, 1.0)
+        ans = ctl.wait_answer(10, 10.0)
         assert ans.status == "incomplete_reading" and ans.corrected_mm is None
         _send_axes(bus, 20, (Axis.X, Axis.Y))
         assert ctl.exchange(_reading(21)).status == "ok"  # 21 completes first: 20 is dropped
-        assert ctl.wait_answer(20, 1.0).status == "incomplete_reading"
-        _send_axes(bus, 19, (Axis.X,))  # older than what was finished
+        assert ctl.wait_answer(20, 10.0).status == "incomplete_reading"
+        _send_axes(bus, 20, (Axis.Z,))  # the missing frame of the dropped reading, too late
         _send_axes(bus, 21, (Axis.Y,))  # duplicate of an answered reading
         assert _wait(lambda: d.metrics.faults.get("out_of_order", 0) >= 1)
         assert _wait(lambda: d.metrics.faults.get("duplicate_frame", 0) >= 1)
@@ -249,6 +289,7 @@ def test_structured_logs_and_mcap(tmp_path) -> None:
 
     cfg = base_config(channel())
     cfg.mcap.path = str(tmp_path / "s.mcap")
+    cfg.mcap.writer_priority = "normal"  # finishes the file even on a saturated CPU
     cfg.log.format = "json"
     stream = io.StringIO()
     with daemon_and_controller(cfg, events_stream=stream) as (_d, ctl, _bus):
@@ -276,27 +317,55 @@ def test_config_must_enable_a_transport() -> None:
 
 
 def test_a_slow_mcap_logger_never_delays_an_answer(tmp_path) -> None:
-    """Every log() call takes 5 ms here: an answer that waited for any of them would show it.
-    Bookkeeping (events, MCAP records) runs only once the bus is quiet; nothing is lost."""
+    """Causality, not a clock: the log() calls of a reading's own records (``/cmm/raw``,
+    ``/cmm/corrected`` of its seq) block on a gate the test opens only once the controller
+    holds the answer. Were any of them on the way between the reading and its answer, the
+    answer could not arrive while the gate is shut (the exchange would time out). Other log
+    calls (heartbeat frames, counters) pass, so nothing else can hold the endpoint. After each
+    answer the test checks the gated call is waiting, opens the gate and waits for the
+    bookkeeping to finish; the MCAP file then holds every answer and every frame."""
+    import threading
+
     from cmm_comp.daemon.sessionlog.reader import read_messages
 
     cfg = base_config(channel())
     cfg.mcap.path = str(tmp_path / "s.mcap")
+    # the file's completeness is checked below; at the default SCHED_IDLE a saturated CPU may
+    # not let the writer child finish within its stop timeout (not what this test is about)
+    cfg.mcap.writer_priority = "normal"
     n = 8
     with daemon_and_controller(cfg) as (d, ctl, _bus):
-        assert d.logger is not None
+        assert d.logger is not None and d.can is not None
+        endpoint = d.can
         fast_log = d.logger.log
+        gate = threading.Event()
+        gate.set()
+        gated_seq = [-1]
+        waiting: list[tuple[str, int]] = []
+        returned: list[tuple[str, int]] = []
 
-        def slow_log(*args, **kw):
-            time.sleep(0.005)
-            return fast_log(*args, **kw)
+        def gated_log(topic, payload, *args, **kw):
+            if topic not in ("/cmm/raw", "/cmm/corrected") or payload[0] != gated_seq[0]:
+                return fast_log(topic, payload, *args, **kw)
+            waiting.append((topic, payload[0]))
+            gate.wait(60.0)
+            try:
+                return fast_log(topic, payload, *args, **kw)
+            finally:
+                returned.append((topic, payload[0]))
 
-        d.logger.log = slow_log  # type: ignore[method-assign]
+        d.logger.log = gated_log  # type: ignore[method-assign]
         send_temps(ctl)
-        time.sleep(0.2)
-        answers = ctl.stream([_reading(seq) for seq in range(n)], 5.0, in_flight=1)
-        assert [a.status for a in answers] == ["ok"] * n
-        assert max(a.latency_us for a in answers) < 5000, [a.latency_us for a in answers]
+        for seq in range(n):
+            gated_seq[0] = seq
+            gate.clear()
+            ans = ctl.exchange(_reading(seq), timeout_s=30.0)
+            assert ans.status == "ok", (seq, ans)  # answered while its records could not log
+            assert not any(s == seq for _, s in returned)
+            assert _wait(lambda s=seq: ("/cmm/raw", s) in waiting)  # its bookkeeping waits
+            gate.set()
+            assert _wait(lambda s=seq: ("/cmm/corrected", s) in returned)
+            assert _wait(lambda: not endpoint._deferred)
     res = read_messages(cfg.mcap.path)
     corrected = [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"]
     assert corrected == list(range(n))

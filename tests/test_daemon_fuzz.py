@@ -55,6 +55,7 @@ def _activity(d: DaemonService) -> int:
         sum(m.faults.values())
         + m.answered
         + m.get("temperature_samples")
+        + m.get("temperature_repeats")
         + m.get("own_frames_ignored")
     )
 

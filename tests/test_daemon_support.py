@@ -1,7 +1,8 @@
 """Helpers shared by the daemon, sim, integration and replay tests (no tests in here).
 
 The grid of ``examples/machines/npl-bridge.toml`` is built once per test process (~0.3 s) into
-a temporary directory removed at exit.
+a temporary directory removed at exit, and signed with a test key made once per process
+(:func:`signing_key`); :func:`base_config` trusts that key and binds the NPL machine.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import can
 
-from cmm_comp.compensation.grid import CorrectionGrid
+from cmm_comp.compensation.grid import CorrectionGrid, generate_signing_key, sign_grid
 from cmm_comp.compensation.machine import Machine
 from cmm_comp.daemon.config import DaemonConfig
 from cmm_comp.daemon.service import DaemonService
@@ -44,11 +45,27 @@ def npl_machine() -> Machine:
 
 
 @functools.cache
-def npl_grid_path(steps: tuple[int, int, int] = (19, 23, 16)) -> Path:
-    """Grid file of the NPL example machine (built once)."""
-    path = _workdir() / f"npl-{steps[0]}x{steps[1]}x{steps[2]}.grid"
+def signing_key() -> tuple[Path, Path]:
+    """``(private, public)`` PEM files of this test process's grid-signing key."""
+    return generate_signing_key(_workdir() / "keys")
+
+
+def build_signed_grid(path: Path, steps: tuple[int, int, int] = (19, 23, 16)) -> Path:
+    """Build the NPL grid at ``path`` and sign it with :func:`signing_key`."""
     CorrectionGrid.build(npl_machine(), steps=steps).save(path)
+    sign_grid(path, signing_key()[0])
     return path
+
+
+@functools.cache
+def npl_grid_path(steps: tuple[int, int, int] = (19, 23, 16)) -> Path:
+    """Grid file of the NPL example machine (built once, signed with :func:`signing_key`)."""
+    return build_signed_grid(_workdir() / f"npl-{steps[0]}x{steps[1]}x{steps[2]}.grid", steps)
+
+
+def trust_toml() -> str:
+    """``[grid]`` lines that trust :func:`signing_key` and bind the NPL machine."""
+    return f'machine = "{NPL}"\npublic_key = "{signing_key()[1]}"\n'
 
 
 def channel() -> str:
@@ -67,6 +84,8 @@ def base_config(ch: str, grid: Path | None = None) -> DaemonConfig:
     cfg = DaemonConfig(source="<test>")
     cfg.grid.path = str(grid if grid is not None else npl_grid_path())
     cfg.grid.stylus_mm = list(STYLUS)
+    cfg.grid.machine = str(NPL)
+    cfg.grid.public_key = str(signing_key()[1])
     cfg.can.interface = "virtual"
     cfg.can.channel = ch
     cfg.metrics.port = 0
@@ -84,7 +103,7 @@ def daemon_and_controller(
     ) as d:  # type: ignore[arg-type]
         bus = can.Bus(interface="virtual", channel=cfg.can.channel)
         try:
-            with CanController(bus, answer_timeout_s=2.0) as ctl:
+            with CanController(bus, answer_timeout_s=10.0) as ctl:  # generous: load
                 yield d, ctl, bus
         finally:
             bus.shutdown()

@@ -39,6 +39,9 @@ def test_candidate_designs_equal_the_extended_machine(npl) -> None:
     for cand in all_candidates(res):
         theta = cand.thetas[len(cand.thetas) // 2]
         amps = [0.7 + 0.1 * j for j in range(cand.n_params)]
+        if cand.cause == "thermal_lag":
+            # the start-up transient columns describe the session, not the machine
+            amps[: cand.static_columns] = [0.0] * cand.static_columns
         eff = cand.build(amps, theta)
         via_machine = true_error_um(npl.with_effects([eff]), data) - true_error_um(npl, data)
         via_design = cand.design(res, theta) @ np.asarray(amps)
@@ -159,3 +162,36 @@ def test_unexplained_structure_is_reported(npl) -> None:
     d = diagnose(npl, data)
     assert d.verdict == "found"
     assert "unexplained" in [e["cause"] for e in d.entries]
+
+
+def test_thermal_lag_transient_is_the_lag_started_out_of_equilibrium(npl) -> None:
+    """The lag candidate's start-up columns: the structure δ °C above the sensor at the first
+    sample relaxes as δ·e^{−(t−t₀)/τ} — checked against a brute-force integration of
+    τ·dy/dt = T − y (fine explicit steps) from y₀ = T₀ + δ and from y₀ = T₀."""
+    _, data = simulate(npl, [], [], seed=3, n_points=120)
+    res = compute_residuals(npl, data)
+    lag = next(c for c in all_candidates(res) if c.cause == "thermal_lag")
+    tau = 1800.0
+    x = lag.design(res, tau)
+    t = res.signals["t"]
+    order = np.argsort(t)
+    ts = t[order]
+    temp = res.signals["T_x"][order]
+    delta = 0.8
+
+    def integrate(y0: float) -> np.ndarray:
+        fine = np.linspace(ts[0], ts[-1], 200_000)
+        drive = np.interp(fine, ts, temp)
+        y = np.empty_like(fine)
+        y[0] = y0
+        h = fine[1] - fine[0]
+        for i in range(1, len(fine)):
+            y[i] = y[i - 1] + h * (drive[i - 1] - y[i - 1]) / tau
+        return np.interp(ts, fine, y)
+
+    diff = integrate(temp[0] + delta) - integrate(temp[0])
+    alpha = float(npl.thermal.expansion[0])
+    expected = alpha * diff * res.u_mm[order, 0] / 1000.0
+    np.testing.assert_allclose(
+        x[order, 0, 0] * delta, expected, atol=2e-3 * np.max(np.abs(expected))
+    )

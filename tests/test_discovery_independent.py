@@ -37,17 +37,9 @@ CASES = [
     ("parametric", 3.0, 25, "FH1", Design("random", 200, 1, H1, 0.25)),
     ("drift", 1.0, 26, "MB2", Design("random", 200, 1, H8, 0.5)),
     ("reversal", 1.0, 27, "CY1", Design("random", 200, 5, H1, 0.6)),
-    # a Gaussian blob in one corner: `unexplained` only, never a named cause
-    # known miss (0/15 in the rate table, docs/discovery.md): global shapes of several causes
-    # soak up a local blob; kept so that it passes the day the diagnosis can tell local from global
-    pytest.param(
-        "unexplained",
-        3.0,
-        30,
-        "FH2",
-        Design("random", 200, 1, H1, 0.4),
-        marks=pytest.mark.xfail(reason="a local blob is named as global causes", strict=False),
-    ),
+    # a Gaussian blob in one corner: `unexplained` only, never a named cause (the local basis
+    # competes with every cause; docs/discovery.md "Method")
+    ("unexplained", 3.0, 30, "FH2", Design("random", 200, 1, H1, 0.4)),
     ("periodic+reversal", 1.0, 29, "MB1", Design("iso_lines", 200, 1, H1, 0.4)),
     ("none", 0.0, 28, "FH2", Design("random", 200, 1, H1, 0.5)),
 ]

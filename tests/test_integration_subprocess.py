@@ -20,9 +20,11 @@ import pytest
 from test_daemon_support import (
     MCAST_GROUP,
     STYLUS,
+    build_signed_grid,
     free_udp_port,
     npl_grid_path,
     npl_machine,
+    trust_toml,
 )
 
 from cmm_comp.compensation.grid import CorrectionGrid
@@ -40,7 +42,7 @@ def _write_config(tmp: Path, port: int, grid: Path, mcap: Path, writer: str = "p
 [grid]
 path = "{grid}"
 stylus_mm = {STYLUS}
-[can]
+{trust_toml()}[can]
 interface = "udp_multicast"
 channel = "{MCAST_GROUP}"
 heartbeat_s = 0.05
@@ -73,7 +75,7 @@ def _daemon(
         )
     bus = can.Bus(interface="udp_multicast", channel=MCAST_GROUP, port=port)
     try:
-        with CanController(bus, answer_timeout_s=2.0) as ctl:
+        with CanController(bus, answer_timeout_s=10.0) as ctl:  # generous: a loaded machine
             t0 = time.monotonic()
             while ctl.heartbeat is None or ctl.heartbeat.state != DaemonState.READY:
                 assert proc.poll() is None, log.read_text()
@@ -87,7 +89,7 @@ def _daemon(
         proc.wait(10)
 
 
-def _wait(pred, timeout_s: float = 5.0) -> bool:
+def _wait(pred, timeout_s: float = 30.0) -> bool:
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout_s:
         if pred():
@@ -117,15 +119,16 @@ def test_subprocess_udp_multicast_reload_and_sigterm(tmp_path) -> None:
         assert ctl.ignored > 0  # our own frames came back and were ignored
         # SIGHUP with a new good grid: swapped atomically
         other = tmp_path / "other.grid"
-        CorrectionGrid.build(machine, steps=(10, 12, 8)).save(other)
+        build_signed_grid(other, steps=(10, 12, 8))
         os.replace(other, grid)
         new_id = grid_id_from_sha256(CorrectionGrid.load(grid).sha256)
         proc.send_signal(signal.SIGHUP)
-        assert _wait(lambda: ctl.heartbeat.grid_id == new_id), log.read_text()
+        # generous: the reload is built in a worker process started at low priority
+        assert _wait(lambda: ctl.heartbeat.grid_id == new_id, 60), log.read_text()
         # SIGHUP with a bad grid: refused, the good one stays active
         grid.write_bytes(b"garbage")
         proc.send_signal(signal.SIGHUP)
-        assert _wait(lambda: "grid_refused" in log.read_text())
+        assert _wait(lambda: "grid_refused" in log.read_text(), 60)
         ctl.send_temperatures(env.samples(0.0))
         assert ctl.exchange(RawReading(999, (450.0, 575.0, 200.0))).status == "ok"
         assert ctl.heartbeat.grid_id == new_id
@@ -156,7 +159,8 @@ def test_kill_9_mcap_reads_back(tmp_path, writer: str) -> None:
         proc.kill()  # SIGKILL
         assert proc.wait(10) == -signal.SIGKILL
     if writer == "process":  # the orphaned child finishes the file (summary and all)
-        assert _wait(lambda: "session_end" in dict(read_messages(mcap).metadata), 20.0)
+        # generous: the child runs at SCHED_IDLE, which a saturated CPU serves last
+        assert _wait(lambda: "session_end" in dict(read_messages(mcap).metadata), 120.0)
     res = read_messages(mcap)
     assert res.truncated == (writer == "thread")
     seqs = [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"]

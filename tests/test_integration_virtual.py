@@ -10,7 +10,16 @@ import sys
 
 import numpy as np
 import pytest
-from test_daemon_support import ROOT, STYLUS, base_config, channel, npl_grid_path, npl_machine
+from test_daemon_support import (
+    NPL,
+    ROOT,
+    STYLUS,
+    base_config,
+    channel,
+    npl_grid_path,
+    npl_machine,
+    signing_key,
+)
 
 from cmm_comp.cli.demo import SUMMARY_KEYS, run_demo
 from cmm_comp.daemon.service import DaemonService
@@ -113,6 +122,10 @@ def test_examples_daemon_toml_checks_with_overrides(tmp_path) -> None:
             str(ROOT / "examples" / "daemon.toml"),
             "--grid-path",
             str(npl_grid_path()),
+            "--grid-machine",
+            str(NPL),
+            "--grid-public-key",
+            str(signing_key()[1]),
             "--check",
         ],
         capture_output=True,

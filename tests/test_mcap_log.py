@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.writer import CompressionType
 
 from cmm_comp.daemon.sessionlog.reader import load_session, read_messages, session_files
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
@@ -82,11 +83,26 @@ def sample(topic: str, i: int) -> dict[str, Any]:
         },
         "/cmm/counters": {
             "period_s": 1.0,
-            "counters": {"frames_rx": i, "mcap_dropped": 0},
+            "counters": {"frames_rx": i, "answers_ok": 2 * i},
             "latency_edges_us": [0, 50, 100, 1e9],
             "latency_counts": [i, 2, 0],
         },
+        "/cmm/log_error": {
+            "topic": "/cmm/raw",
+            "error": "ValueError: x_mm: nan is not finite",
+            "payload": f"({i}, nan)",
+            "log_time": stamp_from_ns(T0_NS + i),
+        },
     }[topic]
+
+
+def without_log_counters(topic: str, payload: dict[str, Any]) -> dict[str, Any]:
+    """``payload`` without the ``mcap_*`` counters the writer adds to ``/cmm/counters`` (tested
+    on their own in tests/test_mcap_overload.py)."""
+    if topic != "/cmm/counters":
+        return payload
+    counters = {k: v for k, v in payload["counters"].items() if not k.startswith("mcap_")}
+    return {**payload, "counters": counters}
 
 
 def test_every_topic_round_trips_against_mcap_reader(tmp_path: Path) -> None:
@@ -113,7 +129,7 @@ def test_every_topic_round_trips_against_mcap_reader(tmp_path: Path) -> None:
         summary = reader.get_summary()
         assert summary is not None and summary.statistics.message_count == len(sent)
         got = [
-            (c.topic, m.log_time, json.loads(m.data))
+            (c.topic, m.log_time, without_log_counters(c.topic, json.loads(m.data)))
             for s, c, m in reader.iter_messages(log_time_order=False)
         ]
         assert all(s.encoding == "jsonschema" for s in summary.schemas.values())
@@ -127,7 +143,9 @@ def test_every_topic_round_trips_against_mcap_reader(tmp_path: Path) -> None:
 
     ours = read_messages(path)
     assert not ours.truncated and ours.error is None
-    assert [(m.topic, m.log_time_ns, m.payload) for m in ours.messages] == sent
+    assert [
+        (m.topic, m.log_time_ns, without_log_counters(m.topic, m.payload)) for m in ours.messages
+    ] == sent
     raw_only = read_messages(path, topics=["/cmm/raw"]).messages
     assert [m.payload["seq"] for m in raw_only] == list(range(n))
 
@@ -180,8 +198,11 @@ def test_argument_errors(tmp_path: Path) -> None:
         McapLogger(tmp_path, flush_period_s=0)
     with McapLogger(tmp_path / "y.mcap") as lg, pytest.raises(KeyError, match="/cmm/nope"):
         lg.log("/cmm/nope", {})
-    with pytest.raises(FileExistsError):
-        McapLogger(tmp_path / "y.mcap")  # never overwrites a session
+    first = (tmp_path / "y.mcap").read_bytes()
+    with McapLogger(tmp_path / "y.mcap") as lg2:  # never overwrites a session: rotates
+        pass
+    assert lg2.files == (tmp_path / "y.1.mcap",)
+    assert (tmp_path / "y.mcap").read_bytes() == first
 
 
 class SlowStream(io.RawIOBase):
@@ -353,3 +374,49 @@ def test_sliced_file_writes_whole_buffers_in_short_system_calls(tmp_path: Path) 
     assert max(sizes) <= WRITE_SLICE and len(sizes) >= 6
     with pytest.raises(FileExistsError):
         SlicedFileIO(path, "xb")
+
+
+def test_the_chunk_index_kept_until_the_end_is_small_and_exact(tmp_path: Path) -> None:
+    """A long file keeps one chunk index entry per chunk in memory until it is finished: packed
+    (< 150 B a chunk, was ~1.5 KiB with message indexes). Oracle for exactness: the chunk
+    records found by scanning the file match the summary's index, read by the mcap reader."""
+    import tracemalloc
+
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    from cmm_comp.daemon.sessionlog.writer import open_exclusive, open_session_file
+
+    path = tmp_path / "many-chunks.mcap"
+    stream, writer, channels = open_session_file(
+        path,
+        open_exclusive,
+        chunk_size=10**9,
+        compression=CompressionType.ZSTD,
+        schemas=TOPIC_SCHEMAS,
+        metadata={},
+    )
+    n = 3000
+    data = json.dumps(sample("/cmm/raw", 1)).encode()
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    for i in range(n):
+        for topic in ("/cmm/raw", "/cmm/corrected", "/cmm/can_rx"):
+            writer.add_message(channels[topic], T0_NS + i, data, T0_NS + i)
+        writer.flush()  # one chunk per round, as the flush timer does
+    kept = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    writer.finish()
+    stream.close()
+    assert kept / n < 150, kept / n
+    with open(path, "rb") as f:
+        indexes = make_reader(f).get_summary().chunk_indexes
+        f.seek(0)
+        offsets = []
+        reader = StreamReader(f, emit_chunks=True)
+        for record in reader.records:
+            if isinstance(record, Chunk):
+                offsets.append((record.message_start_time, record.compression))
+    assert len(indexes) == n
+    assert [(c.message_start_time, c.compression) for c in indexes] == offsets
+    assert [c.message_start_time for c in indexes] == [T0_NS + i for i in range(n)]

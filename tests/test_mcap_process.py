@@ -20,7 +20,7 @@ import can
 import pytest
 from mcap.reader import make_reader
 from test_daemon_support import ROOT, base_config, channel, send_temps
-from test_mcap_log import T0_NS, sample
+from test_mcap_log import T0_NS, sample, without_log_counters
 
 from cmm_comp.daemon.config import ConfigError, add_override_flags, config_from_dict, load_config
 from cmm_comp.daemon.service import DaemonService
@@ -93,7 +93,7 @@ def test_every_topic_round_trips_and_the_file_is_complete(tmp_path: Path) -> Non
         assert summary is not None and summary.statistics is not None
         assert summary.statistics.message_count == len(sent) and summary.chunk_indexes
         got = [
-            (c.topic, m.log_time, json.loads(m.data))
+            (c.topic, m.log_time, without_log_counters(c.topic, json.loads(m.data)))
             for _, c, m in reader.iter_messages(log_time_order=False)
         ]
     assert got == sent
@@ -101,7 +101,9 @@ def test_every_topic_round_trips_and_the_file_is_complete(tmp_path: Path) -> Non
         check_message(topic, payload)
     res = read_messages(path)
     assert not res.truncated and res.error is None
-    assert [(m.topic, m.log_time_ns, m.payload) for m in res.messages] == sent
+    assert [
+        (m.topic, m.log_time_ns, without_log_counters(m.topic, m.payload)) for m in res.messages
+    ] == sent
     meta = dict(res.metadata)
     assert meta["session"]["pid"] == str(os.getpid())  # the parent's, as with the thread logger
     assert meta["session"]["writer_pid"] == str(logger.child_pid)
@@ -131,9 +133,10 @@ def test_constructor_errors_raise_in_the_callers_thread(tmp_path: Path) -> None:
         McapProcessLogger(blocker / "x.mcap")
     existing = tmp_path / "exists.mcap"
     existing.write_bytes(b"keep me")
-    with pytest.raises(FileExistsError):
-        McapProcessLogger(existing)  # never overwrites
+    with McapProcessLogger(existing) as lg:  # never overwrites, never refuses: rotates
+        pass
     assert existing.read_bytes() == b"keep me"
+    assert lg.files == (tmp_path / "exists.1.mcap",)
     with pytest.raises(ValueError, match="rolling needs a directory"):
         McapProcessLogger(tmp_path / "one.mcap", roll_s=1.0)
     with pytest.raises(ValueError, match="queue_size"):
@@ -331,3 +334,17 @@ def test_daemon_mcap_compression_setting(tmp_path: Path, compression: str) -> No
     assert chunks and {c.compression for c in chunks} == {"" if compression == "none" else "lz4"}
     res = read_messages(cfg.mcap.path)
     assert [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"] == [1]
+
+
+def test_the_writer_child_tunes_malloc_to_give_memory_back() -> None:
+    """glibc's mallopt accepts the child's settings (fixed mmap threshold, two arenas); run in
+    a fresh interpreter so this test process keeps its own malloc settings."""
+    code = (
+        "import platform\n"
+        "from cmm_comp.daemon.sessionlog.writer_child import tune_malloc\n"
+        "print(tune_malloc(), platform.libc_ver()[0])"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    ).stdout.split()
+    assert out[0] == "True" or out[1:] != ["glibc"]

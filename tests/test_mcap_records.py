@@ -129,6 +129,8 @@ def test_records_reach_the_file_and_a_bad_record_is_an_encode_error(
     st = lg.stats()
     assert (st.written, st.encode_errors, st.dropped) == (2, 1, 1)
     assert errors and "can_tx" in str(errors[0])
-    res = read_messages(path)
+    res = read_messages(path, topics=["/cmm/can_rx", "/cmm/can_tx"])
     assert [m.payload["data"] for m in res.messages] == [bytes(range(8)).hex()] * 2
+    (err,) = read_messages(path, topics=["/cmm/log_error"]).messages  # the bad one's record
+    assert err.payload["topic"] == "/cmm/can_tx" and err.payload["payload"] == "(1, 2)"
     assert res.messages[0].payload["stamp"] == {"sec": T0_S, "nsec": 0}

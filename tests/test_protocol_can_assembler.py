@@ -196,3 +196,59 @@ def test_invariants_under_loss_duplication_and_local_reordering(
     assert order == sorted(set(order))  # strictly increasing, no seq twice
     if loss == 0 and dup == 0 and stream == sorted(stream, key=lambda fr: (fr.seq - start) % 65536):
         assert emitted == seqs
+
+
+def _restart_frames(seqs: list[int], epoch: int) -> list[RawAxis]:
+    """A reading per seq; ``epoch`` is encoded in the position so each controller run's
+    readings differ from the previous run's with the same seq (the machine moved)."""
+    return [f(a, s, pos=epoch * 1_000_000 + s * 10 + int(a)) for s in seqs for a in (X, Y, Z)]
+
+
+def test_restart_within_256_behind_is_answered_from_its_first_reading() -> None:
+    """Controller restarts: seq 0..99, then 0..29 again (within 256 behind the last finished,
+    the old rule dropped every one of them as late), then 60..69 (inside the remembered
+    finished seqs). Oracle: the spec rule, every complete reading is emitted, with the frames
+    of its own run (never a frame of the earlier run with the same seq)."""
+    asm: TripletAssembler[RawAxis] = TripletAssembler()
+    first = feed_all(asm, _restart_frames(list(range(100)), epoch=1))
+    assert triplets(first) == list(range(100))
+    again = feed_all(asm, _restart_frames(list(range(30)), epoch=2))
+    assert triplets(again) == list(range(30)) and len(again) == 30
+    third = feed_all(asm, _restart_frames(list(range(60, 70)), epoch=3))
+    assert triplets(third) == list(range(60, 70)) and len(third) == 10
+    for ev in again + third:
+        assert isinstance(ev, Triplet)
+        epoch = ev.x.position_nm // 1_000_000
+        assert [fr.position_nm for fr in (ev.x, ev.y, ev.z)] == [
+            epoch * 1_000_000 + ev.seq * 10 + k for k in range(3)
+        ]
+    assert asm.pending_seqs == ()
+
+
+def test_restart_to_a_recent_seq_with_one_axis_unchanged() -> None:
+    """A restarted controller re-sends seq 5 where Y did not move (byte-identical Y frame) and
+    X changed: answered with the new X, whatever the position of Y among the frames."""
+    asm: TripletAssembler[RawAxis] = TripletAssembler()
+    feed_all(asm, [f(a, s) for s in range(8) for a in (X, Y, Z)])
+    new_x, new_z = f(X, 5, pos=777), f(Z, 5, pos=778)
+    events = feed_all(asm, [new_x, f(Y, 5), new_z])
+    assert events == [Triplet(5, new_x, f(Y, 5), new_z)]
+
+
+def test_a_retransmitted_frame_of_an_answered_reading_starts_nothing() -> None:
+    """A byte-identical repeat of a frame already used is a Duplicate: no pending reading is
+    opened for it, so no second (incomplete) answer ever follows."""
+    asm: TripletAssembler[RawAxis] = TripletAssembler()
+    feed_all(asm, [f(a, s) for s in range(3) for a in (X, Y, Z)])
+    for s in range(3):
+        for a in (X, Y, Z):
+            ev = asm.feed(f(a, s))
+            assert len(ev) == 1 and isinstance(ev[0], Duplicate) and ev[0].identical
+    assert asm.pending_seqs == () and asm.flush() == []
+
+
+def test_memory_of_finished_seqs_is_bounded() -> None:
+    asm: TripletAssembler[RawAxis] = TripletAssembler(memory=8)
+    feed_all(asm, [f(a, s) for s in range(100) for a in (X, Y, Z)])
+    assert len(asm._finished) == 8
+    assert asm.feed(f(X, 10)) == [] and asm.pending_seqs == (10,)  # forgotten: a new reading

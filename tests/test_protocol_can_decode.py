@@ -157,3 +157,44 @@ def test_virtual_bus_round_trip_with_node_filter() -> None:
 @pytest.mark.parametrize("kind", list(MessageKind))
 def test_every_kind_has_a_frame_class(kind: MessageKind) -> None:
     assert kind in FRAME_CLASS
+
+
+_NODE = CanIds(node_id=3)
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    offset=st.integers(-2, 18),
+    extended=st.booleans(),
+    remote=st.booleans(),
+    error=st.booleans(),
+    data=st.binary(min_size=0, max_size=9),
+    raw_like=st.booleans(),
+)
+def test_raw_axis_fast_path_is_decode_message_or_nothing(
+    offset: int, extended: bool, remote: bool, error: bool, data: bytes, raw_like: bool
+) -> None:
+    """The daemon's hot-path decoder (RawAxisDecoder) answers only clean RAW_X/Y/Z frames and
+    then exactly what decode_message answers (the oracle); everything else it leaves to it."""
+    from cmm_comp.protocol.can_codec import RawAxisDecoder
+
+    fast = RawAxisDecoder(_NODE)
+    if raw_like:  # mostly well-formed raw axis frames on the right id
+        extended = remote = error = False
+        offset = offset % 3
+        data = (data + bytes(8))[:7] + bytes([offset | (data[:1] or b"\0")[0] & 0x1C])
+    msg = can.Message(
+        arbitration_id=_NODE.block_start + offset if offset >= 0 else 0x100,
+        is_extended_id=extended,
+        is_remote_frame=remote and not error,
+        is_error_frame=error,
+        data=None if remote and not error else data,
+        dlc=len(data),
+        check=False,
+    )
+    got = fast(msg)
+    ref = decode_message(msg, _NODE)
+    if got is not None:
+        assert got == ref
+    else:
+        assert not isinstance(ref, RawAxis)

@@ -1,4 +1,4 @@
-"""A real pymodbus server on 127.0.0.1 (random free port) with the map, driven by our client.
+"""Our MBAP server with the map on 127.0.0.1 (random free port), driven by pymodbus clients.
 
 Everything runs in one asyncio.run per test; the server and clients are closed before it
 returns, so no thread or socket outlives the test (conftest checks threads; filterwarnings=error
@@ -13,7 +13,6 @@ from typing import Any
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
-from pymodbus.server import ModbusTcpServer
 
 from cmm_comp.protocol import (
     AnswerBlock,
@@ -22,11 +21,12 @@ from cmm_comp.protocol import (
     ControllerClient,
     DaemonBlock,
     DaemonState,
+    MapDevice,
+    MbapServer,
     ModbusExceptionError,
     ReadingBlock,
     Status,
     TemperatureSlot,
-    build_sim_device,
 )
 from cmm_comp.protocol import modbus_map as mm
 from cmm_comp.protocol.modbus_codec import int_to_registers
@@ -58,14 +58,13 @@ def run_with_server(scenario: Scenario, device_id: int = 1) -> FakeDaemon:
     daemon = FakeDaemon()
 
     async def main() -> None:
-        device = build_sim_device(device_id, daemon.on_commit, daemon.daemon_block)
-        server = ModbusTcpServer(device, address=("127.0.0.1", 0))
-        await server.serve_forever(background=True)
+        device = MapDevice(daemon.on_commit, daemon.daemon_block)
+        server = MbapServer(device.handle_pdu, unit_ids={device_id})
+        await server.start("127.0.0.1", 0)
         try:
-            port = server.transport.sockets[0].getsockname()[1]  # type: ignore[union-attr]
-            await asyncio.wait_for(scenario(port, daemon), timeout=10)
+            await asyncio.wait_for(scenario(server.port, daemon), timeout=10)
         finally:
-            await server.shutdown()
+            await server.close()
 
     asyncio.run(main())
     return daemon
@@ -168,15 +167,14 @@ def test_answer_published_later_through_the_pull_hook() -> None:
     published: list[AnswerBlock] = []
 
     async def main() -> None:
-        device = build_sim_device(
-            1,
+        device = MapDevice(
             on_commit=lambda r: queued.append(r),  # returns None: answer comes later
             answer_block=lambda: published[-1] if published else None,
         )
-        server = ModbusTcpServer(device, address=("127.0.0.1", 0))
-        await server.serve_forever(background=True)
+        server = MbapServer(device.handle_pdu, unit_ids={1})
+        await server.start("127.0.0.1", 0)
+        port = server.port
         try:
-            port = server.transport.sockets[0].getsockname()[1]  # type: ignore[union-attr]
             async with ControllerClient("127.0.0.1", port) as client:
                 await client.write_reading(ReadingBlock.from_mm(3, (1.0, 1.0, 1.0)))
                 first, _ = await client.read_output()
@@ -186,6 +184,6 @@ def test_answer_published_later_through_the_pull_hook() -> None:
                 answer = await client.wait_answer(3)
                 assert answer.status is Status.OUTSIDE_VOLUME
         finally:
-            await server.shutdown()
+            await server.close()
 
     asyncio.run(main())

@@ -86,3 +86,45 @@ def test_replay_to_bus_reaches_a_running_daemon(session) -> None:
             time.sleep(0.01)
         assert d.metrics.answers.get("ok") == 60
         assert d.metrics.answers.get("outside_volume") == 1
+
+
+def test_replay_reads_a_cut_session_with_a_one_line_warning(session, tmp_path, capsys) -> None:
+    """A session cut by a crash replays up to the break; the CLI says so in one line. Oracle:
+    the chunk index of the complete file (the readings in the chunks before the cut)."""
+    from mcap.reader import make_reader
+    from mcap.records import Chunk, Message
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    from cmm_comp.cli.main import main
+    from cmm_comp.daemon.sessionlog.reader import read_messages
+    from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+
+    small = tmp_path / "small-chunks.mcap"  # the same session in many small chunks
+    with McapLogger(small, chunk_size=3000) as lg:
+        for m in read_messages(session).messages:
+            lg.log(m.topic, m.payload, m.log_time_ns)
+    with open(small, "rb") as f:
+        indexes = sorted(
+            make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset
+        )
+        f.seek(0)
+        chunks = [r for r in StreamReader(f, emit_chunks=True).records if isinstance(r, Chunk)]
+    assert len(chunks) >= 4
+    keep = len(chunks) // 2  # cut inside chunk number `keep`
+    cut_at = indexes[keep].chunk_start_offset + indexes[keep].chunk_length // 2
+    corrected_ids = {
+        c.id for c in breakup_chunk(chunks[0]) if getattr(c, "topic", "") == "/cmm/corrected"
+    }
+    expected = sum(
+        isinstance(r, Message) and r.channel_id in corrected_ids
+        for c in chunks[:keep]
+        for r in breakup_chunk(c)
+    )
+    assert 0 < expected < 61
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(small.read_bytes()[:cut_at])
+    report = replay_offline(cut)
+    assert report.truncated and report.readings == expected
+    assert main(["replay", str(cut)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cut by a crash" in err and f"the {expected} readings" in err

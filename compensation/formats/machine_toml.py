@@ -41,6 +41,8 @@ def read_machine_toml(path: Path) -> dict[str, Any]:
         raise MachineFileError(src, "", "not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise MachineFileError(src, "", f"invalid TOML: {exc}") from None
+    except RecursionError:
+        raise MachineFileError(src, "", "invalid TOML: nested too deeply") from None
     return data
 
 

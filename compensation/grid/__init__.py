@@ -5,7 +5,8 @@ interpolated (Squad for rotations, C² tricubic spline for translations).
 * :mod:`.status` — the one status rule both correction paths use;
 * :mod:`.build` — building from a machine model or from measured node poses; default steps;
 * :mod:`.inputs` — the runtime signals the grid reads;
-* :mod:`.file` — the versioned, checksummed grid file;
+* :mod:`.file` — the versioned, checksummed grid file; :mod:`.signing` — its Ed25519
+  signature (``cmm-comp grid sign``);
 * :mod:`.interpolation` — the Squad and spline tables; :mod:`.kernels` — the compiled (numba)
   evaluation kernels; :mod:`.inverse` — command positions for a target;
 * :mod:`.squad`, :mod:`.quaternion` — quaternion algebra and Squad interpolation;
@@ -29,6 +30,7 @@ from .correction_grid import CorrectionGrid
 from .file import GridFileError
 from .inputs import GridSignal
 from .interpolation import make_grid_continuous
+from .signing import GridSignatureError, generate_signing_key, sign_grid
 from .status import STATUS_DTYPE, VOLUME_TOL_MM, point_status
 
 __all__ = [
@@ -41,8 +43,11 @@ __all__ = [
     "CorrectionGrid",
     "GridFileError",
     "GridSignal",
+    "GridSignatureError",
     "MachineLike",
     "default_steps",
+    "generate_signing_key",
     "make_grid_continuous",
     "point_status",
+    "sign_grid",
 ]

@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..thermal.lag import SignalFilter
 from . import kernels as kern
 from .build import MachineLike, build_from_machine, check_steps, grid_from_poses
-from .file import grid_header, load_grid, save_grid
+from .file import GridContents, grid_header, load_grid, save_grid
 from .inputs import GridSignal, derive_lobing_inputs, lobing_orders, signal_deviations
 from .interpolation import interpolation_tables, make_grid_continuous
 from .inverse import command_for_target
@@ -520,14 +520,29 @@ class CorrectionGrid:
 
     @classmethod
     def load(
-        cls, path: str | Path, expect_machine: Any = None, outside: str | None = None
+        cls,
+        path: str | Path,
+        expect_machine: Any = None,
+        outside: str | None = None,
+        verify: Callable[[GridContents], None] | None = None,
     ) -> CorrectionGrid:
         """Read a grid file; :class:`GridFileError` (a ``ValueError``) names file and problem.
 
         ``expect_machine``: a machine (anything with ``identity_sha256()``) or a sha256 hex
-        string; the file must have been built from that machine description.
+        string; the file must have been built from that machine description. ``verify``: a
+        check of the file contents before the grid is built (``signing.signature_check``).
         """
-        return load_grid(cls, path, expect_machine, outside)
+        return load_grid(cls, path, expect_machine, outside, verify)
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Picklable (a daemon builds a grid in a worker process): the lock is not sent."""
+        state = dict(self.__dict__)
+        state.pop("_lock", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
 
     def __repr__(self) -> str:
         m = self.metadata.get("machine", {})

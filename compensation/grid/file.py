@@ -8,7 +8,10 @@ Layout: a NumPy ``.npz`` (zip) archive, read with ``allow_pickle=False``, holdin
 * the payload arrays named in :data:`PAYLOAD_ARRAYS` (node quaternions (w, x, y, z),
   translations µm, per-signal sensitivity grids);
 * ``sha256``: the hex SHA-256 (as uint8) over every payload array (name, dtype, shape, bytes,
-  in sorted order) followed by the header bytes.
+  in sorted order) followed by the header bytes;
+* optionally ``signature``: UTF-8 JSON (as uint8), an Ed25519 signature over the SHA-256 and the
+  header bytes (added by ``cmm-comp grid sign``; :mod:`.signing`). It is not part of the SHA-256,
+  so signing never changes a grid's identity.
 
 Any problem on reading raises a single :class:`GridFileError` naming the file and the problem.
 :func:`grid_header`, :func:`save_grid` and :func:`load_grid` convert between a
@@ -19,9 +22,11 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+import io
 import json
 import zipfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -41,13 +46,17 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "PAYLOAD_ARRAYS",
+    "SIGNATURE_MEMBER",
+    "GridContents",
     "GridFileError",
     "grid_header",
     "load_grid",
     "payload_sha256",
+    "read_grid_contents",
     "read_grid_file",
     "save_grid",
     "write_grid_file",
+    "write_grid_members",
 ]
 
 FORMAT_NAME = "cmm-grid"
@@ -58,6 +67,21 @@ PAYLOAD_ARRAYS = (
     "sensitivity_translation_um",  # (S, nx, ny, nz, 3) µm per unit of each signal
     "sensitivity_rotation_urad",  # (S, nx, ny, nz, 3) rotation vector, µrad per unit of signal
 )
+SIGNATURE_MEMBER = "signature"
+
+
+@dataclass(frozen=True)
+class GridContents:
+    """A grid file as read and checked (format, version, dtypes, SHA-256), not yet a grid."""
+
+    source: Path
+    header: dict[str, Any]
+    header_bytes: bytes
+    """The header exactly as stored (what the SHA-256 and the signature cover)."""
+    arrays: dict[str, NDArray[np.float64]]
+    sha256: str
+    signature: bytes | None
+    """The ``signature`` member (JSON bytes), None when the file is unsigned."""
 
 
 def payload_sha256(arrays: Mapping[str, NDArray[Any]], header_bytes: bytes) -> str:
@@ -75,27 +99,47 @@ def payload_sha256(arrays: Mapping[str, NDArray[Any]], header_bytes: bytes) -> s
 
 def write_grid_file(path: str | Path, header: Mapping[str, Any], arrays: Mapping[str, Any]) -> str:
     """Write atomically (temp file in the same folder, fsync, rename); return the SHA-256."""
-    target = Path(path)
     payload = {
         name: np.ascontiguousarray(arrays[name], dtype=np.float64) for name in PAYLOAD_ARRAYS
     }
     header_bytes = json.dumps(dict(header), sort_keys=True, indent=1).encode()
     sha = payload_sha256(payload, header_bytes)
-    members: dict[str, Any] = dict(payload)
-    members["header"] = np.frombuffer(header_bytes, dtype=np.uint8)
-    members["sha256"] = np.frombuffer(sha.encode(), dtype=np.uint8)
-    with atomic_output(target, "wb", fsync=True) as fh:
-        np.savez(fh, **members)
+    write_grid_members(path, header_bytes, payload, sha, None)
     return sha
+
+
+def write_grid_members(
+    path: str | Path,
+    header_bytes: bytes,
+    arrays: Mapping[str, NDArray[np.float64]],
+    sha256: str,
+    signature: bytes | None,
+) -> None:
+    """Write the archive members as given (atomically, fsync); signing rewrites a file so."""
+    members: dict[str, Any] = {name: arrays[name] for name in PAYLOAD_ARRAYS}
+    members["header"] = np.frombuffer(header_bytes, dtype=np.uint8)
+    members["sha256"] = np.frombuffer(sha256.encode(), dtype=np.uint8)
+    if signature is not None:
+        members[SIGNATURE_MEMBER] = np.frombuffer(signature, dtype=np.uint8)
+    with atomic_output(Path(path), "wb", fsync=True) as fh:
+        np.savez(fh, **members)
 
 
 def read_grid_file(path: str | Path) -> tuple[dict[str, Any], dict[str, NDArray[np.float64]], str]:
     """Read and verify a grid file: ``(header, payload arrays, sha256)``; :class:`GridFileError`."""
+    contents = read_grid_contents(path)
+    return contents.header, contents.arrays, contents.sha256
+
+
+def read_grid_contents(path: str | Path) -> GridContents:
+    """Read a grid file once (one read of its bytes: a file replaced meanwhile cannot mix two
+    versions) and check format, version, dtypes and SHA-256; :class:`GridFileError`."""
     source = Path(path)
     if not source.is_file():
         raise GridFileError(f"{source}: no such grid file")
     try:
-        with open(source, "rb") as fh, np.load(fh, allow_pickle=False) as npz:
+        data = source.read_bytes()
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             names = set(npz.files)
             missing = [n for n in ("header", "sha256", *PAYLOAD_ARRAYS) if n not in names]
             if missing:
@@ -105,6 +149,7 @@ def read_grid_file(path: str | Path) -> tuple[dict[str, Any], dict[str, NDArray[
             header_bytes = npz["header"].tobytes()
             stored_sha = npz["sha256"].tobytes().decode("ascii", errors="replace")
             arrays = {name: np.asarray(npz[name]) for name in PAYLOAD_ARRAYS}
+            signature = npz[SIGNATURE_MEMBER].tobytes() if SIGNATURE_MEMBER in names else None
     except GridFileError:
         raise
     except (
@@ -121,8 +166,8 @@ def read_grid_file(path: str | Path) -> tuple[dict[str, Any], dict[str, NDArray[
         ) from None
     try:
         header = json.loads(header_bytes.decode())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise GridFileError(f"{source}: header is not valid JSON ({exc})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise GridFileError(f"{source}: header is not valid JSON ({exc!s:.200})") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         fmt = header.get("format") if isinstance(header, dict) else None
         raise GridFileError(
@@ -143,7 +188,7 @@ def read_grid_file(path: str | Path) -> tuple[dict[str, Any], dict[str, NDArray[
             f"{source}: SHA-256 mismatch, the file is corrupt or was modified "
             f"(stored {stored_sha[:16]}…, computed {actual[:16]}…)"
         )
-    return header, arrays, actual
+    return GridContents(source, header, header_bytes, arrays, actual, signature)
 
 
 def _library_version() -> str:
@@ -209,14 +254,23 @@ def save_grid(grid: CorrectionGrid, path: str | Path) -> str:
 
 
 def load_grid(
-    cls: type[G], path: str | Path, expect_machine: Any = None, outside: str | None = None
+    cls: type[G],
+    path: str | Path,
+    expect_machine: Any = None,
+    outside: str | None = None,
+    verify: Callable[[GridContents], None] | None = None,
 ) -> G:
     """Read a grid file; :class:`GridFileError` (a ``ValueError``) names file and problem.
 
     ``expect_machine``: a machine (anything with ``identity_sha256()``) or a sha256 hex
-    string; the file must have been built from that machine description.
+    string; the file must have been built from that machine description. ``verify``: called
+    with the checked file contents before the grid is built (e.g. a signature check, which
+    raises :class:`GridFileError`); it sees exactly the bytes the grid is built from.
     """
-    header, arrays, sha = read_grid_file(path)
+    contents = read_grid_contents(path)
+    if verify is not None:
+        verify(contents)
+    header, arrays, sha = contents.header, contents.arrays, contents.sha256
     try:
         machine = header["machine"]
         sigs = [

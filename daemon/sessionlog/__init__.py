@@ -4,11 +4,13 @@
 * :mod:`.records` - compact record tuples the hot path logs instead of dicts;
 * :mod:`.logger` - :class:`SessionLogger`, the protocol both writers implement, their shared
   :class:`LogSettings`, :class:`LoggerStats` and never-blocking queue;
-* :mod:`.writer` - one MCAP file: naming, opening, encoding, finishing;
+* :mod:`.encoding` - one message to strict JSON, or the error record that replaces it;
+* :mod:`.writer` - one MCAP file: naming (and rotating an existing name), opening, finishing;
 * :mod:`.thread_writer` - :class:`McapLogger`, a writer thread in the daemon's process;
 * :mod:`.process_writer` - :class:`McapProcessLogger`, the writing in a child process
   (:mod:`.writer_child` is that child's side);
 * :mod:`.reader` - read sessions back (rolled sets, files cut by a crash);
+* :mod:`.recover` - rewrite a file cut by a crash as a complete, indexed file;
 * :mod:`.replay` - re-correct a session offline or re-send it to a daemon.
 
 See docs/mcap.md.

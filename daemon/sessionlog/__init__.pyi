@@ -1,9 +1,11 @@
 """Public API of ``sessionlog`` (read by lazy_loader: names load on first use)."""
 
-from .logger import LoggerStats, LogSettings, SessionLogger
+from .encoding import ERROR_TOPIC
+from .logger import LOW_PRIORITY_TOPICS, LoggerStats, LogSettings, SessionLogger
 from .process_writer import McapProcessLogger, McapWriterProcessError
 from .reader import LoggedMessage, Session, load_session, read_messages, session_files
 from .records import CorrectedRecord, FrameRecord, RawRecord
+from .recover import RecoverReport, recover
 from .replay import ReplayError, ReplayReport, replay_offline, replay_to_bus
 from .schemas import (
     TOPIC_SCHEMAS,
@@ -16,6 +18,8 @@ from .schemas import (
 from .thread_writer import McapLogger
 
 __all__ = [
+    "ERROR_TOPIC",
+    "LOW_PRIORITY_TOPICS",
     "TOPIC_SCHEMAS",
     "CorrectedRecord",
     "FrameRecord",
@@ -26,6 +30,7 @@ __all__ = [
     "McapProcessLogger",
     "McapWriterProcessError",
     "RawRecord",
+    "RecoverReport",
     "ReplayError",
     "ReplayReport",
     "Session",
@@ -36,6 +41,7 @@ __all__ = [
     "ns_from_can_timestamp",
     "ns_from_stamp",
     "read_messages",
+    "recover",
     "replay_offline",
     "replay_to_bus",
     "session_files",

@@ -13,7 +13,7 @@ import collections
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, Self
@@ -31,10 +31,24 @@ QueuedMessage = tuple[str, Payload, int]
 """``(topic, payload, log_time_ns)`` as it waits in a queue."""
 
 
+LOW_PRIORITY_TOPICS: frozenset[str] = frozenset({"/cmm/can_rx", "/cmm/can_tx", "/cmm/modbus"})
+"""Topics dropped first under overload: once the queue is half full only the other topics
+(answers, readings, temperatures, status, grid, counters, error records) are still taken."""
+
+
+def topic_counter_name(prefix: str, topic: str) -> str:
+    """Counter name of a per-topic count: ``mcap_dropped`` + ``/cmm/can_rx`` →
+    ``mcap_dropped_can_rx``."""
+    return f"{prefix}_{topic.removeprefix('/cmm/').strip('/').replace('/', '_')}"
+
+
 @dataclass(frozen=True)
 class LoggerStats:
-    """Counters since start. ``dropped`` counts messages lost for any reason (queue full,
-    logged after stop, writer failed); ``encode_errors`` those that could not be serialised."""
+    """Counters since start. ``dropped`` counts messages that did not reach their topic for any
+    reason (queue full, logged after stop, writer failed, could not be encoded);
+    ``encode_errors`` those that could not be encoded (each written as an error record
+    instead). ``*_by_topic`` split them per topic (exact: they sum to the totals).
+    ``flushed``: messages written before the last flush to the OS (what a crash keeps)."""
 
     enqueued: int
     written: int
@@ -42,6 +56,26 @@ class LoggerStats:
     encode_errors: int
     files: tuple[Path, ...]
     queue_len: int
+    dropped_by_topic: Mapping[str, int] = field(default_factory=dict)
+    encode_errors_by_topic: Mapping[str, int] = field(default_factory=dict)
+    written_by_topic: Mapping[str, int] = field(default_factory=dict)
+    flushed: int = 0
+
+    def counters(self) -> dict[str, int]:
+        """The counters the writers add to every ``/cmm/counters`` record (and the daemon may
+        publish): ``mcap_written``, ``mcap_dropped``, ``mcap_encode_errors``, and per topic
+        ``mcap_dropped_<topic>`` / ``mcap_encode_errors_<topic>`` (``<topic>`` without
+        ``/cmm/``, e.g. ``mcap_dropped_corrected``)."""
+        out = {
+            "mcap_written": self.written,
+            "mcap_dropped": self.dropped,
+            "mcap_encode_errors": self.encode_errors,
+        }
+        for topic, n in self.dropped_by_topic.items():
+            out[topic_counter_name("mcap_dropped", topic)] = n
+        for topic, n in self.encode_errors_by_topic.items():
+            out[topic_counter_name("mcap_encode_errors", topic)] = n
+        return out
 
 
 class SessionLogger(Protocol):
@@ -149,10 +183,12 @@ class HotPathQueue:
         self._schemas: Mapping[str, TopicSchema] = settings.schemas
         self._queue: collections.deque[QueuedMessage] = collections.deque()
         self._queue_size = settings.queue_size
+        self._soft_size = max(1, settings.queue_size // 2)  # LOW_PRIORITY_TOPICS stop here
         self._on_error = on_error
         self._what = what
         self._drop_lock = threading.Lock()
         self._dropped = 0
+        self._dropped_by: dict[str, int] = {}
         self._enqueued = 0  # approximate under concurrency, exact from one thread
         self._error: BaseException | None = None
         self._closed = False
@@ -175,16 +211,39 @@ class HotPathQueue:
             raise KeyError(f"MCAP topic {topic!r} takes a dict payload, not a record tuple")
         if log_time_ns is None:
             log_time_ns = time.time_ns()
-        if len(self._queue) >= self._queue_size or self._closed:
-            self._count_drop()
+        queue = self._queue
+        n = len(queue)
+        if (n >= self._soft_size or self._closed) and (  # overload policy (docs/mcap.md)
+            self._closed or n >= self._queue_size or topic in LOW_PRIORITY_TOPICS
+        ):
+            self._count_drop(topic)
             return False
-        self._queue.append((topic, payload, log_time_ns))
+        queue.append((topic, payload, log_time_ns))
         self._enqueued += 1
         return True
 
-    def _count_drop(self, n: int = 1) -> None:
+    def _count_drop(self, topic: str, n: int = 1) -> None:
         with self._drop_lock:
             self._dropped += n
+            self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n
+
+    def _count_drops(self, messages: Iterable[QueuedMessage]) -> None:
+        """Count every message of ``messages`` as dropped, per topic."""
+        for topic, _, _ in messages:
+            self._count_drop(topic)
+
+    def _drop_queue(self) -> None:
+        """Count everything still queued as dropped and empty the queue."""
+        while True:
+            try:
+                topic, _, _ = self._queue.popleft()
+            except IndexError:
+                return
+            self._count_drop(topic)
+
+    def _dropped_snapshot(self) -> dict[str, int]:
+        with self._drop_lock:
+            return dict(self._dropped_by)
 
     def kick(self) -> None:
         """Tell the writer (or forwarder) to work now rather than at its next poll: called by a
@@ -202,6 +261,16 @@ class HotPathQueue:
         if self._error is None:
             self._error = exc
         _log.error("%s: %r", self._what, exc)
+        if self._on_error is not None:
+            try:
+                self._on_error(exc)
+            except Exception:  # the handler's own failure is logged, never raised here
+                _log.exception("MCAP on_error handler raised")
+
+    def _report_quietly(self, exc: BaseException) -> None:
+        """Pass a problem that does not stop the log (a message that could not be encoded)
+        to ``on_error`` and the Python log, without making the logger unhealthy."""
+        _log.warning("%s: %s", self._what, exc)
         if self._on_error is not None:
             try:
                 self._on_error(exc)

@@ -28,8 +28,10 @@ SIGTERM (a Ctrl-C or a systemd stop reaches the whole process group): the parent
 
 from __future__ import annotations
 
+import io
 import logging
 import multiprocessing
+import numbers
 import os
 import pickle
 import subprocess
@@ -43,6 +45,7 @@ from typing import Any
 from mcap.writer import CompressionType
 
 from ..osthread import name_os_thread
+from .encoding import NotJson, safe_repr
 from .logger import HotPathQueue, LoggerStats, LogSettings, QueuedMessage
 from .schemas import TOPIC_SCHEMAS, TopicSchema
 from .writer_child import STOP, McapWriterProcessError
@@ -70,6 +73,47 @@ _CHILD_CODE = (
 def _child_argv(fd: int) -> list[str]:
     """The child's command line: the pipe fd and our pid."""
     return [sys.executable, "-c", _CHILD_CODE, str(fd), str(os.getpid())]
+
+
+class _PlainPickler(pickle.Pickler):
+    """Pickles plain data as usual (str, bytes, int, float, bool, None, tuple, list, dict, set
+    take the C fast path and never reach :meth:`reducer_override`); numpy-like numbers become
+    Python numbers; any other object becomes a :class:`.encoding.NotJson` holding its repr, so
+    the child never imports a class and a bad payload still becomes an error record there."""
+
+    def reducer_override(self, obj: Any) -> Any:
+        if isinstance(obj, numbers.Integral) and not isinstance(obj, bool):
+            return int, (int(obj),)
+        if isinstance(obj, numbers.Real) and not isinstance(obj, bool):
+            return float, (float(obj),)
+        if isinstance(obj, type):
+            return NotImplemented  # classes pickle by reference (NotJson itself)
+        return NotJson, (safe_repr(obj),)
+
+
+def _dumps(obj: Any) -> bytes:
+    buf = io.BytesIO()
+    _PlainPickler(buf, protocol=pickle.HIGHEST_PROTOCOL).dump(obj)
+    return buf.getvalue()
+
+
+def pickle_batch(dropped_by_topic: dict[str, int], batch: list[QueuedMessage]) -> bytes:
+    """The bytes sent to the child for one batch: ``(dropped_by_topic, batch)``. A message that
+    cannot be pickled at all (nested too deep...) is replaced by a :class:`.encoding.NotJson`
+    payload (the child writes its error record), never lost and never fatal."""
+    try:
+        return _dumps((dropped_by_topic, batch))
+    except Exception:
+        pass
+    safe: list[tuple[str, Any, Any]] = []
+    for topic, payload, t_ns in batch:
+        try:
+            _dumps((payload, t_ns))
+            safe.append((topic, payload, t_ns))
+        except Exception as exc:
+            text = f"<not picklable: {type(exc).__name__}> {safe_repr(payload, 200)}"
+            safe.append((topic, NotJson(text), t_ns if type(t_ns) is int else 0))
+    return _dumps((dropped_by_topic, safe))
 
 
 # --------------------------------------------------------------------------- parent side
@@ -125,6 +169,7 @@ class McapProcessLogger(HotPathQueue):
         )
         super().__init__(settings, on_error, "MCAP writer process")
         self._sent = 0
+        self._sent_by: dict[str, int] = {}
         self._child: dict[str, Any] = {
             "received": 0,
             "written": 0,
@@ -133,6 +178,10 @@ class McapProcessLogger(HotPathQueue):
             "files": (),
             "queue_len": 0,
             "healthy": True,
+            "dropped_by_topic": {},
+            "encode_errors_by_topic": {},
+            "written_by_topic": {},
+            "flushed": 0,
         }
         self._done = False
         self._deadline = float("inf")
@@ -205,13 +254,20 @@ class McapProcessLogger(HotPathQueue):
         """A snapshot of the counters: the parent's queue plus the child's last report (sent at
         most every 0.1 s while running; exact after ``stop()``)."""
         c = self._child
+        dropped_by = self._dropped_snapshot()
+        for topic, n in c["dropped_by_topic"].items():
+            dropped_by[topic] = dropped_by.get(topic, 0) + int(n)
         return LoggerStats(
             enqueued=self._enqueued,
             written=int(c["written"]),
-            dropped=self._dropped + int(c["dropped"]),
+            dropped=sum(dropped_by.values()),
             encode_errors=int(c["encode_errors"]),
             files=tuple(c["files"]),
             queue_len=len(self._queue) + int(c["queue_len"]),
+            dropped_by_topic=dropped_by,
+            encode_errors_by_topic=dict(c["encode_errors_by_topic"]),
+            written_by_topic=dict(c["written_by_topic"]),
+            flushed=int(c["flushed"]),
         )
 
     # ------------------------------------------------------------------ lifecycle
@@ -237,6 +293,8 @@ class McapProcessLogger(HotPathQueue):
         kind, body = pickle.loads(data)
         if kind == "error":
             self._report(body)
+        elif kind == "warning":  # a message that could not be encoded: the log goes on
+            self._report_quietly(body)
         else:
             self._child = body
             if kind == "done":
@@ -262,11 +320,23 @@ class McapProcessLogger(HotPathQueue):
             pass
         if batch:
             if self._closed and not self._stopping.is_set():  # child failed: just count
-                self._count_drop(len(batch))
+                self._count_drops(batch)
             else:
-                self._conn.send_bytes(pickle.dumps(batch, protocol=pickle.HIGHEST_PROTOCOL))
-                self._sent += len(batch)
+                self._send(batch)
         return len(batch)
+
+    def _send(self, batch: list[QueuedMessage]) -> None:
+        """Send one batch with our drops so far (per topic; the child writes them into the
+        file's counters and ``session_end``)."""
+        try:
+            self._conn.send_bytes(pickle_batch(self._dropped_snapshot(), batch))
+        except BaseException:
+            self._count_drops(batch)  # never reached the child: counted, not lost silently
+            raise
+        sent_by = self._sent_by
+        for topic, _, _ in batch:
+            sent_by[topic] = sent_by.get(topic, 0) + 1
+        self._sent += len(batch)
 
     def _run(self) -> None:
         name_os_thread()
@@ -282,6 +352,7 @@ class McapProcessLogger(HotPathQueue):
                 elif n == 0:
                     self._wake.wait(_POLL_S)
                     self._wake.clear()
+            self._send([])  # our final drop counts, for the file's session_end
             self._conn.send_bytes(STOP)
             while not self._done:
                 left = self._deadline - time.monotonic()
@@ -326,10 +397,11 @@ class McapProcessLogger(HotPathQueue):
         self._reap(5.0 if self._done else self._deadline - time.monotonic())
         c = self._child
         # everything sent that the child neither wrote nor counted is lost: count it here
-        lost = self._sent - int(c["written"]) - int(c["dropped"])
-        if lost > 0:
-            self._count_drop(lost)
+        written_by, dropped_by = c["written_by_topic"], c["dropped_by_topic"]
+        for topic, sent in self._sent_by.items():
+            lost = sent - int(written_by.get(topic, 0)) - int(dropped_by.get(topic, 0))
+            if lost > 0:
+                self._count_drop(topic, lost)
         self._closed = True
-        self._count_drop(len(self._queue))
-        self._queue.clear()
+        self._drop_queue()
         self._conn.close()

@@ -25,7 +25,7 @@ from mcap.stream_reader import StreamReader
 
 from .schemas import ns_from_stamp
 
-_TRUNCATION_ERRORS: tuple[type[BaseException], ...] = (
+TRUNCATION_ERRORS: tuple[type[BaseException], ...] = (
     McapError,
     struct.error,
     EOFError,
@@ -35,7 +35,7 @@ _TRUNCATION_ERRORS: tuple[type[BaseException], ...] = (
 try:  # a half-written zstd chunk fails in the decompressor
     import zstandard
 
-    _TRUNCATION_ERRORS += (zstandard.ZstdError,)
+    TRUNCATION_ERRORS += (zstandard.ZstdError,)
 except ImportError:  # pragma: no cover - mcap depends on it for zstd
     pass
 
@@ -89,7 +89,7 @@ class MessageStream:
                     record = next(records)
                 except StopIteration:
                     break
-                except _TRUNCATION_ERRORS as exc:
+                except TRUNCATION_ERRORS as exc:
                     self.errors.append(f"{path}: {type(exc).__name__}: {exc}")
                     complete = False  # even a footer without its closing magic is a cut file
                     break

@@ -15,6 +15,7 @@ scaling), which is all the process writer's child needs of them.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from typing import Any
 
@@ -44,62 +45,126 @@ CorrectedRecord = tuple[int, int, int, int, str, tuple[float, float, float], flo
 """``(seq, x_nm, y_nm, z_nm, status, correction_um, latency_us, applied, source, detail)``."""
 
 
+_INT_MIN, _INT_MAX = -(2**63), 2**64 - 1
+
+
+def _int(value: Any, what: str, lo: int = _INT_MIN, hi: int = _INT_MAX) -> int:
+    """``value`` as an int in ``[lo, hi]``: ints (and numpy ints) only, never a float or bool
+    turned into a plausible int. ValueError/TypeError naming ``what`` otherwise."""
+    if type(value) is not int:
+        if isinstance(value, bool | float) or not hasattr(value, "__index__"):
+            raise TypeError(f"{what}: {type(value).__name__} {value!r:.40} is not an integer")
+        value = value.__index__()
+    if not lo <= value <= hi:
+        raise ValueError(f"{what}: {value!r:.40} is outside [{lo}, {hi}]")
+    return value
+
+
+def _real(value: Any, what: str) -> float:
+    """``value`` as a float: floats and ints within 64 bits (numpy too), not bool/None/str.
+    Non-finite values pass here and are refused by the encoder (``allow_nan=False``)."""
+    if type(value) is float:
+        return value
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{what}: {type(value).__name__} {value!r:.40} is not a number")
+    if isinstance(value, int) and not _INT_MIN <= value <= _INT_MAX:
+        raise ValueError(f"{what}: integer out of the 64-bit range")
+    return float(value)
+
+
+def _str(value: Any, what: str) -> str:
+    if type(value) is str:
+        return value
+    raise TypeError(f"{what}: {type(value).__name__} {value!r:.40} is not a string")
+
+
+def _bool(value: Any, what: str) -> bool:
+    """``value`` if a bool (numpy bools too), never the truth value of something else."""
+    if type(value) is bool:
+        return value
+    if getattr(getattr(value, "dtype", None), "kind", "") == "b":
+        return bool(value)
+    raise TypeError(f"{what}: {type(value).__name__} {value!r:.40} is not a boolean")
+
+
+def _three(value: Any, what: str) -> tuple[Any, Any, Any] | list[Any]:
+    """``value`` if a tuple or list of three items (x, y, z)."""
+    if type(value) in (tuple, list) and len(value) == 3:
+        return value  # type: ignore[no-any-return]
+    raise TypeError(f"{what}: {type(value).__name__} {value!r:.40} is not three values (x, y, z)")
+
+
+def _channel(value: Any) -> str:
+    """python-can's channel: a name or a number."""
+    if type(value) is str:
+        return value
+    if type(value) is int:
+        return str(_int(value, "channel"))
+    raise TypeError(f"channel: {type(value).__name__} {value!r:.40} is not a str or int")
+
+
 def frame_payload(rec: FrameRecord) -> dict[str, Any]:
     """The ``/cmm/can_rx`` / ``/cmm/can_tx`` payload of a :data:`FrameRecord`."""
     can_id, ext, dlc, data, ts, channel, fd, remote, error = rec
-    ts = ts if ts and ts == ts else 0.0  # None or NaN: unknown
+    if not isinstance(data, bytes | bytearray | memoryview):
+        raise TypeError(f"data: {type(data).__name__} is not bytes")
+    ts = _real(ts, "timestamp_s") if ts is not None else 0.0
+    ts = ts if ts and ts == ts else 0.0  # None, 0 or NaN: unknown (inf: refused below)
     return {
-        "arbitration_id": int(can_id),
-        "is_extended": bool(ext),
-        "dlc": int(dlc),
+        "arbitration_id": _int(can_id, "arbitration_id", 0, 2**29 - 1),
+        "is_extended": _bool(ext, "is_extended"),
+        "dlc": _int(dlc, "dlc", 0, 64),
         "data": bytes(data).hex(),
-        "bus_stamp": stamp_from_ns(ns_from_can_timestamp(ts)),
-        "channel": str(channel),
-        "is_fd": bool(fd),
-        "is_remote_frame": bool(remote),
-        "is_error_frame": bool(error),
+        "bus_stamp": stamp_from_ns(_int(ns_from_can_timestamp(ts), "timestamp_s", 0)),
+        "channel": _channel(channel),
+        "is_fd": _bool(fd, "is_fd"),
+        "is_remote_frame": _bool(remote, "is_remote_frame"),
+        "is_error_frame": _bool(error, "is_error_frame"),
     }
 
 
 def raw_payload(rec: RawRecord) -> dict[str, Any]:
     """The ``/cmm/raw`` payload of a :data:`RawRecord`."""
-    seq, x, y, z, travel, valid, source, stylus, probe = rec
+    seq, x, y, z, travel, valid, source, stylus_mm, probe = rec
+    stylus = _three(stylus_mm, "stylus_mm")
     out: dict[str, Any] = {
-        "seq": seq,
-        "x_mm": x,
-        "y_mm": y,
-        "z_mm": z,
-        "travel_dir": list(travel),
-        "valid": list(valid),
-        "source": source,
-        "stylus_x_mm": float(stylus[0]),
-        "stylus_y_mm": float(stylus[1]),
-        "stylus_z_mm": float(stylus[2]),
+        "seq": _int(seq, "seq", 0),
+        "x_mm": _real(x, "x_mm"),
+        "y_mm": _real(y, "y_mm"),
+        "z_mm": _real(z, "z_mm"),
+        "travel_dir": [_int(v, "travel_dir", -1, 1) for v in _three(travel, "travel_dir")],
+        "valid": [_bool(v, "valid") for v in _three(valid, "valid")],
+        "source": _str(source, "source"),
+        "stylus_x_mm": _real(stylus[0], "stylus_x_mm"),
+        "stylus_y_mm": _real(stylus[1], "stylus_y_mm"),
+        "stylus_z_mm": _real(stylus[2], "stylus_z_mm"),
     }
     if probe is not None:
-        out["dir_x"], out["dir_y"], out["dir_z"] = (float(v) for v in probe)
+        dirs = _three(probe, "probe direction")
+        out["dir_x"], out["dir_y"], out["dir_z"] = (_real(v, "probe direction") for v in dirs)
     return out
 
 
 def corrected_payload(rec: CorrectedRecord) -> dict[str, Any]:
     """The ``/cmm/corrected`` payload of a :data:`CorrectedRecord` (positions nm → mm)."""
     seq, x_nm, y_nm, z_nm, status, corr_um, latency_us, applied, source, detail = rec
-    x_mm, y_mm, z_mm = mm3_from_nm((x_nm, y_nm, z_nm))
+    x_mm, y_mm, z_mm = mm3_from_nm((_int(x_nm, "x_nm"), _int(y_nm, "y_nm"), _int(z_nm, "z_nm")))
+    dx, dy, dz = _three(corr_um, "correction_um")
     out: dict[str, Any] = {
-        "seq": seq,
+        "seq": _int(seq, "seq", 0),
         "x_mm": x_mm,
         "y_mm": y_mm,
         "z_mm": z_mm,
-        "status": status,
-        "dx_um": corr_um[0],
-        "dy_um": corr_um[1],
-        "dz_um": corr_um[2],
-        "latency_us": latency_us,
-        "applied": int(applied),
-        "source": source,
+        "status": _str(status, "status"),
+        "dx_um": _real(dx, "dx_um"),
+        "dy_um": _real(dy, "dy_um"),
+        "dz_um": _real(dz, "dz_um"),
+        "latency_us": _real(latency_us, "latency_us"),
+        "applied": _int(applied, "applied", 0),
+        "source": _str(source, "source"),
     }
     if detail:
-        out["detail"] = detail
+        out["detail"] = _str(detail, "detail")
     return out
 
 

@@ -57,6 +57,18 @@ class ReplayReport:
     replayed_statuses: dict[str, int] = field(default_factory=dict)
     diffs_um: np.ndarray | None = None
     """(compared, 3) differences, µm (not in :meth:`as_dict`)."""
+    read_error: str | None = None
+    """Where and why a cut file stopped reading (None when every file was complete)."""
+
+    @property
+    def warning(self) -> str | None:
+        """One line for the user when the session was cut by a crash, else None."""
+        if not self.truncated:
+            return None
+        return (
+            f"session cut by a crash: replayed the {self.readings} readings read before the "
+            f"break ({self.read_error or 'file ends without its footer'})"
+        )
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly report."""
@@ -128,6 +140,7 @@ def replay_offline(source: str | Path, grid_path: str | Path | None = None) -> R
         max_abs_diff_um=float("nan"),
         rms_diff_um=float("nan"),
         status_agree=0,
+        read_error=res.error,
     )
     if n == 0:
         return report

@@ -272,6 +272,23 @@ _SCHEMAS: tuple[TopicSchema, ...] = (
             ["counters", "stamp"],
         ),
     ),
+    TopicSchema(
+        "/cmm/log_error",
+        "cmm_comp.LogError",
+        _obj(
+            "cmm_comp.LogError",
+            "A message that could not be encoded (NaN/inf, a value out of the 64-bit range, a "
+            "wrong type...): written here instead of on its topic, and counted.",
+            {
+                "topic": _d(_STR, "Topic the message was logged on."),
+                "error": _d(_STR, "Why it could not be encoded."),
+                "payload": _d(_STR, "repr() of the payload, at most 1000 characters."),
+                "log_time": {**_TIME, "description": "The message's own log time."},
+                "stamp": _STAMP,
+            },
+            ["topic", "error", "payload", "log_time", "stamp"],
+        ),
+    ),
 )
 
 TOPIC_SCHEMAS: Mapping[str, TopicSchema] = MappingProxyType({s.topic: s for s in _SCHEMAS})

@@ -11,6 +11,7 @@ finishes the file (summary and indexes). Errors in the writer thread reach ``on_
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import socket
@@ -24,12 +25,12 @@ from typing import IO
 from mcap.writer import CompressionType, Writer
 
 from ..osthread import name_os_thread
+from .encoding import ERROR_TOPIC, encode_message, error_payload, json_encoder, safe_str
 from .logger import HotPathQueue, LoggerStats, LogSettings
-from .schemas import TOPIC_SCHEMAS, TopicSchema
+from .schemas import TOPIC_SCHEMAS, TopicSchema, stamp_from_ns
 from .writer import (
-    encode_message,
     finish_session_file,
-    json_encoder,
+    free_path,
     open_exclusive,
     open_session_file,
     session_file_name,
@@ -40,6 +41,9 @@ _log = logging.getLogger(__name__)
 WRITER_NAME = "cmm-comp daemon.sessionlog.thread_writer"
 """The ``writer`` key of the files' ``session`` metadata."""
 _BATCH = 32  # messages per writer batch before yielding the GIL (bounds roll overshoot too)
+_ERROR_REPORTS_PER_S = 10
+"""Encode errors passed to ``on_error`` per second at most (all are counted and recorded)."""
+_MAX_T_NS = 2**64 - 1
 
 
 class McapLogger(HotPathQueue):
@@ -115,7 +119,12 @@ class McapLogger(HotPathQueue):
         self._last_flush = time.monotonic()
         self._dirty = False
         self._written = 0
+        self._written_by: dict[str, int] = {}
+        self._flushed = 0
         self._encode_errors = 0
+        self._encode_errors_by: dict[str, int] = {}
+        self._upstream_dropped: dict[str, int] = {}
+        self._error_reports: list[float] = []
         self._files: list[Path] = []
         self._started_utc = datetime.now(UTC)
         self._session_tag = self._started_utc.strftime("%Y%m%dT%H%M%S")
@@ -151,7 +160,27 @@ class McapLogger(HotPathQueue):
         return tuple(self._files)
 
     def stats(self) -> LoggerStats:
-        """A snapshot of the counters."""
+        """A snapshot of the counters (drops include those reported by
+        :meth:`set_upstream_drops`)."""
+        dropped_by = self._dropped_snapshot()
+        for topic, n in self._upstream_dropped.items():
+            dropped_by[topic] = dropped_by.get(topic, 0) + n
+        return LoggerStats(
+            enqueued=self._enqueued,
+            written=self._written,
+            dropped=sum(dropped_by.values()),
+            encode_errors=self._encode_errors,
+            files=tuple(self._files),
+            queue_len=len(self._queue),
+            dropped_by_topic=dropped_by,
+            encode_errors_by_topic=dict(self._encode_errors_by),
+            written_by_topic=dict(self._written_by),
+            flushed=self._flushed,
+        )
+
+    def own_stats(self) -> LoggerStats:
+        """Like :meth:`stats` without the upstream drops (what the process writer's child
+        reports to its parent, which adds its own)."""
         return LoggerStats(
             enqueued=self._enqueued,
             written=self._written,
@@ -159,7 +188,17 @@ class McapLogger(HotPathQueue):
             encode_errors=self._encode_errors,
             files=tuple(self._files),
             queue_len=len(self._queue),
+            dropped_by_topic=self._dropped_snapshot(),
+            encode_errors_by_topic=dict(self._encode_errors_by),
+            written_by_topic=dict(self._written_by),
+            flushed=self._flushed,
         )
+
+    def set_upstream_drops(self, dropped_by_topic: dict[str, int]) -> None:
+        """Messages dropped before they reached this logger (the process writer's parent
+        queue), per topic, since the start: counted in :meth:`stats`, ``/cmm/counters`` and
+        ``session_end``, so the file tells the whole story."""
+        self._upstream_dropped = dict(dropped_by_topic)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -181,7 +220,10 @@ class McapLogger(HotPathQueue):
     def _next_path(self) -> Path:
         target = self._settings.target
         if self._single:
-            return target
+            path = free_path(target)
+            if path != target:
+                _log.warning("MCAP log %s exists: writing %s instead", target, path)
+            return path
         while True:
             path = target / session_file_name(self._session_tag, self._next_index)
             self._next_index += 1
@@ -189,17 +231,25 @@ class McapLogger(HotPathQueue):
                 return path
 
     def _open_next(self) -> None:
-        path = self._next_path()
-        meta = {**self._metadata, "file_index": str(len(self._files)), "file": path.name}
         cfg = self._settings
-        self._stream, self._writer, self._channels = open_session_file(
-            path,
-            self._opener,
-            chunk_size=int(cfg.chunk_size),
-            compression=cfg.compression,
-            schemas=self._schemas,
-            metadata=meta,
-        )
+        for attempt in range(100):
+            path = self._next_path()
+            meta = {**self._metadata, "file_index": str(len(self._files)), "file": path.name}
+            if self._single and path != cfg.target:
+                meta["requested_file"] = cfg.target.name
+            try:
+                self._stream, self._writer, self._channels = open_session_file(
+                    path,
+                    self._opener,
+                    chunk_size=int(cfg.chunk_size),
+                    compression=cfg.compression,
+                    schemas=self._schemas,
+                    metadata=meta,
+                )
+                break
+            except FileExistsError:  # created between our check and our open: next name
+                if attempt == 99:
+                    raise
         self._opened_at = time.monotonic()
         self._files.append(path)
 
@@ -213,9 +263,15 @@ class McapLogger(HotPathQueue):
             "written": str(stats.written),
             "dropped": str(stats.dropped),
             "encode_errors": str(stats.encode_errors),
+            "dropped_by_topic": json.dumps(dict(stats.dropped_by_topic), sort_keys=True),
+            "encode_errors_by_topic": json.dumps(
+                dict(stats.encode_errors_by_topic), sort_keys=True
+            ),
+            "written_by_topic": json.dumps(dict(stats.written_by_topic), sort_keys=True),
             "error": repr(self._error) if self._error else "",
         }
         finish_session_file(writer, stream, end, self._settings.fsync)
+        self._flushed = self._written
 
     def _write_batch(self) -> int:
         n = 0
@@ -223,6 +279,8 @@ class McapLogger(HotPathQueue):
         assert writer is not None
         queue = self._queue
         channels = self._channels
+        schemas = self._schemas
+        written_by = self._written_by
         dumps = json_encoder()
         while n < _BATCH:  # short batches (GIL yielded between them); bounds roll overshoot
             try:
@@ -231,21 +289,56 @@ class McapLogger(HotPathQueue):
                 break
             n += 1
             try:
-                data = encode_message(topic, payload, t_ns, dumps)
-            except (TypeError, ValueError, KeyError, IndexError, OverflowError) as exc:
-                self._encode_errors += 1
-                self._count_drop()
-                self._report(ValueError(f"{topic}: payload not JSON-encodable: {exc}"))
+                if type(t_ns) is not int or not 0 <= t_ns <= _MAX_T_NS:
+                    raise ValueError(f"log_time_ns {t_ns!r:.40} is not an integer ns >= 0")
+                if topic == "/cmm/counters" and type(payload) is dict:
+                    payload = self._with_log_counters(payload)
+                data = encode_message(topic, payload, t_ns, dumps, schemas.get(topic))
+            except Exception as exc:  # any bad payload: an error record, never a stop
+                self._encode_error(topic, payload, t_ns, exc, dumps)
                 continue
             writer.add_message(channels[topic], t_ns, data, t_ns)
             self._written += 1
+            written_by[topic] = written_by.get(topic, 0) + 1
         return n
+
+    def _with_log_counters(self, payload: dict[str, object]) -> dict[str, object]:
+        """A ``/cmm/counters`` payload with the log's own counters added (exact drops per
+        topic, including the process writer's parent queue)."""
+        counters = payload.get("counters")
+        if type(counters) is not dict:
+            return payload  # refused by the schema check
+        return {**payload, "counters": {**counters, **self.stats().counters()}}
+
+    def _encode_error(
+        self, topic: str, payload: object, t_ns: object, exc: Exception, dumps: Callable
+    ) -> None:
+        """Count a message that could not be encoded, write its error record, report it."""
+        self._encode_errors += 1
+        self._encode_errors_by[topic] = self._encode_errors_by.get(topic, 0) + 1
+        self._count_drop(topic)
+        channel = self._channels.get(ERROR_TOPIC)
+        if channel is not None:
+            now_ns = time.time_ns()
+            record = {**error_payload(topic, payload, t_ns, exc), "stamp": stamp_from_ns(now_ns)}
+            assert self._writer is not None
+            self._writer.add_message(channel, now_ns, dumps(record).encode(), now_ns)
+            self._written_by[ERROR_TOPIC] = self._written_by.get(ERROR_TOPIC, 0) + 1
+        now = time.monotonic()
+        recent = [t for t in self._error_reports if now - t < 1.0]
+        if len(recent) < _ERROR_REPORTS_PER_S:
+            recent.append(now)
+            self._report_quietly(
+                ValueError(f"{topic}: payload not JSON-encodable: {safe_str(exc)}")
+            )
+        self._error_reports = recent
 
     def _flush(self) -> None:
         assert self._writer is not None and self._stream is not None
         self._writer.flush()
         if self._settings.fsync:
             os.fsync(self._stream.fileno())
+        self._flushed = self._written
 
     def _should_roll(self) -> bool:
         if self._single:
@@ -303,8 +396,7 @@ class McapLogger(HotPathQueue):
         self._report(exc)
         # keep the hot path cheap and honest: everything still queued or coming is dropped
         self._closed = True
-        self._count_drop(len(self._queue))
-        self._queue.clear()
+        self._drop_queue()
         with self._io_lock:
             try:
                 self._finish_current()
@@ -335,6 +427,6 @@ class McapLogger(HotPathQueue):
                     self._wake.clear()
             with self._io_lock:
                 self._finish_current()
-            self._count_drop(len(self._queue))  # raced past stop(): counted, never lost silently
+            self._drop_queue()  # raced past stop(): counted, never lost silently
         except BaseException as exc:
             self._fail(exc)

@@ -1,5 +1,5 @@
 """Writing one MCAP session file: naming, opening (schemas, channels, ``session`` metadata),
-encoding a message's JSON, finishing (``session_end`` metadata, summary, indexes).
+finishing (``session_end`` metadata, summary, indexes).
 
 Pure file work, no threads: :class:`~.thread_writer.McapLogger` drives it (in the daemon's
 process, or in the child of :class:`~.process_writer.McapProcessLogger`).
@@ -8,21 +8,28 @@ process, or in the child of :class:`~.process_writer.McapProcessLogger`).
 from __future__ import annotations
 
 import io
-import json
 import os
 import re
-from collections.abc import Callable, Mapping
+import struct
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import IO, Any
 
-from mcap.writer import CompressionType, Writer
+from mcap.records import ChunkIndex
+from mcap.writer import CompressionType, IndexType, Writer
 
-from .records import expand
-from .schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, TopicSchema, stamp_from_ns
+from .schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, TopicSchema
 
 PROFILE = ""  # no well-known MCAP profile applies to JSON messages
 LIBRARY = "cmm-comp mcap 1.x"
 SESSION_FILE_RE = re.compile(r"^session-(\d{8}T\d{6})-(\d{3,})\.mcap$")
+
+INDEX_TYPES = IndexType.CHUNK | IndexType.ATTACHMENT | IndexType.METADATA
+"""Summary indexes written: chunk, attachment and metadata indexes, no per-chunk message index
+records. Readers (the ``mcap`` package, Foxglove) find every message through the chunk index
+(message indexes are optional in MCAP); the writer keeps the chunk index in memory until the
+file is finished, and without message indexes each chunk's entry is half the size (~0.8 KiB
+instead of ~1.5 KiB with nine channels: a one-hour file at 1 kHz holds ~20k chunks)."""
 
 WRITE_SLICE = 16 * 1024
 """Largest single ``write`` system call, bytes (see :class:`SlicedFileIO`)."""
@@ -43,10 +50,92 @@ class SlicedFileIO(io.FileIO):
         return 0 if n is None else n
 
 
+_PACKED_INDEX = struct.Struct("<7QB")
+"""One chunk index entry kept in memory: start and end time, offset, length, message index
+length, compressed and uncompressed size, compression code."""
+_COMPRESSIONS = ("", "zstd", "lz4")
+
+
+class ChunkIndexStore:
+    """Where the ``mcap`` writer keeps its chunk index until the file is finished, packed:
+    57 bytes a chunk instead of a ``ChunkIndex`` object (~0.8 KiB with its dict). The writer
+    only appends and iterates (``mcap`` 1.6, pinned); an entry with message index offsets or an
+    unknown compression is kept as the object itself. A one-hour file at 1 kHz holds ~4k-20k
+    chunks: this is what keeps the writer's memory flat."""
+
+    def __init__(self) -> None:
+        self._packed = bytearray()
+        self._objects: dict[int, ChunkIndex] = {}
+        self._n = 0
+
+    def append(self, index: ChunkIndex) -> None:
+        if index.message_index_offsets or index.compression not in _COMPRESSIONS:
+            self._objects[self._n] = index
+            self._packed += bytes(_PACKED_INDEX.size)
+        else:
+            self._packed += _PACKED_INDEX.pack(
+                index.message_start_time,
+                index.message_end_time,
+                index.chunk_start_offset,
+                index.chunk_length,
+                index.message_index_length,
+                index.compressed_size,
+                index.uncompressed_size,
+                _COMPRESSIONS.index(index.compression),
+            )
+        self._n += 1
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __iter__(self) -> Iterator[ChunkIndex]:
+        for i, fields in enumerate(_PACKED_INDEX.iter_unpack(self._packed)):
+            obj = self._objects.get(i)
+            if obj is not None:
+                yield obj
+                continue
+            start, end, offset, length, mi_length, csize, usize, comp = fields
+            yield ChunkIndex(
+                message_start_time=start,
+                message_end_time=end,
+                chunk_start_offset=offset,
+                chunk_length=length,
+                message_index_offsets={},
+                message_index_length=mi_length,
+                compression=_COMPRESSIONS[comp],
+                compressed_size=csize,
+                uncompressed_size=usize,
+            )
+
+
+def compact_chunk_index(writer: Writer) -> bool:
+    """Give ``writer`` a :class:`ChunkIndexStore` (before its first chunk); False (and nothing
+    changed) if this ``mcap`` version keeps its chunk index differently."""
+    name = "_Writer__chunk_indices"
+    current = getattr(writer, name, None)
+    if not isinstance(current, list) or current:
+        return False
+    setattr(writer, name, ChunkIndexStore())
+    return True
+
+
 def open_exclusive(path: Path) -> IO[bytes]:
     """Default opener: create ``path`` (refuse to overwrite an existing file) for writing in
     slices; the logger buffers it and owns and closes it."""
     return SlicedFileIO(path, "xb")  # type: ignore[return-value]
+
+
+def free_path(path: Path) -> Path:
+    """``path`` if no file of that name exists, else the first free ``<stem>.<n>.mcap``
+    (n = 1, 2, …): an explicit log path is rotated, never refused and never overwritten."""
+    if not path.exists():
+        return path
+    n = 1
+    while True:
+        candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
+        if not candidate.exists():
+            return candidate
+        n += 1
 
 
 def session_file_name(session_tag: str, index: int) -> str:
@@ -69,7 +158,8 @@ def open_session_file(
     stream = opener(path)
     if isinstance(stream, io.RawIOBase):  # else mcap wraps it in a buffer we cannot flush
         stream = io.BufferedWriter(stream)
-    writer = Writer(stream, chunk_size=chunk_size, compression=compression)
+    writer = Writer(stream, chunk_size=chunk_size, compression=compression, index_types=INDEX_TYPES)
+    compact_chunk_index(writer)
     writer.start(profile=PROFILE, library=LIBRARY)
     ids: dict[str, int] = {}
     channels: dict[str, int] = {}
@@ -95,20 +185,3 @@ def finish_session_file(
             os.fsync(stream.fileno())
     finally:
         stream.close()
-
-
-def json_encoder() -> Callable[[Any], str]:
-    """The compact JSON encoder of the log (no spaces, NaN/Inf rejected)."""
-    return json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
-
-
-def encode_message(
-    topic: str, payload: dict[str, Any] | tuple[Any, ...], t_ns: int, dumps: Callable[[Any], str]
-) -> bytes:
-    """The JSON bytes of one logged message: a record tuple expanded by its topic's builder,
-    ``stamp`` added from ``t_ns`` (ns) when absent. TypeError/ValueError/KeyError/IndexError/
-    OverflowError when the payload cannot be encoded."""
-    obj = expand(topic, payload)
-    if "stamp" not in obj:
-        obj = {**obj, "stamp": stamp_from_ns(t_ns)}
-    return dumps(obj).encode()

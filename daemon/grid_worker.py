@@ -1,0 +1,142 @@
+"""Grid loading in a worker process: a reload never holds the reply path's interpreter lock.
+
+Reading a grid, checking its trust and building its interpolation tables takes 60 ms to over
+a second of CPU, much of it inside compiled calls that hold Python's GIL for tens of ms; in a
+thread of the daemon that shows up directly in the reply latency. :class:`ProcessGridLoader`
+runs :func:`.grid_slot.load_grid` (the same checks, the same code) in one worker process
+(``python -m cmm_comp.daemon.grid_worker``, started on the first reload, kept for the next ones,
+at the lowest CPU priority) and returns the built, checked :class:`.grid_slot.LoadedGrid`
+(pickled: ~2 ms to unpickle a 19×23×16 grid). A worker that dies is reported as a refused
+reload (the old grid stays) and replaced on the next one; it exits when its stdin closes (the
+daemon stopped or died).
+
+Protocol on the worker's stdin/stdout: frames of an 8-byte little-endian length and a pickle;
+requests ``(path, GridTrust | None)``, answers ``("ok", LoadedGrid)`` or ``("refused", message)``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pickle
+import struct
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import IO, Any
+
+from .grid_slot import GridLoadError, LoadedGrid, load_grid
+from .grid_trust import GridTrust
+
+_LENGTH = struct.Struct("<Q")  # frame length, bytes
+
+
+def _send(fh: IO[bytes], obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    fh.write(_LENGTH.pack(len(data)))
+    fh.write(data)
+    fh.flush()
+
+
+def _recv(fh: IO[bytes]) -> Any:
+    head = fh.read(_LENGTH.size)
+    if len(head) < _LENGTH.size:
+        raise EOFError("grid worker pipe closed")
+    (size,) = _LENGTH.unpack(head)
+    data = fh.read(size)
+    if len(data) < size:
+        raise EOFError("grid worker pipe closed mid-frame")
+    return pickle.loads(data)
+
+
+class ProcessGridLoader:
+    """A ``loader(path, trust) -> LoadedGrid`` that does the work in a worker process.
+
+    Thread-safe (one load at a time); ``stop(timeout_s)`` ends the worker.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._stopped = False
+
+    def _worker(self) -> subprocess.Popen[bytes]:
+        if self._proc is None or self._proc.poll() is not None:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "cmm_comp.daemon.grid_worker"],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+            )
+        return self._proc
+
+    def prewarm(self) -> None:
+        """Start the worker now (it imports the grid code at low priority, so the first reload
+        does not wait for that)."""
+        with self._lock:
+            if not self._stopped:
+                self._worker()
+
+    def __call__(self, path: str | Path, trust: GridTrust | None) -> LoadedGrid:
+        with self._lock:
+            if self._stopped:
+                raise GridLoadError(f"{path}: the daemon is stopping; reload not done")
+            proc = self._worker()
+            assert proc.stdin is not None and proc.stdout is not None
+            try:
+                _send(proc.stdin, (str(path), trust))
+                kind, value = _recv(proc.stdout)
+            except (OSError, EOFError, pickle.UnpicklingError, ValueError) as exc:
+                self._end(proc, 1.0)
+                self._proc = None
+                raise GridLoadError(
+                    f"{path}: the grid loader process failed ({exc}); old grid kept"
+                ) from None
+        if kind == "ok" and isinstance(value, LoadedGrid):
+            return value
+        raise GridLoadError(str(value))
+
+    @staticmethod
+    def _end(proc: subprocess.Popen[bytes], timeout_s: float) -> bool:
+        if proc.stdin is not None:
+            with contextlib.suppress(OSError):
+                proc.stdin.close()
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
+        return True
+
+    def stop(self, timeout_s: float = 5.0) -> bool:
+        """End the worker (it exits when its stdin closes; killed after ``timeout_s``)."""
+        self._stopped = True
+        with self._lock:  # after the load in progress, if any
+            proc, self._proc = self._proc, None
+        return True if proc is None else self._end(proc, timeout_s)
+
+
+def main() -> int:
+    """Worker process: answer load requests until stdin closes."""
+    with contextlib.suppress(OSError):  # lowest ordinary priority: the reply path comes first
+        os.nice(19)
+    requests, answers = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # a stray print must not corrupt the answer stream
+    while True:
+        try:
+            path, trust = _recv(requests)
+        except EOFError:
+            return 0
+        try:
+            answer: tuple[str, Any] = ("ok", load_grid(path, trust))
+        except GridLoadError as exc:
+            answer = ("refused", str(exc))
+        except Exception as exc:  # a refusal with the reason, never a dead worker
+            answer = ("refused", f"{path}: grid loader failed: {exc!r}")
+        _send(answers, answer)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
