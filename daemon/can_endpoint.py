@@ -385,10 +385,10 @@ class CanEndpoint(can.Listener):
 
     def _answer_incomplete(self, seq: int, reason: str, t_rx: float) -> None:
         self.metrics.fault("incomplete_reading")
-        latency_us = (time.perf_counter() - t_rx) * 1e6
         status = CorrectionStatus(seq, Status.INCOMPLETE_READING, latency_us=0)
         self._send([status])
-        self.metrics.answer(Status.INCOMPLETE_READING.label, latency_us)
+        # answered when it expired: its wait is not a reply latency (kept out of the histogram)
+        self.metrics.answer(Status.INCOMPLETE_READING.label, None)
         self.events.emit("answer_incomplete_reading", "warning", seq=seq, detail=reason)
 
     # ------------------------------------------------------------------ send

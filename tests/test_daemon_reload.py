@@ -141,9 +141,11 @@ def test_sighup_reload_is_built_in_a_worker_process(tmp_path: Path) -> None:
         new = d.grids.current
         assert new.sha256 != old and new.sha256 == CorrectionGrid.load(grid).sha256
         assert new.loaded_by_pid not in (0, os.getpid())
+        send_temps(ctl)  # fresh temperatures: a slow reload on a busy machine outlasts stale_s
         assert ctl.exchange(RawReading(1, CENTRE_MM)).status == "ok"
         CorrectionGrid.build(npl_machine(), steps=(5, 5, 4)).save(grid)  # unsigned
         d.request_reload()
         assert _wait(lambda: d.reloader.completed == 2, 120)
         assert d.grids.current.sha256 == new.sha256
+        send_temps(ctl)
         assert ctl.exchange(RawReading(2, CENTRE_MM)).status == "ok"

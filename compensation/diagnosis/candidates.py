@@ -234,15 +234,25 @@ def _periodic_design_many(
     return design
 
 
+#: Cycles per travel scanned by the periodic candidate; a dense record (``DENSE_POINTS`` or more,
+#: positions finer than Nyquist allows) also gets a short-period candidate up to
+#: ``DENSE_CYCLES`` (a screw's pitch, an encoder's interpolation error, a stick-slip cycle).
+PERIODIC_CYCLES = 80.0
+DENSE_CYCLES = 400.0
+DENSE_POINTS = 2000
+
+
 def periodic_periods(
-    span_mm: tuple[float, float], positions_mm: FloatArray | None = None
+    span_mm: tuple[float, float],
+    positions_mm: FloatArray | None = None,
+    cycles: tuple[float, float] = (1.5, PERIODIC_CYCLES),
 ) -> tuple[tuple[float, ...], float]:
     """Scan grid of periods (mm) for an axis of travel L: 1.5 to 80 periods within L, spaced
     0.1/L in spatial frequency, and never shorter than 2.5× the typical gap between the
     distinct positions measured (Nyquist: a few fixed targets alias short periods); and the
     effective number of independent periods tried (≈ the span of cycles per travel)."""
     length = span_mm[1] - span_mm[0]
-    f_max = 80.0 / length
+    f_min, f_max = cycles[0] / length, cycles[1] / length
     if positions_mm is not None and len(positions_mm) > 1:
         distinct = np.unique(np.round(np.asarray(positions_mm) / (1e-3 * length)))
         if len(distinct) > 1:
@@ -250,8 +260,8 @@ def periodic_periods(
             f_max = min(
                 f_max, 1.0 / (2.5 * gap)
             )  # margin: at 2 samples per period a sine aliases to ~0
-    f = np.arange(1.5 / length, f_max, 0.1 / length)
-    return tuple(float(v) for v in 1.0 / f), max(1.0, (f_max - 1.5 / length) * length)
+    f = np.arange(f_min, f_max, 0.1 / length)
+    return tuple(float(v) for v in 1.0 / f), max(1.0, (f_max - f_min) * length)
 
 
 def _parametric_builder(comp: str, span: tuple[float, float], orders: list[int]) -> EffectBuilder:
@@ -410,26 +420,35 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     drivers=("t",),
                 ).with_rich(n_params=2 * hi_k + 1, build=_drift_builder(a, t_span, hi_k))
             )
-        periods, n_eff = periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])
-        if not periods:
-            continue
-        h_lo, h_hi = PERIODIC_HARMONICS
-        out.append(
-            Candidate(
-                "periodic",
-                {"axis": a},
-                2 * h_lo,
-                _periodic_builder(a),
-                thetas=periods,
-                look_elsewhere=n_eff,
-                design_fn=_periodic_design(a, h_lo),
-                design_many=_periodic_design_many(a, h_lo),
-            ).with_rich(
-                n_params=2 * h_hi,
-                design_fn=_periodic_design(a, h_hi),
-                design_many=_periodic_design_many(a, h_hi),
+        scans = [periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])]
+        if res.n >= DENSE_POINTS:
+            scans.append(
+                periodic_periods(
+                    _span(res, a),
+                    res.q_mm[:, AXIS_INDEX[a]],
+                    (PERIODIC_CYCLES, DENSE_CYCLES),
+                )
             )
-        )
+        h_lo, h_hi = PERIODIC_HARMONICS
+        for periods, n_eff in scans:
+            if not periods:
+                continue
+            out.append(
+                Candidate(
+                    "periodic",
+                    {"axis": a},
+                    2 * h_lo,
+                    _periodic_builder(a),
+                    thetas=periods,
+                    look_elsewhere=n_eff,
+                    design_fn=_periodic_design(a, h_lo),
+                    design_many=_periodic_design_many(a, h_lo),
+                ).with_rich(
+                    n_params=2 * h_hi,
+                    design_fn=_periodic_design(a, h_hi),
+                    design_many=_periodic_design_many(a, h_hi),
+                )
+            )
     if res.has("T_wp"):
         fixture = (
             m.thermal.workpiece_fixture_mm
