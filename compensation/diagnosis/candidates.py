@@ -99,6 +99,11 @@ class Candidate:
     #: in fits and cross-validation: a generic local basis must not extrapolate into regions
     #: the training points do not cover. 0 for the causes (plain least squares).
     ridge: float = 0.0
+    #: A cause that is a function of time alone (a drift) is not extrapolated in time: where a
+    #: held-out fold lies before or after every training point (folds are often blocks of time),
+    #: it is predicted with the time held at the nearest end of the training span — a drift
+    #: describes the session, and no polynomial in time says what happened beyond its data.
+    hold_time: bool = False
     _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
     _statics: dict[tuple[int, Any], Candidate | None] = field(default_factory=dict, repr=False)
 
@@ -293,7 +298,8 @@ COUPLING_ORDERS = (((0, 1, 2), (1,)), ((0, 1, 2, 3), (1, 2)))
 #: Orders of the part along a at b's reference position (default, rich).
 COUPLING_ALONG = (1, 3)
 PERIODIC_HARMONICS = (1, 3)
-DRIFT_ORDERS = (3, 6)
+DRIFT_ORDERS = (3, 10)
+DRIFT_LINEAR = (1, 10)
 
 
 def candidate_orders(component: str) -> list[int]:
@@ -410,16 +416,19 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             out.append(Candidate("reversal", {"axis": a}, 2, _reversal_builder(a, span)))
         if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
             t_span = (float(np.min(res.signals["t"])), float(np.max(res.signals["t"])))
-            lo_k, hi_k = DRIFT_ORDERS
-            out.append(
-                Candidate(
-                    "drift",
-                    {"axis": a},
-                    2 * lo_k + 1,
-                    _drift_builder(a, t_span, lo_k),
-                    drivers=("t",),
-                ).with_rich(n_params=2 * hi_k + 1, build=_drift_builder(a, t_span, hi_k))
-            )
+            # a steady drift (linear in time) and a wandering one (cubic), both with the wandering
+            # shape of order 10 as rich variant: where folds are blocks of time, only a line extrapolates
+            for lo_k, hi_k in (DRIFT_LINEAR, DRIFT_ORDERS):
+                out.append(
+                    Candidate(
+                        "drift",
+                        {"axis": a},
+                        2 * lo_k + 1,
+                        _drift_builder(a, t_span, lo_k),
+                        drivers=("t",),
+                        hold_time=True,
+                    ).with_rich(n_params=2 * hi_k + 1, build=_drift_builder(a, t_span, hi_k))
+                )
         scans = [periodic_periods(_span(res, a), res.q_mm[:, AXIS_INDEX[a]])]
         if res.n >= DENSE_POINTS:
             scans.append(

@@ -11,7 +11,7 @@ a bounded scalar search between the neighbouring grid values.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -293,10 +293,35 @@ def cv_predictions(problem: Problem, terms: Sequence[Term], rescan: bool = True)
             else:
                 fold_terms.append(t)
         beta, _, _ = fit(problem, fold_terms, train, ridge=True)
-        x_test = problem.stacked(fold_terms, test)
+        x_test = _held_out_design(problem, fold_terms, train, test)
         p = (x_test @ beta).reshape(len(test), len(problem.axes))
         pred[np.ix_(test, np.asarray(problem.axes, dtype=np.intp))] = p
     return pred
+
+
+def _held_out_design(
+    problem: Problem, terms: Sequence[Term], train: NDArray[np.intp], test: NDArray[np.intp]
+) -> FloatArray:
+    """The stacked design of ``test`` rows, with the columns of terms that are not extrapolated
+    in time (``Candidate.hold_time``) evaluated at the time clipped to the training span."""
+    x = problem.stacked(terms, test)
+    t = problem.res.signals.get("t")
+    if t is None or not any(term.candidate.hold_time for term in terms):
+        return x
+    lo, hi = float(np.min(t[train])), float(np.max(t[train]))
+    t_test = t[test]
+    if float(np.min(t_test)) >= lo and float(np.max(t_test)) <= hi:
+        return x
+    sub = problem.res.subset(test)
+    sub = replace(sub, signals={**sub.signals, "t": np.clip(t_test, lo, hi)})
+    col = problem.n_nuisance
+    for term in terms:
+        n_p = term.candidate.n_params
+        if term.candidate.hold_time:
+            d = term.candidate.design_uncached(sub, term.theta)[:, problem.axes, :]
+            x[:, col : col + n_p] = d.reshape(-1, n_p)
+        col += n_p
+    return x
 
 
 def cv_mse(problem: Problem, terms: Sequence[Term], rescan: bool = True) -> float:

@@ -148,7 +148,8 @@ def _round(
         pick = min(close, key=lambda r: (r["candidate"].n_params, r["cv_mse"]))
         term = Term(pick["candidate"], pick["theta"])
         if is_local(term.candidate):
-            return term, rows
+            family = _family_rather_than_bump(problem, current, eligible, pick["cv_mse"])
+            return family or term, rows
         check = spatial_consistency(problem, [*current, term], len(current))
         if not check.local:
             return term, rows
@@ -158,6 +159,32 @@ def _round(
         local_hits.append(pick)
         eligible = [r for r in eligible if r is not pick]
     return None, rows
+
+
+#: How many of the best global families are tried at their rich shape against a local bump.
+RICH_CHALLENGERS = 3
+
+
+def _family_rather_than_bump(
+    problem: Problem, current: list[Term], eligible: list[dict[str, Any]], bump_cv: float
+) -> Term | None:
+    """A local bump beat every cause at its default shape. Before structure is called
+    ``unexplained``, the best few causes get their rich shape (a table of order 8 rather than 4,
+    harmonics, …): where one of them predicts held-out points as well as the bump (within
+    :data:`SIMPLER_WITHIN`), the structure *is* that cause, only shaped beyond its default, and
+    the cause is returned (its default candidate: the variant is chosen later with the others).
+    A bump that sits in one corner stays unexplained: no global shape follows it there."""
+    globals_ = sorted(
+        (r for r in eligible if not is_local(r["candidate"]) and r["candidate"].rich is not None),
+        key=lambda r: r["cv_mse"],
+    )[:RICH_CHALLENGERS]
+    best: tuple[float, dict[str, Any]] | None = None
+    for r in globals_:
+        cand = r["candidate"]
+        cv = cv_mse(problem, [*current, Term(cand.rich, r["theta"])])
+        if cv <= bump_cv * (1.0 + SIMPLER_WITHIN) and (best is None or cv < best[0]):
+            best = (cv, r)
+    return None if best is None else Term(best[1]["candidate"], best[1]["theta"])
 
 
 def _reprofile(problem: Problem, slots: list[_Slot]) -> None:
@@ -317,7 +344,9 @@ def diagnose(
     if local_entries:
         entries.extend(local_entries)
     else:
-        unexplained = unexplained_candidate(problem, accepted, alpha, min_cv_gain, cv_history[-1])
+        unexplained = unexplained_candidate(
+            problem, accepted, alpha, min_cv_gain, cv_history[-1], _terms(slots, rich=True)
+        )
         if unexplained is None and local_hits:
             unexplained = local_unexplained(problem, accepted, local_hits)
         if unexplained is not None:

@@ -161,16 +161,28 @@ def local_entry(
 
 
 def unexplained_candidate(
-    problem: Problem, accepted: list[Term], alpha: float, min_cv_gain: float, cv_current: float
+    problem: Problem,
+    accepted: list[Term],
+    alpha: float,
+    min_cv_gain: float,
+    cv_current: float,
+    accepted_rich: list[Term] | None = None,
 ) -> dict[str, Any] | None:
-    """The ``unexplained`` entry (docs/formats.md §4) when a generic model still pays, else None."""
+    """The ``unexplained`` entry (docs/formats.md §4) when a generic model still pays, else None.
+
+    Significance is judged beside the accepted causes at their *rich* shapes
+    (``accepted_rich``, default ``accepted``): what a cause's richer shape absorbs is that cause
+    mis-shaped, not structure no cause explains."""
     blocks = generic_blocks(problem.res)
     terms = [Term(_block_candidate(n, b)) for n, b in blocks.items()]
-    _, rss0, rank0 = fit(problem, accepted)
-    _, rss1, rank1 = fit(problem, [*accepted, *terms])
+    base = accepted if accepted_rich is None else accepted_rich
+    _, rss0, rank0 = fit(problem, base)
+    _, rss1, rank1 = fit(problem, [*base, *terms])
     p = f_test_p(rss0, rss1, rank1 - rank0, problem.y.size, rank1)
     if p * len(blocks) >= alpha:
         return None
+    _, rss0, rank0 = fit(problem, accepted)
+    _, rss1, rank1 = fit(problem, [*accepted, *terms])
     cv1 = cv_mse(problem, [*accepted, *terms], rescan=False)
     gain = (cv_current - cv1) / cv_current if cv_current > 0 else 0.0
     if gain < min_cv_gain:
