@@ -145,6 +145,16 @@ class Candidate:
         x: FloatArray | None = None
         if self.static_columns:
             x = self.design(res, at)[:, :, : self.static_columns]
+            if self.drivers:  # a lagged, signal-driven cause: its transient and its mean
+                frozen = replace(
+                    res,
+                    signals={
+                        k: np.full_like(v, float(np.mean(v))) if k in self.drivers else v
+                        for k, v in res.signals.items()
+                    },
+                )
+                rest = self.design_uncached(frozen, at)[:, :, self.static_columns :]
+                x = np.concatenate([x, rest], axis=2)
         elif self.drivers:
             frozen = replace(
                 res,
@@ -203,6 +213,39 @@ def _lag_design(res: Residuals, tau: Any) -> FloatArray:
             x[:, k, k] = arm * decay
             x[:, k, 3] = arm * (lag_filter(t, temp, float(tau)) - temp)
     return x
+
+
+def _lagged_squareness_builder(comp: str, reference_C: float) -> EffectBuilder:
+    def build(p: list[float], tau: Any) -> Effect:
+        eff = SquarenessDriftEffect(comp, p[1], "T_air", time_constant_s=float(tau))
+        eff.reference_C = reference_C
+        return eff
+
+    return build
+
+
+def _lagged_squareness_design(
+    comp: str, reference_C: float
+) -> Callable[[Residuals, Any], FloatArray]:
+    """Column 0: the structure's unknown initial state (°C above the lagged air at the first
+    sample) decaying as e^{−(t−t₀)/τ}, through the squareness' chain terms, per °C·(µrad/°C);
+    column 1: the lagged squareness drift per µrad/°C (:class:`SquarenessDriftEffect` with τ,
+    the effect's own forward model)."""
+
+    def design(res: Residuals, tau: Any) -> FloatArray:
+        t = res.signals["t"]
+        lagged = SquarenessDriftEffect(comp, 1.0, "T_air", time_constant_s=float(tau))
+        lagged.reference_C = reference_C
+        direct = SquarenessDriftEffect(comp, 1.0, "T_air")
+        direct.reference_C = reference_C
+        decay = np.exp(-(t - float(np.min(t))) / float(tau))
+        transient = replace(res, signals={**res.signals, "T_air": reference_C + decay})
+        return np.stack(
+            [effect_displacement_um(transient, direct), effect_displacement_um(res, lagged)],
+            axis=2,
+        )
+
+    return design
 
 
 def _periodic_columns(
@@ -485,6 +528,22 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     drivers=("T_air",),
                 )
             )
+        if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
+            # the structure follows the air through a lag (10 min … hours): the same cause
+            for comp in SQUARENESS:
+                out.append(
+                    Candidate(
+                        "squareness_drift",
+                        {"component": comp},
+                        2,
+                        _lagged_squareness_builder(comp, ref_c),
+                        thetas=LAG_TIME_CONSTANTS_S,
+                        look_elsewhere=4.0,
+                        design_fn=_lagged_squareness_design(comp, ref_c),
+                        drivers=("T_air",),
+                        static_columns=1,
+                    )
+                )
     if (
         res.has("t")
         and any(m.thermal.expansion)

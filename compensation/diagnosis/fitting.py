@@ -41,6 +41,12 @@ class Problem:
     #: Fit a constant offset per measured axis in every model (a nuisance, not a cause): the
     #: reference instrument's zero is never exactly the machine's reference point.
     offsets: bool = True
+    #: Folds for a cause that is a function of time alone (a drift): short blocks of time dealt
+    #: out in turn, so a held-out block has training points just before and after it. The main
+    #: folds (whole groups or fifths of the session) ask whether a *law* carries over to unseen
+    #: artefact positions or times; a drift has no law beyond its session — what can be asked
+    #: is whether it predicts the points between those it was fitted on. None without times.
+    time_folds: list[NDArray[np.intp]] | None = None
     _q_cache: dict[Any, FloatArray | None] = field(default_factory=dict, repr=False)
 
     def projector(self, base: Sequence[Term], rows: Any) -> FloatArray | None:
@@ -83,6 +89,10 @@ class Problem:
         return np.hstack(cols) if cols else np.zeros((n_rows * len(self.axes), 0))
 
 
+#: Blocks of time per fold in :attr:`Problem.time_folds` (5 folds → 25 blocks).
+TIME_BLOCKS_PER_FOLD = 5
+
+
 def make_problem(res: Residuals, n_folds: int = 5, seed: int = 0) -> Problem:
     """Folds by ``group`` (groups shuffled into ``n_folds`` folds), else by time blocks, else by
     blocks of consecutive rows: held-out points are never neighbours of training points in the
@@ -104,7 +114,15 @@ def make_problem(res: Residuals, n_folds: int = 5, seed: int = 0) -> Problem:
         which = rank * n_folds // max(n, 1)
         k = n_folds
     folds = [np.flatnonzero(which == j) for j in range(k)]
-    return Problem(res=res, axes=axes or (0,), folds=[f for f in folds if len(f)])
+    time_folds = None
+    if data.t_s is not None and float(np.ptp(data.t_s)) > 0:
+        rank = np.argsort(np.argsort(data.t_s, kind="stable"), kind="stable")
+        block = rank * (n_folds * TIME_BLOCKS_PER_FOLD) // max(n, 1)
+        tf = [np.flatnonzero(block % n_folds == j) for j in range(n_folds)]
+        time_folds = [f for f in tf if len(f)]
+    return Problem(
+        res=res, axes=axes or (0,), folds=[f for f in folds if len(f)], time_folds=time_folds
+    )
 
 
 def lstsq(x: FloatArray, y: FloatArray) -> tuple[FloatArray, float, int]:
@@ -274,15 +292,21 @@ def f_test_p(rss0: float, rss1: float, extra: int, n: int, p_total: int) -> floa
     return float(stats.f.sf(max(f, 0.0), extra, dof))
 
 
-def cv_predictions(problem: Problem, terms: Sequence[Term], rescan: bool = True) -> FloatArray:
+def cv_predictions(
+    problem: Problem,
+    terms: Sequence[Term],
+    rescan: bool = True,
+    folds: Sequence[NDArray[np.intp]] | None = None,
+) -> FloatArray:
     """(N, 3) out-of-fold predictions: each fold predicted by the terms fitted on the others
-    (nonlinear parameters re-profiled on the training folds when ``rescan``)."""
+    (nonlinear parameters re-profiled on the training folds when ``rescan``); ``folds``
+    default: the problem's main folds."""
     res = problem.res
     pred = np.zeros((res.n, 3))
     if not terms and not problem.offsets:
         return pred
     all_rows = np.arange(res.n)
-    for test in problem.folds:
+    for test in problem.folds if folds is None else folds:
         train = np.setdiff1d(all_rows, test)
         fold_terms: list[Term] = []
         for i, t in enumerate(terms):
@@ -324,9 +348,14 @@ def _held_out_design(
     return x
 
 
-def cv_mse(problem: Problem, terms: Sequence[Term], rescan: bool = True) -> float:
+def cv_mse(
+    problem: Problem,
+    terms: Sequence[Term],
+    rescan: bool = True,
+    folds: Sequence[NDArray[np.intp]] | None = None,
+) -> float:
     """Mean squared out-of-fold residual per measured component (µm²)."""
-    pred = cv_predictions(problem, terms, rescan)
+    pred = cv_predictions(problem, terms, rescan, folds)
     r = problem.res.residual_um - pred
     return float(np.mean(r[:, problem.axes] ** 2))
 

@@ -139,8 +139,14 @@ def _round(
     # in the significance test: with few points they would overfit the comparison)
     current = _terms(slots)
     for r in eligible:
-        r["cv_mse"] = cv_mse(problem, [*current, Term(r["candidate"], r["theta"])])
+        with_it = [*current, Term(r["candidate"], r["theta"])]
+        r["cv_mse"] = cv_mse(problem, with_it)
         r["cv_gain"] = (cv_base - r["cv_mse"]) / cv_base if cv_base > 0 else 0.0
+        timed = _time_gain(problem, current, with_it) if r["candidate"].hold_time else None
+        if timed is not None and timed > r["cv_gain"]:
+            # a drift may also be judged between its own neighbours in time (same scale)
+            r["cv_gain"] = timed
+            r["cv_mse"] = cv_base * (1.0 - timed)
     eligible = [r for r in eligible if r["cv_gain"] >= min_cv_gain]
     while eligible:
         best_cv = min(r["cv_mse"] for r in eligible)
@@ -159,6 +165,16 @@ def _round(
         local_hits.append(pick)
         eligible = [r for r in eligible if r is not pick]
     return None, rows
+
+
+def _time_gain(problem: Problem, base: list[Term], with_term: list[Term]) -> float | None:
+    """Relative out-of-fold gain of ``with_term`` over ``base`` on the problem's time folds
+    (None when the session has no times): the test for a cause of time alone (a drift)."""
+    if problem.time_folds is None:
+        return None
+    cv0 = cv_mse(problem, base, folds=problem.time_folds)
+    cv1 = cv_mse(problem, with_term, folds=problem.time_folds)
+    return (cv0 - cv1) / cv0 if cv0 > 0 else 0.0
 
 
 #: How many of the best global families are tried at their rich shape against a local bump.
@@ -237,6 +253,9 @@ def _backward(
             p_adj = min(1.0, p * n_tried * s.root.look_elsewhere)
             cv0 = cv_mse(problem, others)
             gain = (cv0 - cv_full) / cv0 if cv0 > 0 else 0.0
+            timed = _time_gain(problem, others, full) if s.root.hold_time else None
+            if timed is not None:
+                gain = max(gain, timed)
             if (p_adj >= alpha or gain < min_cv_gain) and (worst is None or -gain > worst[0]):
                 worst = (-gain, i)
         if worst is None:

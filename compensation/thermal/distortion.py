@@ -8,6 +8,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+import numpy as np
+
 from ..effects.base import (
     EvalContext,
     add_to_component,
@@ -19,6 +21,7 @@ from ..effects.base import (
 )
 from ..parametric_errors import AXIS_INDEX, SQUARENESS
 from .expansion import TemperatureEffect
+from .lag import FIRST_ORDER_LAG, SignalFilter, lag_filter
 from .roles import AIR, BOTTOM, TOP
 
 __all__ = ["SquarenessDriftEffect", "ThermalGradientEffect"]
@@ -128,40 +131,76 @@ class ThermalGradientEffect(TemperatureEffect):
 
 class SquarenessDriftEffect(TemperatureEffect):
     """A squareness changes with temperature: ``+k·(T − T_ref)`` µrad (k µrad/°C, T the signal
-    named ``temperature``, default ``T_air``)."""
+    named ``temperature``, default ``T_air``).
+
+    With ``time_constant_s`` τ > 0 the structure follows the sensor through a first-order lag
+    (``τ·dT_s/dt = T − T_s``): evaluated on a time series (signal ``t`` present), the signal is
+    replaced by its lagged value for every effect (:meth:`transform_signals`, as the thermal
+    lag does for the scale temperatures); at run time a grid carries the same filter
+    (:meth:`signal_filter`), which the daemon applies to the raw temperature."""
 
     cause: ClassVar[str] = "squareness_drift"
 
-    def __init__(self, component: str, urad_per_C: float, temperature: str = AIR) -> None:
+    def __init__(
+        self,
+        component: str,
+        urad_per_C: float,
+        temperature: str = AIR,
+        time_constant_s: float = 0.0,
+    ) -> None:
         if component not in SQUARENESS:
             raise ValueError(f"component must be one of alpha, beta1, beta2, got {component!r}")
+        if not time_constant_s >= 0.0:
+            raise ValueError(f"time_constant_s must be ≥ 0, got {time_constant_s}")
         self.component = component
         self.urad_per_C = float(urad_per_C)
         self.temperature = str(temperature)
+        self.time_constant_s = float(time_constant_s)
 
     def signals(self) -> dict[str, float]:
         return {self.temperature: self.reference_C}
+
+    def transform_signals(self, ctx: EvalContext) -> None:
+        if self.time_constant_s <= 0.0:
+            return
+        t = ctx.signals.get("t")
+        temp = ctx.signals.get(self.temperature)
+        if t is None or temp is None or np.ndim(temp) == 0 or np.size(temp) < 2:
+            return  # a single sample: taken as already filtered (the grid's runtime contract)
+        ctx.signals[self.temperature] = lag_filter(t, temp, self.time_constant_s)
 
     def modify_errors(self, ctx: EvalContext) -> None:
         dt = signal_or(ctx, self.temperature, ctx.reference_C) - ctx.reference_C
         add_to_component(ctx, self.component, self.urad_per_C * dt)
 
+    def signal_filter(self) -> SignalFilter | None:
+        """The lag a runtime user applies to the raw temperature (None without a lag)."""
+        if self.time_constant_s <= 0.0:
+            return None
+        return SignalFilter(FIRST_ORDER_LAG, (self.temperature,), self.time_constant_s, 1.0)
+
     def to_table(self) -> dict[str, Any]:
+        extra = {"time_constant_s": self.time_constant_s} if self.time_constant_s > 0 else {}
         return self._table(
-            component=self.component, urad_per_C=self.urad_per_C, temperature=self.temperature
+            component=self.component,
+            urad_per_C=self.urad_per_C,
+            temperature=self.temperature,
+            **extra,
         )
 
     def describe(self) -> dict[str, Any]:
-        return {
-            "cause": self.cause,
-            "component": self.component,
-            "parameters": {"urad_per_C": self.urad_per_C, "temperature": self.temperature},
-        }
+        params: dict[str, Any] = {"urad_per_C": self.urad_per_C, "temperature": self.temperature}
+        if self.time_constant_s > 0:
+            params["time_constant_s"] = self.time_constant_s
+        return {"cause": self.cause, "component": self.component, "parameters": params}
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> SquarenessDriftEffect:
         return cls(
-            str(t.get("component")), read_number(t, "urad_per_C"), str(t.get("temperature", AIR))
+            str(t.get("component")),
+            read_number(t, "urad_per_C"),
+            str(t.get("temperature", AIR)),
+            read_number(t, "time_constant_s", 0.0),
         )._with_reference(t)
 
 

@@ -175,8 +175,28 @@ class SignalFilter:
 
 
 def signal_filters(effects: Iterable[Any]) -> list[SignalFilter]:
-    """The runtime signal filters a model's effects require (one per thermal-lag effect)."""
-    return [e.signal_filter() for e in effects if isinstance(e, ThermalLagEffect)]
+    """The runtime signal filters a model's effects require (a thermal lag's, a lagged
+    squareness drift's). ValueError when two effects would filter one signal differently: a
+    grid has one value per signal, so the model cannot be carried to run time as it stands."""
+    out: list[SignalFilter] = []
+    seen: dict[str, SignalFilter] = {}
+    for e in effects:
+        make = getattr(e, "signal_filter", None)
+        spec = make() if callable(make) else None
+        if spec is None:
+            continue
+        for role in spec.signals:
+            other = seen.get(role)
+            if other is not None and other != spec:
+                raise ValueError(
+                    f"two effects filter {role} differently (time constants "
+                    f"{other.time_constant_s:g} s and {spec.time_constant_s:g} s): a grid "
+                    "carries one value per signal"
+                )
+            seen[role] = spec
+        if spec not in out:
+            out.append(spec)
+    return out
 
 
 register_effect(ThermalLagEffect.cause, ThermalLagEffect.from_table)
