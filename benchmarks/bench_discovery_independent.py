@@ -147,6 +147,22 @@ def summarise(results: list[dict[str, Any]], sizes: list[float]) -> dict[str, An
             "p90": float(np.percentile(secs, 90)) if secs.size else None,
             "worst": float(secs.max()) if secs.size else None,
             "worst_case": f"{worst['case']} size={worst['size']} seed={worst['seed']}",
+            # the target is per ~700-point session: times by session size
+            "by_points": {
+                str(n): {
+                    "n": len(ts),
+                    "median": float(np.median(ts)),
+                    "worst": float(np.max(ts)),
+                }
+                for n in sorted({int(r.get("n_points", 0)) for r in results})
+                if (
+                    ts := [
+                        r["seconds"]
+                        for r in results
+                        if int(r.get("n_points", 0)) == n and np.isfinite(r.get("seconds", np.nan))
+                    ]
+                )
+            },
         },
         "errors": sum("error" in r for r in results),
         "per_variant": _breakdown(singles, lambda r: f"{r['case']}/{_variants(r)}"),
@@ -232,6 +248,13 @@ def print_table(summary: dict[str, Any], results: list[dict[str, Any]], sizes: l
     if sec["median"] is not None:
         print(
             f"diagnosis seconds: median {sec['median']:.2f}, p90 {sec['p90']:.2f}, worst {sec['worst']:.2f} ({sec['worst_case']})"
+        )
+        print(
+            "  by session size: "
+            + ", ".join(
+                f"{n} points: median {v['median']:.2f} worst {v['worst']:.2f} (n={v['n']})"
+                for n, v in sec["by_points"].items()
+            )
         )
     for title in ("per_model", "per_layout", "per_styli"):
         parts = [f"{k} {v['named']:.0%} (n={v['n']})" for k, v in summary[title].items()]

@@ -155,7 +155,11 @@ def find_alternatives(
     found.sort(key=lambda f: f[0])
     advice: list[str] = []
     alternatives: list[dict[str, Any]] = []
+    listed: set[tuple[Any, ...]] = set()
     for _, cand, theta in found:
+        if cand.identity in listed:  # one entry per identity: its best-fitting variant
+            continue
+        listed.add(cand.identity)
         keys = {
             k: v
             for k, v in zip(

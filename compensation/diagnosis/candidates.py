@@ -93,8 +93,12 @@ class Candidate:
     #: For a cause driven by another axis' position (a coupling): its first columns are the part
     #: that does not vary with that axis (a table of its own axis); it must be needed beyond them.
     static_columns: int = 0
-    #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional.
+    #: (N, 3, T, p) designs for several thetas at once (fast profiles); optional. With
+    #: ``design_component`` set, (N, T, p) on that error component only.
     design_many: Callable[[Residuals, Sequence[Any]], FloatArray] | None = None
+    #: The one error component (0, 1, 2 for x, y, z) every column of the design lies on (a
+    #: periodic error of one axis' scale), or None: lets profiles skip the other components.
+    design_component: int | None = None
     #: Ridge penalty (in units of one observation per coefficient) on this term's coefficients
     #: in fits and cross-validation: a generic local basis must not extrapolate into regions
     #: the training points do not cover. 0 for the causes (plain least squares).
@@ -251,24 +255,29 @@ def _lagged_squareness_design(
 def _periodic_columns(
     res: Residuals, axis: str, periods: Sequence[Any], harmonics: int
 ) -> FloatArray:
-    """(N, 3, T, 2·harmonics) cos/sin columns of harmonics 1…H for each of T periods, on the
-    axis' positional error, each minus its value at the reference point (PeriodicEffect)."""
+    """(N, T, 2·harmonics) cos/sin columns of harmonics 1…H for each of T periods, on the axis'
+    positional error (that component only), each minus its value at the reference point
+    (PeriodicEffect)."""
     k = AXIS_INDEX[axis]
     q = res.q_mm[:, k]
     ref = float(res.machine.volume.reference_mm[k])
     w = 2.0 * np.pi / np.asarray([float(p) for p in periods])
-    x = np.zeros((res.n, 3, len(w), 2 * harmonics))
+    x = np.empty((res.n, len(w), 2 * harmonics))
     for h in range(1, harmonics + 1):
         ph = np.outer(q, h * w)
         ph0 = h * w * ref
-        x[:, k, :, 2 * h - 2] = np.cos(ph) - np.cos(ph0)
-        x[:, k, :, 2 * h - 1] = np.sin(ph) - np.sin(ph0)
+        x[:, :, 2 * h - 2] = np.cos(ph) - np.cos(ph0)
+        x[:, :, 2 * h - 1] = np.sin(ph) - np.sin(ph0)
     return x
 
 
 def _periodic_design(axis: str, harmonics: int = 1) -> Callable[[Residuals, Any], FloatArray]:
+    k = AXIS_INDEX[axis]
+
     def design(res: Residuals, period: Any) -> FloatArray:
-        return _periodic_columns(res, axis, [period], harmonics)[:, :, 0, :]
+        x = np.zeros((res.n, 3, 2 * harmonics))
+        x[:, k, :] = _periodic_columns(res, axis, [period], harmonics)[:, 0, :]
+        return x
 
     return design
 
@@ -288,6 +297,9 @@ def _periodic_design_many(
 PERIODIC_CYCLES = 80.0
 DENSE_CYCLES = 400.0
 DENSE_POINTS = 2000
+#: Spacing of the period scan in cycles per travel: 5 grid values per resolution element 1/L
+#: (a peak between two of them loses at most 3 % of its power before refinement).
+PERIOD_STEP_CYCLES = 0.2
 
 
 def periodic_periods(
@@ -296,7 +308,8 @@ def periodic_periods(
     cycles: tuple[float, float] = (1.5, PERIODIC_CYCLES),
 ) -> tuple[tuple[float, ...], float]:
     """Scan grid of periods (mm) for an axis of travel L: 1.5 to 80 periods within L, spaced
-    0.1/L in spatial frequency, and never shorter than 2.5× the typical gap between the
+    :data:`PERIOD_STEP_CYCLES`/L in spatial frequency (5× finer than a record of length L
+    resolves; the best grid value is then refined continuously), and never shorter than 2.5× the typical gap between the
     distinct positions measured (Nyquist: a few fixed targets alias short periods); and the
     effective number of independent periods tried (≈ the span of cycles per travel)."""
     length = span_mm[1] - span_mm[0]
@@ -308,7 +321,7 @@ def periodic_periods(
             f_max = min(
                 f_max, 1.0 / (2.5 * gap)
             )  # margin: at 2 samples per period a sine aliases to ~0
-    f = np.arange(f_min, f_max, 0.1 / length)
+    f = np.arange(f_min, f_max, PERIOD_STEP_CYCLES / length)
     return tuple(float(v) for v in 1.0 / f), max(1.0, (f_max - f_min) * length)
 
 
@@ -495,6 +508,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     look_elsewhere=n_eff,
                     design_fn=_periodic_design(a, h_lo),
                     design_many=_periodic_design_many(a, h_lo),
+                    design_component=AXIS_INDEX[a],
                 ).with_rich(
                     n_params=2 * h_hi,
                     design_fn=_periodic_design(a, h_hi),
@@ -585,13 +599,6 @@ def contract_keys(effect: Effect) -> dict[str, Any]:
 
 def is_finite_design(x: FloatArray) -> bool:
     return bool(np.all(np.isfinite(x))) and float(np.max(np.abs(x), initial=0.0)) > 0.0
-
-
-def period_refine_bounds(period: float, span_mm: tuple[float, float]) -> tuple[float, float]:
-    """±half a grid step in frequency around ``period`` (mm)."""
-    length = span_mm[1] - span_mm[0]
-    f = 1.0 / period
-    return 1.0 / (f + 0.05 / length), 1.0 / max(f - 0.05 / length, 1e-12)
 
 
 __all__ = [

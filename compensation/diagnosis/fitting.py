@@ -190,10 +190,26 @@ _PROFILE_BLOCK = 4_000_000
 
 def _designs_for(problem: Problem, cand: Candidate, thetas: Sequence[Any], r: Any) -> FloatArray:
     """(rows·axes, T, p) stacked designs of ``cand`` at each theta."""
-    if cand.design_many is not None:
+    if cand.design_many is not None and cand.design_component is None:
         x = cand.design_many(problem.res, thetas)[r][:, problem.axes]
         return x.reshape(-1, x.shape[2], x.shape[3])
     return np.stack([problem.design(Term(cand, th), r) for th in thetas], axis=1)
+
+
+#: Eigenvalues of a candidate's projected Gram matrix below this fraction of its columns'
+#: unprojected squared norms are directions the accepted terms already span (the Gram matrix is
+#: formed as XᵀX − CᵀC, whose cancellation error is ~1e-15 of the unprojected norms).
+_GRAM_KEEP = 1e-9
+
+
+def _gain_from_gram(g: FloatArray, b: FloatArray) -> tuple[FloatArray, NDArray[np.intp]]:
+    """Per theta: the RSS reduction bᵀG⁺b and the rank of G ((T, p, p) Gram matrices of columns
+    scaled to unit unprojected norm, (T, p) right-hand sides)."""
+    w, v = np.linalg.eigh(g)
+    keep = w > _GRAM_KEEP
+    vb = np.einsum("tpq,tp->tq", v, b)
+    gain = np.sum(np.where(keep, vb**2 / np.where(keep, w, 1.0), 0.0), axis=1)
+    return gain, np.sum(keep, axis=1)
 
 
 def profile_rss(
@@ -205,7 +221,10 @@ def profile_rss(
     y: FloatArray,
 ) -> tuple[FloatArray, NDArray[np.intp]]:
     """RSS and rank of ``cand`` at every theta with the columns of ``q`` (orthonormal: the
-    accepted terms) projected out — all thetas at once by normal equations on scaled columns."""
+    accepted terms) projected out — all thetas at once by normal equations on scaled columns:
+    G = XᵀX − (QᵀX)ᵀ(QᵀX), b = (y − QQᵀy)ᵀX, never forming the projected design. A candidate
+    whose design lies on one error component (``design_component``: a periodic error of an
+    axis' scale) is profiled on that component's rows only."""
     if q is not None:
         y = y - q @ (q.T @ y)
     yy = float(y @ y)
@@ -213,28 +232,47 @@ def profile_rss(
     p = cand.n_params
     rss = np.empty(len(thetas))
     rank = np.empty(len(thetas), dtype=np.intp)
+    comp = cand.design_component
+    if comp is not None and cand.design_many is not None:
+        if comp not in problem.axes:  # the component is never measured: nothing to explain
+            return np.full(len(thetas), yy), np.zeros(len(thetas), dtype=np.intp)
+        pos, n_ax = problem.axes.index(comp), len(problem.axes)
+        y_k = y[pos::n_ax]
+        q_k = None if q is None else q[pos::n_ax]
+        step = max(1, _PROFILE_BLOCK // max(y_k.size * p, 1))
+        for i0 in range(0, len(thetas), step):
+            xk = cand.design_many(problem.res, thetas[i0 : i0 + step])[r]  # (n, T, p)
+            rss[i0 : i0 + xk.shape[1]], rank[i0 : i0 + xk.shape[1]] = _profile_block(
+                xk, q_k, y_k, yy
+            )
+        return rss, rank
     step = max(1, _PROFILE_BLOCK // max(m * p, 1))
     for i0 in range(0, len(thetas), step):
         x3 = _designs_for(problem, cand, thetas[i0 : i0 + step], r)
-        t = x3.shape[1]
-        x = x3.reshape(m, t * p)
-        if q is not None:
-            x = x - q @ (q.T @ x)
-        scale = np.sqrt(np.einsum("mj,mj->j", x, x))
-        scale[scale == 0] = 1.0
-        x = x / scale
-        g = np.empty((t, p, p))
-        for a in range(p):
-            for c in range(a, p):
-                g[:, a, c] = g[:, c, a] = np.einsum("mt,mt->t", x[:, a::p], x[:, c::p])
-        b = (y @ x).reshape(t, p)
-        w, v = np.linalg.eigh(g)
-        keep = w > 1e-16 * np.maximum(w[:, -1:], 1e-300)
-        vb = np.einsum("tpq,tp->tq", v, b)
-        gain = np.sum(np.where(keep, vb**2 / np.where(keep, w, 1.0), 0.0), axis=1)
-        rss[i0 : i0 + t] = np.maximum(yy - gain, 0.0)
-        rank[i0 : i0 + t] = np.sum(keep, axis=1)
+        rss[i0 : i0 + x3.shape[1]], rank[i0 : i0 + x3.shape[1]] = _profile_block(x3, q, y, yy)
     return rss, rank
+
+
+def _profile_block(
+    x3: FloatArray, q: FloatArray | None, y: FloatArray, yy: float
+) -> tuple[FloatArray, NDArray[np.intp]]:
+    """RSS and rank for a block of designs ``x3`` (rows, T, p), ``y`` already projected."""
+    n, t, p = x3.shape
+    x = x3.reshape(n, t * p)
+    g = np.empty((t, p, p))
+    for a in range(p):
+        for c in range(a, p):
+            g[:, a, c] = g[:, c, a] = np.einsum("mt,mt->t", x3[:, :, a], x3[:, :, c])
+    scale = np.sqrt(np.einsum("tpp->tp", g)).reshape(-1)
+    scale[scale == 0] = 1.0
+    b = (y @ x).reshape(t, p)
+    if q is not None:
+        cq = (q.T @ x).reshape(-1, t, p)  # (r, T, p)
+        g -= np.einsum("rta,rtc->tac", cq, cq)
+    s = scale.reshape(t, p)
+    g /= s[:, :, None] * s[:, None, :]
+    gain, rank = _gain_from_gram(g, b / s)
+    return np.maximum(yy - gain, 0.0), rank
 
 
 def _near(thetas: Sequence[Any], theta: Any, width: int) -> Sequence[Any]:
@@ -274,7 +312,7 @@ def best_theta(
                 lambda th: _profile_rss(problem, cand, float(th), r, q, y)[0],
                 bounds=(lo, hi),
                 method="bounded",
-                options={"xatol": 1e-6 * (hi - lo)},
+                options={"xatol": 1e-4 * (hi - lo)},
             )
             if sol.fun < rss:
                 theta = float(sol.x)

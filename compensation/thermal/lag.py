@@ -50,8 +50,16 @@ def lag_filter(t_s: FloatArray, temp_C: FloatArray, time_constant_s: float) -> F
     y = np.empty_like(xs)
     if len(xs):
         y[0] = xs[0]
-    for i in range(1, len(xs)):
-        y[i] = a[i - 1] * y[i - 1] + (1 - a[i - 1]) * xs[i - 1] + (xs[i] - xs[i - 1]) * ramp[i - 1]
+        # y_i = a_i·y_{i−1} + b_i, solved for all i at once by a parallel prefix scan over the
+        # affine maps y ↦ a·y + b (log₂ n vector steps; products of a ≤ 1 never overflow)
+        b = (1 - a) * xs[:-1] + np.diff(xs) * ramp
+        a = a.copy()
+        shift = 1
+        while shift < len(a):
+            b[shift:] = b[shift:] + a[shift:] * b[:-shift]
+            a[shift:] = a[shift:] * a[:-shift]
+            shift *= 2
+        y[1:] = a * xs[0] + b
     out = np.empty_like(y)
     out[order] = y
     return out
