@@ -57,7 +57,7 @@ from cmm_comp.protocol.can_codec import RawAxisDecoder
 from cmm_comp.protocol.can_ids import MessageKind
 from cmm_comp.protocol.codes import Axis, DaemonState, Status
 
-from .can_send import send_batch
+from .can_send import recv_pending, send_batch
 from .config import CanSection
 from .engine import Answer, CorrectionEngine, Reading
 from .events import EventLog
@@ -290,17 +290,19 @@ class CanEndpoint(can.Listener):
 
     # ------------------------------------------------------------------ receive
     def _drain(self, bus: can.BusABC) -> None:
-        """Handle every frame already waiting (up to ``_DRAIN_MAX``), without blocking."""
-        for _ in range(_DRAIN_MAX - 1):
-            try:
-                msg = bus.recv(0.0)
-            except Exception as exc:  # bus gone: answer what is complete, then reopen
-                self._answer_ready()
-                self._bus_failed(exc)
-                return
-            if msg is None:
-                return
-            self._handle(msg, time.perf_counter())
+        """Handle every frame already waiting (up to ``_DRAIN_MAX``), without blocking (one
+        locked take on ``virtual``: :func:`daemon.can_send.recv_pending`)."""
+        try:
+            msgs = recv_pending(bus, _DRAIN_MAX - 1)
+        except Exception as exc:  # bus gone: answer what is complete, then reopen
+            self._answer_ready()
+            self._bus_failed(exc)
+            return
+        if msgs:
+            t_rx = time.perf_counter()  # they were all waiting: the same arrival for each
+            handle = self._handle
+            for msg in msgs:
+                handle(msg, t_rx)
 
     def _handle(self, msg: can.Message, t_rx: float) -> None:
         self._frames_rx += 1
@@ -330,8 +332,8 @@ class CanEndpoint(can.Listener):
         """Report (events, MCAP) the readings answered since the last call, then log the
         frames; then let the MCAP writer work (the line is quiet now)."""
         deferred, self._deferred = self._deferred, []
-        for reading, answer, latency_us in deferred:
-            self.engine.report(reading, answer, latency_us)
+        if deferred:
+            self.engine.report_many(deferred)
         if self.logger is not None and (deferred or self._log_backlog):
             self._flush_log()
             self.logger.kick()
@@ -342,9 +344,10 @@ class CanEndpoint(can.Listener):
             return
         ch = str(self.config.channel)
         backlog, self._log_backlog = self._log_backlog, []
-        log = self.logger.log
-        for topic, msg in backlog:
-            log(topic, frame_record(msg, ch))
+        rx = [frame_record(msg, ch) for topic, msg in backlog if topic == "/cmm/can_rx"]
+        tx = [frame_record(msg, ch) for topic, msg in backlog if topic != "/cmm/can_rx"]
+        self.logger.log_many("/cmm/can_rx", rx)
+        self.logger.log_many("/cmm/can_tx", tx)
 
     def _on_undecodable(self, result: object) -> None:
         if isinstance(result, UnknownId):
@@ -405,10 +408,9 @@ class CanEndpoint(can.Listener):
             self._answer_frames(a, r.received_s, msgs) for r, a in zip(ready, answers, strict=True)
         ]
         self._send_msgs(msgs)
-        count, deferred = self.engine.count, self._deferred
-        for reading, answer, latency_us in zip(ready, answers, latencies, strict=True):
-            count(answer, latency_us)
-            deferred.append((reading, answer, latency_us))  # reported when the bus is quiet
+        self.engine.count_many(answers, latencies)
+        # reported when the bus is quiet
+        self._deferred += zip(ready, answers, latencies, strict=True)
 
     def _answer_frames(self, answer: Answer, t_rx: float, out: list[can.Message]) -> float:
         """Append the 4 answer frames of ``answer`` to ``out``; return the latency, µs."""

@@ -85,7 +85,8 @@ class Answer:
     @property
     def correction_norm_um(self) -> float:
         """Length of the applied correction, µm."""
-        return math.sqrt(sum(c * c for c in self.correction_um))
+        x, y, z = self.correction_um
+        return math.sqrt(x * x + y * y + z * z)
 
 
 class CorrectionEngine:
@@ -289,8 +290,28 @@ class CorrectionEngine:
         warning = bool(answer.detail) and answer.status == Status.OK
         self.metrics.reading_answered(answer.status.label, latency_us, warning)
 
-    def report(self, reading: Reading, answer: Answer, latency_us: float) -> None:
-        """Events and MCAP records of one answer (may wait until the line is quiet)."""
+    def count_many(self, answers: Sequence[Answer], latencies_us: Sequence[float]) -> None:
+        """:meth:`count` of each answer (with its latency, µs), under one lock."""
+        self.metrics.readings_answered(
+            [
+                (a.status.label, lat, bool(a.detail) and a.status == Status.OK)
+                for a, lat in zip(answers, latencies_us, strict=True)
+            ]
+        )
+
+    def report_many(self, batch: Sequence[tuple[Reading, Answer, float]]) -> None:
+        """:meth:`report` of each ``(reading, answer, latency_us)``: the events one by one, the
+        MCAP records of all with one ``log_many`` per topic (one log time)."""
+        for _, answer, _ in batch:
+            if answer.detail or answer.status != Status.OK:
+                self._report_event(answer)
+        log = self.logger
+        if log is None or not batch:
+            return
+        log.log_many("/cmm/raw", [self._raw_record(r) for r, _, _ in batch])
+        log.log_many("/cmm/corrected", [self._corrected_record(r, a, lat) for r, a, lat in batch])
+
+    def _report_event(self, answer: Answer) -> None:
         label = answer.status.label
         if answer.detail and answer.status == Status.OK:
             self.events.emit("correction_warning", "warning", seq=answer.seq, detail=answer.detail)
@@ -298,35 +319,44 @@ class CorrectionEngine:
             self.events.emit(
                 f"answer_{label}", "warning", seq=answer.seq, status=label, detail=answer.detail
             )
+
+    def _raw_record(self, reading: Reading) -> tuple[object, ...]:
+        """The compact ``/cmm/raw`` record (sessionlog.records.RawRecord)."""
+        return (
+            reading.seq,
+            *reading.position_mm,
+            reading.directions,
+            reading.valid,
+            reading.source,
+            self._stylus_t,
+            reading.probe,
+        )
+
+    def _corrected_record(
+        self, reading: Reading, answer: Answer, latency_us: float
+    ) -> tuple[object, ...]:
+        """The compact ``/cmm/corrected`` record (sessionlog.records.CorrectedRecord)."""
+        return (
+            answer.seq,
+            *answer.position_nm,
+            answer.status.label,
+            answer.correction_um,
+            latency_us,
+            int(answer.applied),
+            reading.source,
+            answer.detail,
+        )
+
+    def report(self, reading: Reading, answer: Answer, latency_us: float) -> None:
+        """Events and MCAP records of one answer (may wait until the line is quiet)."""
+        if answer.detail or answer.status != Status.OK:
+            self._report_event(answer)
         log = self.logger
         if log is None:
             return
         # compact records: the MCAP writer builds the JSON (sessionlog.records)
-        log.log(
-            "/cmm/raw",
-            (
-                reading.seq,
-                *reading.position_mm,
-                reading.directions,
-                reading.valid,
-                reading.source,
-                self._stylus_t,
-                reading.probe,
-            ),
-        )
-        log.log(
-            "/cmm/corrected",
-            (
-                answer.seq,
-                *answer.position_nm,
-                label,
-                answer.correction_um,
-                latency_us,
-                int(answer.applied),
-                reading.source,
-                answer.detail,
-            ),
-        )
+        log.log("/cmm/raw", self._raw_record(reading))
+        log.log("/cmm/corrected", self._corrected_record(reading, answer, latency_us))
 
     def temperature(
         self, sensor: int, temp_C: float, counter: int, valid: bool, source: str

@@ -116,6 +116,20 @@ class Metrics:
             self.latency.add(latency_us)
             self._period.add(latency_us)
 
+    def readings_answered(self, answers: list[tuple[str, float, bool]]) -> None:
+        """:meth:`reading_answered` of each ``(status_label, latency_us, warning)``, under one
+        lock (the answers of one CAN wake-up)."""
+        with self._lock:
+            c, by_status = self.counters, self.answers
+            c["readings"] = c.get("readings", 0) + len(answers)
+            latency, period = self.latency, self._period
+            for label, latency_us, warning in answers:
+                if warning:
+                    c["correction_warnings"] = c.get("correction_warnings", 0) + 1
+                by_status[label] = by_status.get(label, 0) + 1
+                latency.add(latency_us)
+                period.add(latency_us)
+
     def get(self, name: str) -> int:
         """Counter value (0 if never counted)."""
         return self.counters.get(name, 0)

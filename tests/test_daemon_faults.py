@@ -317,7 +317,7 @@ def test_config_must_enable_a_transport() -> None:
 
 
 def test_a_slow_mcap_logger_never_delays_an_answer(tmp_path) -> None:
-    """Causality, not a clock: the log() calls of a reading's own records (``/cmm/raw``,
+    """Causality, not a clock: the log() / log_many() calls of a reading's own records (``/cmm/raw``,
     ``/cmm/corrected`` of its seq) block on a gate the test opens only once the controller
     holds the answer. Were any of them on the way between the reading and its answer, the
     answer could not arrive while the gate is shut (the exchange would time out). Other log
@@ -354,7 +354,21 @@ def test_a_slow_mcap_logger_never_delays_an_answer(tmp_path) -> None:
             finally:
                 returned.append((topic, payload[0]))
 
+        fast_log_many = d.logger.log_many
+
+        def gated_log_many(topic, payloads, *args, **kw):
+            mine = [p[0] for p in payloads if topic in ("/cmm/raw", "/cmm/corrected")]
+            if gated_seq[0] not in mine:
+                return fast_log_many(topic, payloads, *args, **kw)
+            waiting.append((topic, gated_seq[0]))
+            gate.wait(60.0)
+            try:
+                return fast_log_many(topic, payloads, *args, **kw)
+            finally:
+                returned.extend((topic, s) for s in mine)
+
         d.logger.log = gated_log  # type: ignore[method-assign]
+        d.logger.log_many = gated_log_many  # type: ignore[method-assign]
         send_temps(ctl)
         for seq in range(n):
             gated_seq[0] = seq

@@ -123,3 +123,71 @@ def test_policy_frames_take_half_the_queue_answers_all_of_it(tmp_path: Path) -> 
     st = lg.stats()
     assert st.dropped_by_topic == {"/cmm/can_rx": 3, "/cmm/corrected": 3}
     assert st.written_by_topic == {"/cmm/can_rx": 5, "/cmm/corrected": 5}
+
+
+def _flood_batched(lg: Any, n: int, batch: int = 16) -> dict[str, int]:
+    """As :func:`_flood`, with one ``log_many`` per topic per ``batch`` readings (what the CAN
+    endpoint does per wake-up)."""
+    logged: dict[str, int] = {}
+
+    def log_many(topic: str, payloads: list[Any], t_ns: int) -> None:
+        lg.log_many(topic, payloads, t_ns)
+        logged[topic] = logged.get(topic, 0) + len(payloads)
+
+    for start in range(0, n, batch):
+        seqs = range(start, min(n, start + batch))
+        t = T0_NS + start * 1000
+        log_many("/cmm/can_rx", [FRAME] * (3 * len(seqs)), t)
+        log_many("/cmm/can_tx", [FRAME] * (4 * len(seqs)), t)
+        log_many("/cmm/raw", [(i, *RAW[1:]) for i in seqs], t)
+        log_many("/cmm/corrected", [_corrected(i) for i in seqs], t)
+    return logged
+
+
+def test_log_many_flood_counts_exactly_for_both_writers(tmp_path: Path) -> None:
+    slow = McapLogger(
+        tmp_path / "t.mcap",
+        queue_size=400,
+        chunk_size=4096,
+        flush_period_s=0.02,
+        opener=lambda p: SlowStream(p, delay_s=0.002),
+    )
+    proc = McapProcessLogger(tmp_path / "p.mcap", queue_size=64, chunk_size=4096)
+    for lg, path in ((slow, tmp_path / "t.mcap"), (proc, tmp_path / "p.mcap")):
+        logged = _flood_batched(lg, 4000)
+        assert lg.stop(30.0)
+        st = lg.stats()
+        dropped = _check_accounts(path, logged, st)
+        assert st.dropped > 0 and sum(dropped.values()) == st.dropped
+
+
+def test_log_many_takes_what_log_would_take(tmp_path: Path) -> None:
+    """The policy of :func:`test_policy_frames_take_half_the_queue_answers_all_of_it`, batched:
+    a held writer, a queue of 10: 8 frames → the first 5, 8 answers → the first 5."""
+    release = threading.Event()
+    lg = McapLogger(tmp_path / "q.mcap", queue_size=10, writer_setup=release.wait)
+    assert lg.log_many("/cmm/can_rx", [FRAME] * 8, T0_NS) == 5
+    assert lg.log_many("/cmm/corrected", [_corrected(i) for i in range(8)], T0_NS + 1) == 5
+    assert lg.log_many("/cmm/corrected", [], T0_NS + 2) == 0
+    release.set()
+    assert lg.stop(10.0)
+    assert lg.log_many("/cmm/raw", [RAW], T0_NS + 3) == 0  # after stop: dropped, counted
+    st = lg.stats()
+    assert st.dropped_by_topic == {"/cmm/can_rx": 3, "/cmm/corrected": 3, "/cmm/raw": 1}
+    assert st.written_by_topic == {"/cmm/can_rx": 5, "/cmm/corrected": 5}
+    with open(tmp_path / "q.mcap", "rb") as f:
+        seqs = [
+            json.loads(m.data)["seq"]
+            for _, ch, m in make_reader(f).iter_messages()
+            if ch.topic == "/cmm/corrected"
+        ]
+    assert seqs == [0, 1, 2, 3, 4]
+
+
+def test_enqueued_message_of_an_unknown_topic_becomes_an_error_record(tmp_path: Path) -> None:
+    lg = McapLogger(tmp_path / "u.mcap")
+    lg.enqueue([("/cmm/nope", {"a": 1}, T0_NS), ("/cmm/raw", RAW, T0_NS + 1)])
+    assert lg.stop(10.0)
+    st = lg.stats()
+    assert st.encode_errors_by_topic == {"/cmm/nope": 1}
+    assert st.written_by_topic == {"/cmm/raw": 1, "/cmm/log_error": 1}

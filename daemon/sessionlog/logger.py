@@ -13,7 +13,7 @@ import collections
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, Self
@@ -84,6 +84,13 @@ class SessionLogger(Protocol):
 
     def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
         """Enqueue one message; never blocks; False when it was dropped."""
+        ...
+
+    def log_many(
+        self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
+    ) -> int:
+        """Enqueue several messages of one topic with one log time, as ``log`` each would;
+        never blocks; returns how many were taken (the rest are dropped and counted)."""
         ...
 
     def kick(self) -> None:
@@ -221,6 +228,51 @@ class HotPathQueue:
         queue.append((topic, payload, log_time_ns))
         self._enqueued += 1
         return True
+
+    def log_many(
+        self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
+    ) -> int:
+        """Enqueue ``payloads`` on ``topic``, all with one log time (now if None), under the
+        same rules as :meth:`log` each (overload policy, drops counted per topic) at one call's
+        cost: what the CAN endpoint uses for the frames and answers of one wake-up. Returns how
+        many were taken; the rest (the last ones) were dropped and counted."""
+        if topic not in self._schemas:
+            raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(self._schemas)}")
+        if topic not in RECORD_BUILDERS and any(type(p) is tuple for p in payloads):
+            raise KeyError(f"MCAP topic {topic!r} takes a dict payload, not a record tuple")
+        if not payloads:
+            return 0
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        queue = self._queue
+        limit = self._soft_size if topic in LOW_PRIORITY_TOPICS else self._queue_size
+        room = 0 if self._closed else max(0, limit - len(queue))
+        if len(payloads) <= room:
+            take = len(payloads)
+            queue.extend([(topic, p, log_time_ns) for p in payloads])
+        else:
+            take = room
+            queue.extend([(topic, p, log_time_ns) for p in payloads[:room]])
+            self._count_drop(topic, len(payloads) - room)
+        self._enqueued += take
+        return take
+
+    def enqueue(self, messages: list[QueuedMessage]) -> None:
+        """Take ``(topic, payload, log_time_ns)`` messages already checked by another
+        logger's :meth:`log` (the process writer's child gets them so): one ``extend`` while
+        the queue is below half full, else :meth:`log` each (overload policy, drops
+        counted). A topic without a channel or a bad time becomes an error record."""
+        queue = self._queue
+        if not self._closed and len(queue) + len(messages) < self._soft_size:
+            queue.extend(messages)
+            self._enqueued += len(messages)
+            return
+        for topic, payload, t_ns in messages:
+            try:
+                self.log(topic, payload, t_ns)
+            except KeyError:  # not a topic of this log: never silent, never fatal
+                queue.append((topic, payload, t_ns))
+                self._enqueued += 1
 
     def _count_drop(self, topic: str, n: int = 1) -> None:
         with self._drop_lock:

@@ -26,9 +26,11 @@ from mcap.writer import CompressionType, Writer
 
 from ..osthread import name_os_thread
 from .encoding import ERROR_TOPIC, encode_message, error_payload, json_encoder, safe_str
+from .fastjson import FAST_JSON
 from .logger import HotPathQueue, LoggerStats, LogSettings
 from .schemas import TOPIC_SCHEMAS, TopicSchema, stamp_from_ns
 from .writer import (
+    MessageAppender,
     finish_session_file,
     free_path,
     open_exclusive,
@@ -141,6 +143,7 @@ class McapLogger(HotPathQueue):
         # open the first file here so a bad target fails loudly in the caller's thread
         self._stream: IO[bytes] | None = None
         self._writer: Writer | None = None
+        self._append: MessageAppender | None = None
         self._channels: dict[str, int] = {}
         self._opened_at = 0.0
         self._open_next()
@@ -246,6 +249,7 @@ class McapLogger(HotPathQueue):
                     schemas=self._schemas,
                     metadata=meta,
                 )
+                self._append = MessageAppender(self._writer)
                 break
             except FileExistsError:  # created between our check and our open: next name
                 if attempt == 99:
@@ -256,6 +260,7 @@ class McapLogger(HotPathQueue):
     def _finish_current(self) -> None:
         writer, stream = self._writer, self._stream
         self._writer = self._stream = None
+        self._append = None
         if writer is None or stream is None:
             return
         stats = self.stats()
@@ -275,13 +280,14 @@ class McapLogger(HotPathQueue):
 
     def _write_batch(self) -> int:
         n = 0
-        writer = self._writer
-        assert writer is not None
+        append = self._append
+        assert self._writer is not None and append is not None
         queue = self._queue
         channels = self._channels
         schemas = self._schemas
         written_by = self._written_by
         dumps = json_encoder()
+        fast_json = FAST_JSON
         while n < _BATCH:  # short batches (GIL yielded between them); bounds roll overshoot
             try:
                 topic, payload, t_ns = queue.popleft()
@@ -291,13 +297,17 @@ class McapLogger(HotPathQueue):
             try:
                 if type(t_ns) is not int or not 0 <= t_ns <= _MAX_T_NS:
                     raise ValueError(f"log_time_ns {t_ns!r:.40} is not an integer ns >= 0")
-                if topic == "/cmm/counters" and type(payload) is dict:
-                    payload = self._with_log_counters(payload)
-                data = encode_message(topic, payload, t_ns, dumps, schemas.get(topic))
+                channel = channels[topic]  # KeyError: not a topic of this file
+                fast = fast_json.get(topic) if type(payload) is tuple else None
+                data = fast(payload, t_ns) if fast is not None else None  # type: ignore[arg-type]
+                if data is None:  # dicts, and records the fast path does not take
+                    if topic == "/cmm/counters" and type(payload) is dict:
+                        payload = self._with_log_counters(payload)
+                    data = encode_message(topic, payload, t_ns, dumps, schemas.get(topic))
             except Exception as exc:  # any bad payload: an error record, never a stop
                 self._encode_error(topic, payload, t_ns, exc, dumps)
                 continue
-            writer.add_message(channels[topic], t_ns, data, t_ns)
+            append(channel, t_ns, data)
             self._written += 1
             written_by[topic] = written_by.get(topic, 0) + 1
         return n

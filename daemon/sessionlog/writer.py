@@ -119,6 +119,66 @@ def compact_chunk_index(writer: Writer) -> bool:
     return True
 
 
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+"""Opcode, record length, channel id, sequence, log time, publish time of an MCAP Message."""
+_OP_MESSAGE = 0x05
+
+
+class MessageAppender:
+    """``writer.add_message(channel, t, data, t)`` for chunked writers without message index
+    records (:data:`INDEX_TYPES`), ~4× cheaper: one ``struct`` header and two buffer writes
+    instead of a ``Message`` object, a per-channel index entry and five small writes. It keeps
+    the writer's statistics and chunk bookkeeping exactly as ``add_message`` does (``mcap``
+    1.6, pinned), so the file is byte-identical (``tests/test_mcap_fastjson.py`` compares
+    whole files); with another layout of the writer's internals it calls ``add_message``."""
+
+    def __init__(self, writer: Writer) -> None:
+        self._writer = writer
+        stats = getattr(writer, "_Writer__statistics", None)
+        builder = getattr(writer, "_Writer__chunk_builder", None)
+        index_types = getattr(writer, "_Writer__index_types", None)
+        finalize = getattr(writer, "_Writer__maybe_finalize_chunk", None)
+        buf = getattr(getattr(builder, "record_writer", None), "_buffer", None)
+        self._fast = (
+            stats is not None
+            and builder is not None
+            and finalize is not None
+            and isinstance(buf, io.BytesIO)
+            and isinstance(getattr(builder, "num_messages", None), int)
+            and isinstance(getattr(stats, "message_count", None), int)
+            and hasattr(stats, "channel_message_counts")
+            and index_types is not None
+            and not index_types & IndexType.MESSAGE
+        )
+        self._stats: Any = stats
+        self._builder: Any = builder
+        self._finalize: Any = finalize
+        self._chunk_size = getattr(writer, "_Writer__chunk_size", 0)
+
+    def __call__(self, channel_id: int, t_ns: int, data: bytes) -> None:
+        """Add one message with log time = publish time = ``t_ns`` (int ns, checked)."""
+        if not self._fast:
+            self._writer.add_message(channel_id, t_ns, data, t_ns)
+            return
+        stats, cb = self._stats, self._builder
+        if stats.message_count == 0 or t_ns < stats.message_start_time:
+            stats.message_start_time = t_ns
+        if t_ns > stats.message_end_time:
+            stats.message_end_time = t_ns
+        stats.channel_message_counts[channel_id] += 1
+        stats.message_count += 1
+        if cb.num_messages == 0 or t_ns < cb.message_start_time:
+            cb.message_start_time = t_ns
+        if t_ns > cb.message_end_time:
+            cb.message_end_time = t_ns
+        cb.num_messages += 1
+        buf = cb.record_writer._buffer  # replaced at every chunk end
+        buf.write(_MESSAGE_HEAD.pack(_OP_MESSAGE, 22 + len(data), channel_id, 0, t_ns, t_ns))
+        buf.write(data)
+        if buf.tell() > self._chunk_size:
+            self._finalize()
+
+
 def open_exclusive(path: Path) -> IO[bytes]:
     """Default opener: create ``path`` (refuse to overwrite an existing file) for writing in
     slices; the logger buffers it and owns and closes it."""

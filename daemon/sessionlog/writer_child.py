@@ -183,8 +183,7 @@ def child_main(
                 upstream_drops, batch = pickle.loads(data)
                 batch = cast(list[QueuedMessage], batch)
                 logger.set_upstream_drops(upstream_drops)
-                for topic, payload, t_ns in batch:
-                    logger.log(topic, payload, t_ns)
+                logger.enqueue(batch)
                 received += len(batch)
                 logger.kick()  # write now, in the gap the daemon's kick announced
                 if logger.backlog > HELP_HIGH:
