@@ -1,0 +1,43 @@
+"""export: a machine's volumetric model as a controller's own compensation tables.
+
+``export_tables(machine, "sinumerik-cec" | "twincat-cnc" | "linuxcnc", tool_mm)`` fits the
+tables the format can hold to the model over the working volume, writes them (in memory) and
+measures what is left after the control's own interpolation (docs/export.md). The fit
+(:mod:`.decompose`, :mod:`.plan`) is shared; each format has its own module (:mod:`.sinumerik`,
+:mod:`.twincat`, :mod:`.linuxcnc`); :mod:`.report` writes the JSON, PNG and HTML.
+"""
+
+from __future__ import annotations
+
+from .decompose import Decomposition, decompose, direction_axes, model_error_um
+from .export import (
+    FORMATS,
+    ExportError,
+    ExportOptions,
+    ExportResult,
+    describe,
+    direction_combinations,
+    evaluation_points,
+    export_tables,
+    measure_residual,
+)
+from .plan import Plan
+from .splines import Knots
+
+__all__ = [
+    "FORMATS",
+    "Decomposition",
+    "ExportError",
+    "ExportOptions",
+    "ExportResult",
+    "Knots",
+    "Plan",
+    "decompose",
+    "describe",
+    "direction_axes",
+    "direction_combinations",
+    "evaluation_points",
+    "export_tables",
+    "measure_residual",
+    "model_error_um",
+]

@@ -1,0 +1,431 @@
+"""``export_tables``: a machine's volumetric model as a controller's own compensation tables.
+
+The model is evaluated at a fixed tool/stylus offset and the reference temperatures; what the
+format can carry is fitted by least squares over the working volume (:mod:`.decompose`,
+:mod:`.plan`), written in the format's units, signs, resolution and limits, and then the
+residual is measured by evaluating what was written exactly as the control does (linear
+interpolation, direction selection, table products) on an evaluation grid, for every
+combination of travel directions of the axes whose error depends on it. Units: mm, µm.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from itertools import product
+from typing import Any
+
+import numpy as np
+
+from ..errors import CmmCompError
+from ..machine import Machine
+from ..parametric_errors import AXES
+from .decompose import Decomposition, decompose, direction_axes, model_error_um
+from .linuxcnc import LINUXCNC_MAX_POINTS, build_linuxcnc, linuxcnc_error_um, render_linuxcnc
+from .plan import Plan, left_out, own_axis_plan
+from .sinumerik import build_cec, cec_correction_mm, render_cec, total_extremes_mm
+from .splines import FloatArray, Knots, make_knots
+from .twincat import build_twincat, render_twincat, twincat_error_um
+
+__all__ = ["FORMATS", "ExportError", "ExportOptions", "ExportResult", "export_tables"]
+
+FORMATS = ("sinumerik-cec", "twincat-cnc", "linuxcnc")
+
+#: (default points limit per table, hard limit or None, where it comes from)
+_POINT_LIMITS: dict[str, tuple[int, int | None, str]] = {
+    "sinumerik-cec": (200, None, "MD18342 $MN_MM_CEC_MAX_POINTS (828D: 200, fixed)"),
+    "twincat-cnc": (1001, None, "kw.crosscomp.max_points default 1001 (P-COMP-00060)"),
+    "linuxcnc": (LINUXCNC_MAX_POINTS, LINUXCNC_MAX_POINTS, "EMCMOT_COMP_SIZE = 256 triplets"),
+}
+_QUANTUM_MM = 1e-4  # positions: 0.1 µm (TwinCAT's length unit; 4 decimals in the other files)
+_MAX_EVAL_STEPS = 201
+
+
+class ExportError(CmmCompError, ValueError):
+    """The model cannot be written in the format as asked (limits, ranges, bad options)."""
+
+
+@dataclass
+class ExportOptions:
+    """How to export; ``None`` means the format's default. Every limit names its source."""
+
+    points: int | None = None  # per table; default: about one point per 10 mm, at least 11
+    max_points: int | None = None  # the control's limit per table (default: the format's)
+    max_tables: int = 8  # sinumerik-cec: number of CEC tables (828D: 8)
+    products: bool = True  # sinumerik-cec: $AN_CEC_MULT_BY_TABLE for two-axis terms
+    cec_max_sum_mm: float = 1.0  # sinumerik-cec: MD32720 $MA_CEC_MAX_SUM
+    cec_resolution_um: float = 0.1  # sinumerik-cec: value resolution written (4 decimals of mm)
+    cec_axis_names: tuple[str, str, str] = ("AX1", "AX2", "AX3")
+    twincat_axis_numbers: tuple[int, int, int] = (1, 2, 3)
+    twincat_axis_names: tuple[str, str, str] = ("X", "Y", "Z")
+    twincat_cross: bool = True
+    linuxcnc_joints: tuple[int, int, int] = (0, 1, 2)
+    linuxcnc_file_type: int = 0
+    eval_steps: tuple[int, int, int] = (41, 41, 21)
+    min_rms_um: float = 0.01  # a part smaller than this is not worth a table
+
+
+@dataclass
+class ExportResult:
+    """What was written (``files``: name → text) and the report (``report``, JSON-ready)."""
+
+    format: str
+    files: dict[str, str]
+    report: dict[str, Any]
+    tables: list[dict[str, Any]]
+    represented_um: Callable[[FloatArray, FloatArray], FloatArray] = field(repr=False)
+    decomposition: Decomposition = field(repr=False)
+    plan: Plan = field(repr=False)
+    residual_stats: dict[str, Any] = field(default_factory=dict)
+
+
+def _check_tool(machine: Machine, tool_mm: Sequence[float] | FloatArray) -> FloatArray:
+    tool = np.asarray(tool_mm, dtype=float)
+    if tool.shape != (3,):
+        raise ExportError(f"--tool needs 3 numbers (X Y Z mm), got {np.shape(tool_mm)}")
+    if not np.all(np.isfinite(tool)):
+        raise ExportError(f"--tool must be finite numbers (mm), got {tool.tolist()}")
+    reach = float(np.max(machine.volume.upper_mm - machine.volume.lower_mm))
+    if np.any(np.abs(tool) > reach):
+        raise ExportError(
+            f"--tool {tool.tolist()} mm is outside reason: each component must be within "
+            f"±{reach:g} mm (the machine's largest travel)"
+        )
+    return tool
+
+
+def _points(machine: Machine, fmt: str, opts: ExportOptions) -> tuple[list[int], int, str]:
+    default_limit, hard_limit, source = _POINT_LIMITS[fmt]
+    limit = opts.max_points if opts.max_points is not None else default_limit
+    if hard_limit is not None and limit > hard_limit:
+        raise ExportError(f"{fmt}: --max-points {limit} is more than the format holds ({source})")
+    if limit < 2:
+        raise ExportError(f"{fmt}: --max-points must be at least 2, got {limit}")
+    span = machine.volume.upper_mm - machine.volume.lower_mm
+    if opts.points is not None:
+        if opts.points < 2:
+            raise ExportError(f"--points must be at least 2 per table, got {opts.points}")
+        if opts.points > limit:
+            raise ExportError(
+                f"{fmt}: --points {opts.points} is more than a table holds: at most {limit} "
+                f"({source}; --max-points raises it to your control's setting)"
+            )
+        return [opts.points] * 3, limit, source
+    counts = [int(min(limit, max(11, math.ceil(float(s) / 10.0) + 1))) for s in span]
+    return counts, limit, source
+
+
+def _check_eval_steps(steps: Sequence[int]) -> tuple[int, int, int]:
+    if len(steps) != 3 or any(int(s) != s or s < 2 or s > _MAX_EVAL_STEPS for s in steps):
+        raise ExportError(
+            f"--eval-steps needs 3 integers in 2…{_MAX_EVAL_STEPS}, got {list(steps)}"
+        )
+    return int(steps[0]), int(steps[1]), int(steps[2])
+
+
+def _stats(r: FloatArray) -> dict[str, Any]:
+    norm = np.linalg.norm(r, axis=1)
+    return {
+        "rms": float(np.sqrt(np.mean(norm**2))),
+        "max": float(np.max(norm)),
+        "per_axis": {
+            AXES[k]: {
+                "rms": float(np.sqrt(np.mean(r[:, k] ** 2))),
+                "max": float(np.max(np.abs(r[:, k]))),
+            }
+            for k in range(3)
+        },
+    }
+
+
+def evaluation_points(machine: Machine, steps: Sequence[int]) -> FloatArray:
+    """The evaluation grid (N, 3) mm: ``steps`` nodes per axis over the volume, C order."""
+    nodes = machine.volume.nodes(tuple(int(s) for s in steps))  # type: ignore[arg-type]
+    mesh = np.meshgrid(*nodes, indexing="ij")
+    return np.stack([m.ravel() for m in mesh], axis=1)
+
+
+def direction_combinations(dir_axes: Sequence[int]) -> list[dict[int, float]]:
+    """Every combination of ±1 for the axes whose error depends on the direction ({} if none)."""
+    return [dict(zip(dir_axes, c, strict=True)) for c in product((1.0, -1.0), repeat=len(dir_axes))]
+
+
+def measure_residual(
+    machine: Machine,
+    tool_mm: FloatArray,
+    represented_um: Callable[[FloatArray, FloatArray], FloatArray],
+    steps: Sequence[int],
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(residual, uncompensated) statistics µm over the evaluation grid and direction
+    combinations: residual = model error − the error the tables take off."""
+    q = evaluation_points(machine, steps)
+    res, raw = [], []
+    for combo in direction_combinations(direction_axes(machine)):
+        e = model_error_um(machine, q, tool_mm, combo)
+        dirs = np.ones_like(q)
+        for a, s in combo.items():
+            dirs[:, a] = s
+        res.append(e - represented_um(q, dirs))
+        raw.append(e)
+    return _stats(np.concatenate(res)), _stats(np.concatenate(raw))
+
+
+def _header(machine: Machine, fmt: str, tool: FloatArray) -> list[str]:
+    return [
+        f"cmm-comp export --format {fmt}: {machine.name} ({machine.model})",
+        f"machine description sha256 {machine.identity_sha256()}",
+        f"tool/stylus offset {tool.tolist()} mm; reference temperatures "
+        f"({machine.thermal.reference_C:g} C): valid for this tool only",
+        "error = true - indicated; see docs/export.md of cmm-comp for the conventions",
+    ]
+
+
+def export_tables(
+    machine: Machine,
+    fmt: str,
+    tool_mm: Sequence[float] | FloatArray | None = None,
+    options: ExportOptions | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> ExportResult:
+    """Fit, write (in memory) and measure the tables of ``fmt`` for ``machine`` at ``tool_mm``
+    (default: the machine's probe offset). :class:`ExportError` names any limit it cannot meet."""
+    if fmt not in FORMATS:
+        raise ExportError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    opts = options or ExportOptions()
+    say = progress or (lambda _line: None)
+    tool = _check_tool(machine, machine.probe.offset_mm if tool_mm is None else tool_mm)
+    steps = _check_eval_steps(opts.eval_steps)
+    counts, limit, source = _points(machine, fmt, opts)
+    lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
+    knots: tuple[Knots, Knots, Knots] = tuple(  # type: ignore[assignment]
+        make_knots(a, float(lo[a]), float(hi[a]), counts[a], _QUANTUM_MM) for a in range(3)
+    )
+    ranks = 2 if (fmt == "sinumerik-cec" and opts.products) else 0
+    say(f"fitting {fmt} tables ({counts[0]}/{counts[1]}/{counts[2]} points on X/Y/Z)")
+    d = decompose(machine, tool, knots, interaction_ranks=ranks)
+    header = _header(machine, fmt, tool)
+    files: dict[str, str] = {}
+    tables_info: list[dict[str, Any]] = []
+    extra: dict[str, Any] = {}
+    represented: Callable[[FloatArray, FloatArray], FloatArray]
+    if fmt == "sinumerik-cec":
+        if opts.max_tables < 1:
+            raise ExportError(f"--max-tables must be at least 1, got {opts.max_tables}")
+        if not (0 < opts.cec_max_sum_mm < math.inf):
+            raise ExportError(
+                f"--cec-max-sum-mm must be a positive number, got {opts.cec_max_sum_mm}"
+            )
+        res_mm = opts.cec_resolution_um / 1000.0
+        cec, plan = build_cec(
+            d,
+            max_tables=opts.max_tables,
+            products=opts.products,
+            resolution_mm=res_mm,
+            min_rms_um=opts.min_rms_um,
+        )
+        peak = total_extremes_mm(cec, d.direction_axes)
+        for k in range(3):
+            if peak[k] > opts.cec_max_sum_mm:
+                raise ExportError(
+                    f"sinumerik-cec: the total compensation of {AXES[k].upper()} reaches "
+                    f"{peak[k]:.4f} mm, above MD32720 $MA_CEC_MAX_SUM = {opts.cec_max_sum_mm:g} mm "
+                    "(the control would limit it and raise an alarm, leaving a wrong correction): "
+                    "set --cec-max-sum-mm to your control's value, or correct the gross errors first"
+                )
+        files["NC_CEC.INI"] = render_cec(cec, opts.cec_axis_names, header)
+
+        def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
+            return -1000.0 * cec_correction_mm(cec, q, dirs)
+
+        for i, t in enumerate(cec):
+            tables_info.append(
+                {
+                    "table": i,
+                    "input": AXES[t.input_axis],
+                    "output": AXES[t.output_axis],
+                    "role": t.role,
+                    "direction": t.direction,
+                    "mult_by_table": None if t.mult_by is None else t.mult_by + 1,
+                    "points": t.knots.count,
+                    "min_mm": t.knots.start_mm,
+                    "max_mm": t.knots.end_mm,
+                    "step_mm": t.knots.step_mm,
+                    "max_abs_mm": float(np.max(np.abs(t.values_mm))),
+                }
+            )
+        extra["limits"] = {
+            "max_tables": opts.max_tables,
+            "tables_written": len(cec),
+            "max_points": limit,
+            "points_source": source,
+            "cec_max_sum_mm": opts.cec_max_sum_mm,
+            "total_compensation_peak_mm": peak.tolist(),
+            "value_resolution_um": opts.cec_resolution_um,
+        }
+        if opts.products and plan.products:
+            flat, _ = build_cec(
+                d,
+                max_tables=opts.max_tables,
+                products=False,
+                resolution_mm=res_mm,
+                min_rms_um=opts.min_rms_um,
+            )
+            extra["residual_without_products_um"] = measure_residual(
+                machine, tool, lambda q, s: -1000.0 * cec_correction_mm(flat, q, s), steps
+            )[0]
+    elif fmt == "twincat-cnc":
+        plan = own_axis_plan(d, cross=opts.twincat_cross, min_rms_um=opts.min_rms_um)
+        lists = build_twincat(plan, knots)
+        for entry in lists:
+            nr = opts.twincat_axis_numbers[entry.axis]
+            files[f"achskw{nr}.lis"] = render_twincat(
+                entry, opts.twincat_axis_numbers, opts.twincat_axis_names, header
+            )
+            tables_info.append(
+                {
+                    "list": f"achskw{nr}.lis",
+                    "axis": AXES[entry.axis],
+                    "leadscrew_points": entry.knots.count,
+                    "bilateral": entry.bilateral,
+                    "cross_master": None
+                    if entry.cross_master is None
+                    else AXES[entry.cross_master],
+                    "cross_points": None if entry.cross_knots is None else entry.cross_knots.count,
+                }
+            )
+        files["startup-snippet.txt"] = _twincat_startup(lists, opts)
+
+        def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
+            return twincat_error_um(lists, q, dirs)
+
+        extra["limits"] = {
+            "max_points": limit,
+            "points_source": source,
+            "value_range": "SGN32 in 0.1 µm",
+        }
+    else:
+        plan = own_axis_plan(d, cross=False, min_rms_um=opts.min_rms_um)
+        joints = build_linuxcnc(plan, knots, opts.linuxcnc_file_type)
+        for j in joints:
+            n = opts.linuxcnc_joints[j.axis]
+            files[f"joint{n}.comp"] = render_linuxcnc(j)
+            tables_info.append(
+                {
+                    "file": f"joint{n}.comp",
+                    "joint": n,
+                    "axis": AXES[j.axis],
+                    "points": len(j.nominal_mm),
+                    "file_type": j.file_type,
+                }
+            )
+        files["linuxcnc-joints.ini"] = _linuxcnc_ini(joints, opts, header)
+
+        def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
+            return linuxcnc_error_um(joints, q, dirs)
+
+        extra["limits"] = {"max_points": limit, "points_source": source}
+    say("measuring the residual as the control interpolates")
+    residual, raw = measure_residual(machine, tool, represented, steps)
+    report: dict[str, Any] = {
+        "format": fmt,
+        "machine": machine.name,
+        "model": machine.model,
+        "machine_sha256": machine.identity_sha256(),
+        "source": machine.source,
+        "tool_mm": tool.tolist(),
+        "temperatures_C": "reference",
+        "reference_C": machine.thermal.reference_C,
+        "files": sorted(files),
+        "tables": tables_info,
+        "points_per_axis": counts,
+        "evaluation": {
+            "grid_steps": list(steps),
+            "direction_axes": [AXES[a] for a in d.direction_axes],
+            "direction_combinations": len(direction_combinations(d.direction_axes)),
+            "points": int(np.prod(steps)) * len(direction_combinations(d.direction_axes)),
+        },
+        "uncompensated_um": raw,
+        "residual_um": residual,
+        "left_out": left_out(d, plan),
+        "not_modelled_here": _runtime_parts(machine),
+        "convention": "error = true - indicated (µm); residual = model error - what the tables "
+        "take off, evaluated as the control interpolates; RMS and max of the 3-D vector",
+        **extra,
+    }
+    return ExportResult(fmt, files, report, tables_info, represented, d, plan, residual)
+
+
+def _runtime_parts(machine: Machine) -> list[str]:
+    """Model terms a static table cannot know (runtime signals other than directions)."""
+    out = []
+    for name in sorted(machine.runtime_signals()):
+        if name.startswith("dir_"):
+            continue
+        out.append(
+            f"{name}: the tables are for its reference value; its effect at run time is left to "
+            "the daemon"
+        )
+    return out
+
+
+def _twincat_startup(lists: Sequence[Any], opts: ExportOptions) -> str:
+    lines = [
+        "# TwinCAT CNC start-up list entries for these compensation lists (adapt the paths)",
+        f"zahl_kw                   {len(lists)}",
+    ]
+    for i, entry in enumerate(lists):
+        nr = opts.twincat_axis_numbers[entry.axis]
+        lines += [
+            f"achs_kw_log_ax_nr[{i}]      {nr}",
+            f"achs_kw[{i}]                achskw{nr}.lis",
+        ]
+    lines += ["#", "# axis parameter lists: activate per axis"]
+    for entry in lists:
+        nr = opts.twincat_axis_numbers[entry.axis]
+        lines.append(
+            f"#   axis {nr}: lr_param.ssfk 1"
+            + (", lr_param.crosscomp 1" if entry.cross_master is not None else "")
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _linuxcnc_ini(joints: Sequence[Any], opts: ExportOptions, header: Sequence[str]) -> str:
+    lines = [f"# {h}" for h in header]
+    lines.append(
+        "# machine units mm ([TRAJ] LINEAR_UNITS = mm); BACKLASH is ignored with COMP_FILE"
+    )
+    for j in joints:
+        n = opts.linuxcnc_joints[j.axis]
+        lines += [
+            "",
+            f"[JOINT_{n}]",
+            f"COMP_FILE = joint{n}.comp",
+            f"COMP_FILE_TYPE = {j.file_type}",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def describe(result: ExportResult) -> list[str]:
+    """Lines for people: residual before/after and the largest parts left for the daemon."""
+    r, u = result.report["residual_um"], result.report["uncompensated_um"]
+    lines = [
+        f"{result.format}: {len(result.tables)} table(s) → {', '.join(result.report['files'])}",
+        f"  model error over the volume: RMS {u['rms']:.3f} µm, max {u['max']:.3f} µm",
+        f"  left after the control's own interpolation: RMS {r['rms']:.3f} µm, max {r['max']:.3f} µm"
+        " (what the daemon would still correct)",
+        "  per axis (RMS/max µm): "
+        + ", ".join(f"{a.upper()} {v['rms']:.3f}/{v['max']:.3f}" for a, v in r["per_axis"].items()),
+    ]
+    if "residual_without_products_um" in result.report:
+        w = result.report["residual_without_products_um"]
+        lines.append(
+            f"  without table products it would be RMS {w['rms']:.3f} µm, max {w['max']:.3f} µm"
+        )
+    big = [p for p in result.report["left_out"] if p["rms_um"] >= 0.05][:6]
+    if big:
+        lines.append("  largest parts the format cannot carry (≈ RMS over the volume):")
+        lines += [f"    {p['output']}: {p['part']}: {p['rms_um']:.3f} µm" for p in big]
+    for note in result.report["not_modelled_here"]:
+        lines.append(f"  note: {note}")
+    return lines
