@@ -12,7 +12,6 @@ from __future__ import annotations
 from .decompose import Decomposition, decompose, direction_axes, model_error_um
 from .export import (
     FORMATS,
-    ExportError,
     ExportOptions,
     ExportResult,
     describe,
@@ -21,6 +20,7 @@ from .export import (
     export_tables,
     measure_residual,
 )
+from .limits import ExportError
 from .plan import Plan
 from .splines import Knots
 

@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CmmCompError
 from ..machine import Machine
 from ..parametric_errors import AXES
 from .decompose import Decomposition, decompose, direction_axes, model_error_um
-from .linuxcnc import LINUXCNC_MAX_POINTS, build_linuxcnc, linuxcnc_error_um, render_linuxcnc
+from .limits import POINT_LIMITS, ExportError
+from .linuxcnc import build_linuxcnc, linuxcnc_error_um, render_linuxcnc
 from .plan import Plan, left_out, own_axis_plan
 from .sinumerik import build_cec, cec_correction_mm, render_cec, total_extremes_mm
 from .splines import FloatArray, Knots, make_knots
@@ -32,18 +32,8 @@ __all__ = ["FORMATS", "ExportError", "ExportOptions", "ExportResult", "export_ta
 
 FORMATS = ("sinumerik-cec", "twincat-cnc", "linuxcnc")
 
-#: (default points limit per table, hard limit or None, where it comes from)
-_POINT_LIMITS: dict[str, tuple[int, int | None, str]] = {
-    "sinumerik-cec": (200, None, "MD18342 $MN_MM_CEC_MAX_POINTS (828D: 200, fixed)"),
-    "twincat-cnc": (1001, None, "kw.crosscomp.max_points default 1001 (P-COMP-00060)"),
-    "linuxcnc": (LINUXCNC_MAX_POINTS, LINUXCNC_MAX_POINTS, "EMCMOT_COMP_SIZE = 256 triplets"),
-}
 _QUANTUM_MM = 1e-4  # positions: 0.1 µm (TwinCAT's length unit; 4 decimals in the other files)
 _MAX_EVAL_STEPS = 201
-
-
-class ExportError(CmmCompError, ValueError):
-    """The model cannot be written in the format as asked (limits, ranges, bad options)."""
 
 
 @dataclass
@@ -96,7 +86,7 @@ def _check_tool(machine: Machine, tool_mm: Sequence[float] | FloatArray) -> Floa
 
 
 def _points(machine: Machine, fmt: str, opts: ExportOptions) -> tuple[list[int], int, str]:
-    default_limit, hard_limit, source = _POINT_LIMITS[fmt]
+    default_limit, hard_limit, source = POINT_LIMITS[fmt]
     limit = opts.max_points if opts.max_points is not None else default_limit
     if hard_limit is not None and limit > hard_limit:
         raise ExportError(f"{fmt}: --max-points {limit} is more than the format holds ({source})")

@@ -19,18 +19,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .limits import ExportError
 from .plan import Plan
 from .splines import FloatArray, Knots
 
 __all__ = [
-    "LINUXCNC_MAX_POINTS",
     "JointComp",
     "build_linuxcnc",
     "linuxcnc_error_um",
     "render_linuxcnc",
 ]
-
-LINUXCNC_MAX_POINTS = 256
 
 
 @dataclass
@@ -58,7 +56,7 @@ def build_linuxcnc(
 ) -> list[JointComp]:
     """One file per joint from an own-axis plan (values rounded as printed, 7 decimals of mm)."""
     if file_type not in (0, 1):
-        raise ValueError(f"linuxcnc: COMP_FILE_TYPE must be 0 or 1, got {file_type}")
+        raise ExportError(f"linuxcnc: COMP_FILE_TYPE must be 0 or 1, got {file_type}")
     out: list[JointComp] = []
     for k in range(3):
         kn = knots[k]

@@ -179,6 +179,6 @@ def left_out(d: Decomposition, plan: Plan) -> list[dict[str, Any]]:
         rows.append(
             (max(total - kept, 0.0), AXES[k].upper(), f"two-axis term of {AXES[a]} and {AXES[b]}")
         )
-    rows = [r for r in rows if r[0] > 0]
+    rows = [r for r in rows if r[0] >= 1e-6]  # below 0.001 µm RMS: quadrature noise
     rows.sort(key=lambda r: -r[0])
     return [{"output": o, "part": p, "rms_um": float(np.sqrt(e))} for e, o, p in rows]

@@ -24,12 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..parametric_errors import AXES
+from .limits import SGN32, ExportError
 from .plan import Plan
 from .splines import FloatArray, Knots, hat_matrix
 
-__all__ = ["SGN32", "TwinCatList", "build_twincat", "render_twincat", "twincat_error_um"]
+__all__ = ["TwinCatList", "build_twincat", "render_twincat", "twincat_error_um"]
 
-SGN32 = (-(2**31), 2**31 - 1)
 NDInt = np.ndarray  # integer values in 0.1 µm
 
 
@@ -50,7 +50,7 @@ class TwinCatList:
 def _to_01um(values_um: FloatArray, what: str) -> NDInt:
     raw = np.round(np.asarray(values_um, dtype=float) * 10.0)
     if not np.all(np.isfinite(raw)) or raw.min() < SGN32[0] or raw.max() > SGN32[1]:
-        raise ValueError(
+        raise ExportError(
             f"twincat-cnc: {what} reaches {np.nanmax(np.abs(raw)) / 1e4:.4g} mm, outside the "
             f"SGN32 range of the list (±{SGN32[1] / 1e4:.4g} mm in 0.1 µm)"
         )

@@ -1,0 +1,318 @@
+"""``cmm-comp export``: every written file read back by an independent reader written from the
+format's public documentation (tests/export_readers.py), applied as the control applies it, and
+compared with the model: the residual the command reports is the residual measured this way.
+Hand-checkable machines give exact table values; bad input gets one error line."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from export_readers import (
+    cec_error_um,
+    linuxcnc_error_um,
+    read_cec,
+    read_linuxcnc,
+    read_twincat,
+    twincat_axis,
+    twincat_error_um,
+)
+
+from cmm_comp.compensation import Machine, ParametricErrors
+from cmm_comp.compensation.effects import CouplingEffect, ReversalEffect
+from cmm_comp.compensation.export import ExportError, ExportOptions, export_tables
+
+ROOT = Path(__file__).resolve().parents[1]
+NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
+GOLDEN = ROOT / "tests" / "data" / "export"
+FAST = {"points": 21, "eval_steps": (9, 9, 5)}
+
+
+def _grid(machine: Machine, steps: list[int]) -> np.ndarray:
+    axes = [
+        np.linspace(machine.volume.lower_mm[k], machine.volume.upper_mm[k], steps[k])
+        for k in range(3)
+    ]
+    return np.stack([m.ravel() for m in np.meshgrid(*axes, indexing="ij")], axis=1)
+
+
+def _reader_error(fmt: str, files: dict[str, str], q: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    if fmt == "sinumerik-cec":
+        return cec_error_um(read_cec(files["NC_CEC.INI"]), ["AX1", "AX2", "AX3"], q, dirs)
+    if fmt == "twincat-cnc":
+        axes = [twincat_axis(read_twincat(files[f"achskw{n}.lis"])) for n in (1, 2, 3)]
+        return twincat_error_um(axes, [1, 2, 3], q, dirs)
+    ini = files["linuxcnc-joints.ini"]
+    file_type = int(ini.split("COMP_FILE_TYPE = ")[1][0])
+    return linuxcnc_error_um(
+        [read_linuxcnc(files[f"joint{j}.comp"]) for j in (0, 1, 2)], file_type, q, dirs
+    )
+
+
+def _measured(machine: Machine, fmt: str, files: dict[str, str], report: dict) -> dict:
+    """Residual statistics of the files, evaluated by the readers over the report's grid and
+    every combination of travel directions, against the model at the report's tool."""
+    q = _grid(machine, report["evaluation"]["grid_steps"])
+    dir_axes = ["xyz".index(a) for a in report["evaluation"]["direction_axes"]]
+    res = []
+    for combo in itertools.product((1.0, -1.0), repeat=len(dir_axes)):
+        dirs = np.ones_like(q)
+        inputs = {}
+        for a, s in zip(dir_axes, combo, strict=True):
+            dirs[:, a] = s
+            inputs[f"dir_{'xyz'[a]}"] = s
+        e = machine.volumetric_error(q, stylus_mm=report["tool_mm"], inputs=inputs)
+        res.append(e - _reader_error(fmt, files, q, dirs))
+    r = np.concatenate(res)
+    norm = np.linalg.norm(r, axis=1)
+    return {
+        "rms": float(np.sqrt(np.mean(norm**2))),
+        "max": float(norm.max()),
+        "per_axis": np.sqrt(np.mean(r**2, axis=0)),
+    }
+
+
+def _assert_same_residual(measured: dict, reported: dict) -> None:
+    assert measured["rms"] == pytest.approx(reported["rms"], rel=1e-6, abs=2e-6)
+    assert measured["max"] == pytest.approx(reported["max"], rel=1e-6, abs=2e-6)
+    for k, a in enumerate("xyz"):
+        assert measured["per_axis"][k] == pytest.approx(
+            reported["per_axis"][a]["rms"], rel=1e-6, abs=2e-6
+        )
+
+
+def _reversal_machine() -> Machine:
+    """A bridge from an `extend`-like description: tables plus [[effects]] (reversal on X and Y
+    — two direction axes —, a coupling: the roll of Y changing with X)."""
+    base = Machine.from_toml(NPL)
+    return base.with_effects(
+        [
+            ReversalEffect("x", [0.8, 0.3], (0.0, 900.0)),
+            ReversalEffect("y", [-0.5, 0.0], (0.0, 1150.0)),
+            CouplingEffect("ex_y", "x", [2.0, -0.5], (0.0, 1150.0), (0.0, 900.0)),
+        ]
+    )
+
+
+@pytest.mark.parametrize("fmt", ["sinumerik-cec", "twincat-cnc", "linuxcnc"])
+def test_reported_residual_is_what_the_control_would_leave(fmt: str) -> None:
+    machine = _reversal_machine()
+    result = export_tables(machine, fmt, (0.0, 40.0, -150.0), ExportOptions(max_tables=14, **FAST))
+    rep = result.report
+    assert rep["evaluation"]["direction_axes"] == ["x", "y"]
+    measured = _measured(machine, fmt, result.files, rep)
+    _assert_same_residual(measured, rep["residual_um"])
+    # the tables do work, and the order of formats by what they can carry holds
+    assert rep["residual_um"]["rms"] < 0.6 * rep["uncompensated_um"]["rms"]
+
+
+def test_direction_tables_carry_the_reversal_exactly() -> None:
+    """Reversal only (a half step 1.5 µm + 0.4 µm·s along X): every format has direction tables
+    on X's own axis, so nothing but rounding remains."""
+    machine = Machine.from_parts(model="MB1", volume=((0, 600), (0, 400), (0, 300))).with_effects(
+        [ReversalEffect("x", [1.5, 0.4], (0.0, 600.0))]
+    )
+    for fmt, tol in (("sinumerik-cec", 0.051), ("twincat-cnc", 0.051), ("linuxcnc", 1e-3)):
+        result = export_tables(machine, fmt, (0, 0, 0), ExportOptions(**FAST))
+        rep = result.report
+        measured = _measured(machine, fmt, result.files, rep)
+        _assert_same_residual(measured, rep["residual_um"])
+        assert rep["uncompensated_um"]["max"] == pytest.approx(1.9, abs=1e-6)
+        assert measured["max"] <= tol, fmt
+
+
+def test_hand_values_positional_and_squareness() -> None:
+    """X positional 10 µm/m, squareness α = 20 µrad (ΔY = −α·x): SINUMERIK holds −e, TwinCAT
+    +e in 0.1 µm, LinuxCNC the actual position; the values are known by hand."""
+    errors = ParametricErrors.from_polynomials({"dx_x": [0.0, 0.01]})
+    machine = Machine.from_parts(model="MB1", volume=((0, 400), (0, 300), (0, 200)), errors=errors)
+    data = machine.description
+    data["squareness"] = {"alpha": 20.0}
+    machine = Machine.from_dict(data)
+    opts = ExportOptions(points=11, eval_steps=(9, 7, 5), products=False)
+    x = np.linspace(0.0, 400.0, 11)
+    cec = export_tables(machine, "sinumerik-cec", (0, 0, 0), opts)
+    tables = read_cec(cec.files["NC_CEC.INI"])
+    by_pair = {(t.params["INPUT_AXIS"], t.params["OUTPUT_AXIS"]): t for t in tables.values()}
+    xx = by_pair[("(AX1)", "(AX1)")]
+    xy = by_pair[("(AX1)", "(AX2)")]
+    got_xx = np.array([xx.values[n] for n in range(11)])
+    got_xy = np.array([xy.values[n] for n in range(11)])
+    assert np.allclose(got_xx - got_xx[0], -0.01 * x / 1000.0, atol=1e-4 + 1e-12)
+    assert np.allclose(got_xy - got_xy[0], 0.02 * x / 1000.0, atol=1e-4 + 1e-12)
+    assert cec.report["residual_um"]["max"] < 0.11  # two 0.1 µm roundings at most
+    tc = export_tables(machine, "twincat-cnc", (0, 0, 0), opts)
+    y_list = twincat_axis(read_twincat(tc.files["achskw2.lis"]))
+    assert y_list.master_nr == 1
+    assert np.allclose(y_list.cross_val - y_list.cross_val[0], np.round(-0.02 * x * 10), atol=1)
+    lc = export_tables(machine, "linuxcnc", (0, 0, 0), opts)
+    j0 = read_linuxcnc(lc.files["joint0.comp"])
+    assert np.allclose(j0[:, 1] - j0[:, 0] - (j0[0, 1] - j0[0, 0]), 0.01 * x / 1000.0, atol=1e-7)
+    # LinuxCNC has no cross table: the squareness is left, all of it (−0.02·x µm on Y)
+    xs = np.linspace(0, 400, 9)
+    assert lc.report["residual_um"]["per_axis"]["y"]["max"] == pytest.approx(8.0 - 4.0, abs=0.02)
+    assert lc.report["residual_um"]["per_axis"]["y"]["rms"] == pytest.approx(
+        float(np.sqrt(np.mean((0.02 * (xs - xs.mean())) ** 2))), rel=0.01
+    )
+
+
+def test_products_carry_an_abbe_term() -> None:
+    """Y pitch growing along Y on a bridge with a long stylus: X's error gets ε(y)·(z + p_z),
+    a product of two axes. With $AN_CEC_MULT_BY_TABLE it is carried (as read: the product is
+    added on top of both tables' own values); without, it is left."""
+    errors = ParametricErrors.from_polynomials({"ey_y": [0.0, 0.05]})
+    machine = Machine.from_parts(model="MB1", volume=((0, 500), (0, 600), (0, 400)), errors=errors)
+    with_p = export_tables(
+        machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, **FAST)
+    )
+    without = export_tables(
+        machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, products=False, **FAST)
+    )
+    assert any(
+        t.params["MULT_BY_TABLE"] != "0" for t in read_cec(with_p.files["NC_CEC.INI"]).values()
+    )
+    for res in (with_p, without):
+        _assert_same_residual(
+            _measured(machine, "sinumerik-cec", res.files, res.report), res.report["residual_um"]
+        )
+    assert with_p.report["residual_um"]["max"] < 0.15
+    assert without.report["residual_um"]["max"] > 2.0
+    assert with_p.report["residual_without_products_um"]["rms"] == pytest.approx(
+        without.report["residual_um"]["rms"], rel=1e-9
+    )
+
+
+def test_golden_files_reproduce_and_read_back(tmp_path: Path) -> None:
+    """tests/data/export/README.md: the files checked in are what the command writes for the
+    golden machine (byte for byte), and they carry its errors as derived there by hand."""
+    machine = Machine.from_toml(GOLDEN / "golden-machine.toml")
+    opts = ExportOptions(points=11, eval_steps=(9, 7, 5))
+    for fmt in ("sinumerik-cec", "twincat-cnc", "linuxcnc"):
+        result = export_tables(machine, fmt, None, opts)
+        for name, text in result.files.items():
+            assert (GOLDEN / fmt / name).read_text(encoding="utf-8") == text, (fmt, name)
+        golden = {p.name: p.read_text(encoding="utf-8") for p in (GOLDEN / fmt).iterdir()}
+        _assert_same_residual(
+            _measured(machine, fmt, golden, result.report), result.report["residual_um"]
+        )
+    cec = read_cec((GOLDEN / "sinumerik-cec" / "NC_CEC.INI").read_text(encoding="utf-8"))
+    plus = np.array([cec[0].values[n] for n in range(11)])
+    minus = np.array([cec[1].values[n] for n in range(11)])
+    assert (cec[0].params["DIRECTION"], cec[1].params["DIRECTION"]) == ("1", "-1")
+    assert np.allclose(plus - minus, -0.001)  # half reversal 0.5 µm each way, as −error
+    assert np.allclose(np.diff(plus), -0.0004)  # 10 µm/m over 40 mm steps
+    j0 = read_linuxcnc((GOLDEN / "linuxcnc" / "joint0.comp").read_text(encoding="utf-8"))
+    assert np.allclose(j0[:, 1] - j0[:, 2], 0.001, atol=2e-7)
+
+
+def test_reader_is_not_the_writer() -> None:
+    """The comparison can fail: a CEC table with one value changed by 1 µm changes the residual
+    the reader measures, and the direction selection matters."""
+    machine = Machine.from_toml(GOLDEN / "golden-machine.toml")
+    result = export_tables(
+        machine, "sinumerik-cec", None, ExportOptions(points=11, eval_steps=(9, 7, 5))
+    )
+    text = result.files["NC_CEC.INI"].replace("$AN_CEC[0,5]=-0.0025", "$AN_CEC[0,5]=-0.0035")
+    assert text != result.files["NC_CEC.INI"]
+    bad = _measured(machine, "sinumerik-cec", {"NC_CEC.INI": text}, result.report)
+    assert bad["max"] > result.report["residual_um"]["max"] + 0.5
+    swapped = (
+        result.files["NC_CEC.INI"]
+        .replace("DIRECTION[0]=1", "DIRECTION[0]=-1")
+        .replace("DIRECTION[1]=-1", "DIRECTION[1]=1")
+    )
+    assert _measured(machine, "sinumerik-cec", {"NC_CEC.INI": swapped}, result.report)["max"] > 0.9
+
+
+def test_limits_and_bad_input() -> None:
+    machine = Machine.from_toml(GOLDEN / "golden-machine.toml")
+    with pytest.raises(ExportError, match="finite"):
+        export_tables(machine, "linuxcnc", (0.0, float("nan"), 0.0))
+    with pytest.raises(ExportError, match="outside reason"):
+        export_tables(machine, "linuxcnc", (0.0, 0.0, -5000.0))
+    with pytest.raises(ExportError, match="at most 200"):
+        export_tables(machine, "sinumerik-cec", None, ExportOptions(points=300))
+    with pytest.raises(ExportError, match="256"):
+        export_tables(machine, "linuxcnc", None, ExportOptions(max_points=300))
+    with pytest.raises(ExportError, match="eval-steps"):
+        export_tables(machine, "linuxcnc", None, ExportOptions(eval_steps=(1, 5, 5)))
+    with pytest.raises(ExportError, match="--format"):
+        export_tables(machine, "heidenhain", None)
+    # errors beyond the format's value range: a clear error, never a limited table
+    big = Machine.from_parts(
+        model="MB1",
+        volume=((0, 400), (0, 300), (0, 200)),
+        errors=ParametricErrors.from_polynomials({"dx_x": [0.0, 5.0]}),  # 2 mm at the far end
+    )
+    with pytest.raises(ExportError, match=r"CEC_MAX_SUM = 1 mm"):
+        export_tables(big, "sinumerik-cec", (0, 0, 0), ExportOptions(**FAST))
+    ok = export_tables(big, "sinumerik-cec", (0, 0, 0), ExportOptions(cec_max_sum_mm=3.0, **FAST))
+    assert max(ok.report["limits"]["total_compensation_peak_mm"]) > 1.9
+    huge = Machine.from_parts(
+        model="MB1",
+        volume=((0, 400), (0, 300), (0, 200)),
+        errors=ParametricErrors.from_polynomials({"dx_x": [0.0, 1.0e6]}),  # 400 m: beyond SGN32
+    )
+    with pytest.raises(ExportError, match="SGN32"):
+        export_tables(huge, "twincat-cnc", (0, 0, 0), ExportOptions(**FAST))
+
+
+def _cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "cmm_comp.cli", "export", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=120,
+    )
+
+
+def test_cli_writes_everything_and_refuses_bad_input(tmp_path: Path) -> None:
+    golden = str(GOLDEN / "golden-machine.toml")
+    out = tmp_path / "cec"
+    run = _cli(
+        [
+            golden,
+            "--format",
+            "sinumerik-cec",
+            "--points",
+            "11",
+            "--eval-steps",
+            "9",
+            "7",
+            "5",
+            "-o",
+            str(out),
+        ],
+        tmp_path,
+    )
+    assert run.returncode == 0, run.stderr
+    assert {p.name for p in out.iterdir()} == {
+        "NC_CEC.INI",
+        "export.json",
+        "export.png",
+        "export.html",
+    }
+    report = json.loads((out / "export.json").read_text(encoding="utf-8"))
+    assert f"RMS {report['residual_um']['rms']:.3f} µm" in run.stdout
+    assert (out / "export.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    for args, message in (
+        (
+            [golden, "--format", "linuxcnc", "--tool", "0", "nan", "0", "-o", str(tmp_path / "a")],
+            "finite",
+        ),
+        ([golden, "--format", "linuxcnc", "-o", str(out)], "not empty"),
+    ):
+        bad = _cli(args, tmp_path)
+        assert bad.returncode == 2, bad.stderr
+        lines = bad.stderr.strip().splitlines()
+        assert lines[-1].startswith("cmm-comp: error: ") and message in lines[-1], bad.stderr
+        assert "Traceback" not in bad.stderr
+    assert not (tmp_path / "a").exists()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # nothing lost
