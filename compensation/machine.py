@@ -32,6 +32,7 @@ from .offsets import refer_to_reference
 from .parametric_errors import AXIS_INDEX, ParametricErrors
 from .tables import ErrorTable
 from .thermal import TEMPERATURE_ROLES, Thermal
+from .uncertainty.model import UncertaintyModel
 
 FloatArray = NDArray[np.float64]
 
@@ -71,6 +72,7 @@ class Machine:
     description: dict[str, Any] = field(default_factory=dict)  # normalised TOML content
     source: str = "<memory>"
     warnings: list[str] = field(default_factory=list)  # accepted but questionable input
+    uncertainty: UncertaintyModel | None = None  # [uncertainty], defaults resolved
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -105,6 +107,7 @@ class Machine:
             description=parsed.description,
             source=source,
             warnings=parsed.warnings,
+            uncertainty=parsed.uncertainty,
         )
         try:
             refer_to_reference(machine, parsed.squareness_offset_mm)
@@ -234,6 +237,36 @@ class Machine:
         for effect in self.effects:
             effect.add_direct(ctx)
         return ctx
+
+    def context(
+        self,
+        points_mm: ArrayLike,
+        temps_C: Mapping[str, Any] | None = None,
+        inputs: Mapping[str, Any] | None = None,
+    ) -> EvalContext:
+        """The model's evaluation context at indicated ``points_mm`` (N, 3): parametric errors
+        after reversal and effects (N, 3, 6), squareness (N, 3), the direct terms (thermal,
+        effects) µm and the signals. What the virtual CMM (:mod:`.uncertainty`) perturbs."""
+        return self._context(points_mm, temps_C, inputs)
+
+    def uncertainty_model(self) -> UncertaintyModel:
+        """The machine's uncertainty model (``[uncertainty]``, docs/formats.md §1.11) with its
+        defaults resolved; built from the defaults alone for a machine made without a file."""
+        if self.uncertainty is not None:
+            return self.uncertainty
+        from .uncertainty.model import parse_uncertainty
+
+        return parse_uncertainty(
+            None,
+            source=self.source,
+            tables=self.tables,
+            lower_mm=self.volume.lower_mm,
+            upper_mm=self.volume.upper_mm,
+            reference_mm=self.volume.reference_mm,
+            expansion=self.thermal.expansion,
+            workpiece_expansion=self.thermal.workpiece_expansion,
+            probe_random_um=self.probe.random_um,
+        )
 
     def stylus_or_probe(self, stylus_mm: ArrayLike | None) -> FloatArray:
         """``stylus_mm`` as floats, or the machine's probe offset when it is None (the default

@@ -104,9 +104,13 @@ def _rewrite_header(src: Path, dst: Path, **changes: object) -> None:
 def test_wrong_version_and_format(grid: CorrectionGrid, tmp_path: Path) -> None:
     path = tmp_path / "m.grid"
     grid.save(path)
-    v2 = tmp_path / "v2.grid"
+    v3 = tmp_path / "v3.grid"
+    _rewrite_header(path, v3, format_version=3)
+    with pytest.raises(GridFileError, match=r"v3\.grid: unsupported grid format version 3"):
+        CorrectionGrid.load(v3)
+    v2 = tmp_path / "v2.grid"  # version 2 is a grid carrying U: its members must be there
     _rewrite_header(path, v2, format_version=2)
-    with pytest.raises(GridFileError, match=r"v2\.grid: unsupported grid format version 2"):
+    with pytest.raises(GridFileError, match=r"v2\.grid: grid format version 2 needs the uncertainty"):
         CorrectionGrid.load(v2)
     other = tmp_path / "other.grid"
     _rewrite_header(path, other, format="something-else")

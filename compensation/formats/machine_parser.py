@@ -24,6 +24,7 @@ from ..models import known_models, model_code
 from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, canonical_name, parse_component
 from ..tables import MAX_POLYNOMIAL_ORDER, ErrorTable, fit_polynomial
 from ..thermal import Thermal
+from ..uncertainty.model import UncertaintyModel, parse_uncertainty
 
 FORMAT = "cmm-machine/1"
 CRITERIA = ("least_squares", "end_points", "min_zone")
@@ -37,6 +38,7 @@ _TOP_TABLES = {
     "arm_deflection",
     "effects",
     "meta",
+    "uncertainty",
 }
 _TABLE_KEYS = {
     "position",
@@ -74,6 +76,7 @@ class ParsedMachine:
     effects: list[Effect]
     description: dict[str, Any]
     warnings: list[str] = field(default_factory=list)
+    uncertainty: UncertaintyModel | None = None
 
 
 def parse_machine(data: Mapping[str, Any], *, source: str, base_dir: Path) -> ParsedMachine:
@@ -201,6 +204,19 @@ class _Parser:
             except (ValueError, KeyError, TypeError) as exc:
                 raise self.fail(f"effects[{i}]", str(exc)) from None
 
+        unc = data.get("uncertainty")
+        uncertainty = parse_uncertainty(
+            unc if unc is not None else None,
+            source=self.source,
+            tables=tables,
+            lower_mm=volume.lower_mm,
+            upper_mm=volume.upper_mm,
+            reference_mm=volume.reference_mm,
+            expansion=thermal.expansion,
+            workpiece_expansion=thermal.workpiece_expansion,
+            probe_random_um=probe.random_um,
+        )
+
         description = plain_copy(data)
         description["format"] = FORMAT
         description["model"] = model
@@ -220,6 +236,7 @@ class _Parser:
             effects=effects,
             description=description,
             warnings=self.warnings,
+            uncertainty=uncertainty,
         )
 
     def volume(self, tbl: Mapping[str, Any]) -> Volume:

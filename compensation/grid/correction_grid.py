@@ -38,7 +38,7 @@ import os
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,6 +62,7 @@ from .status import (
     check_policy,
     statuses,
 )
+from .uncertainty import GridUncertainty, expanded_uncertainty_um
 
 __all__ = ["CorrectionGrid"]
 
@@ -90,6 +91,7 @@ class CorrectionGrid:
         sensitivity_rotation_urad: ArrayLike | None = None,
         metadata: Mapping[str, Any] | None = None,
         outside: str = "refuse",
+        uncertainty: GridUncertainty | None = None,
     ) -> None:
         lo = np.asarray(lower_mm, dtype=np.float64).reshape(3)
         hi = np.asarray(upper_mm, dtype=np.float64).reshape(3)
@@ -139,6 +141,9 @@ class CorrectionGrid:
             SignalFilter.from_header(f) for f in self.metadata.get("signal_filters", [])
         )
         self.sha256: str | None = None
+        self.uncertainty: GridUncertainty | None = None
+        if uncertainty is not None:
+            self._set_uncertainty(uncertainty)
         self._prepare()
 
     # ------------------------------------------------------------------ construction
@@ -324,6 +329,30 @@ class CorrectionGrid:
         without a probing direction nothing is derived and the point is flagged ``missing_input``."""
         return derive_lobing_inputs(self._derived_lobes, inputs)
 
+    @overload
+    def correct(
+        self,
+        points_mm: ArrayLike,
+        stylus_mm: ArrayLike = ...,
+        temps_C: Mapping[str, Any] | None = ...,
+        inputs: Mapping[str, Any] | None = ...,
+        *,
+        outside: str | None = ...,
+        with_uncertainty: Literal[False] = ...,
+    ) -> tuple[FloatArray, NDArray[np.str_]]: ...
+
+    @overload
+    def correct(
+        self,
+        points_mm: ArrayLike,
+        stylus_mm: ArrayLike = ...,
+        temps_C: Mapping[str, Any] | None = ...,
+        inputs: Mapping[str, Any] | None = ...,
+        *,
+        outside: str | None = ...,
+        with_uncertainty: Literal[True],
+    ) -> tuple[FloatArray, NDArray[np.str_], FloatArray]: ...
+
     def correct(
         self,
         points_mm: ArrayLike,
@@ -332,13 +361,20 @@ class CorrectionGrid:
         inputs: Mapping[str, Any] | None = None,
         *,
         outside: str | None = None,
-    ) -> tuple[FloatArray, NDArray[np.str_]]:
+        with_uncertainty: bool = False,
+    ) -> Any:
         """Corrected positions (N, 3) mm and status (N,) str of indicated ``points_mm`` (N, 3).
 
         ``stylus_mm`` (3,) or (N, 3) mm; ``temps_C`` / ``inputs`` map signal names to scalars or
         (N,) arrays (either mapping may hold any signal). ``outside`` overrides the grid's
         policy (``"refuse"`` or ``"clamp"``). See the module docstring for the status values.
+
+        ``with_uncertainty=True`` returns ``(corrected, status, U_um)``: U (N, 3) µm, expanded
+        (k = 2) per component, of every point whose status is ``ok``; NaN elsewhere and
+        everywhere when the grid carries no uncertainty (:attr:`has_uncertainty`).
         """
+        if with_uncertainty:
+            return self._correct_with_uncertainty(points_mm, stylus_mm, temps_C, inputs, outside)
         inputs = self.derive_inputs(inputs)
         pts = np.asarray(points_mm, dtype=np.float64)
         if pts.shape in ((3,), (1, 3)):
@@ -459,6 +495,108 @@ class CorrectionGrid:
                 return _NAN3, status
             return out, status
         return out, by_flags[0]
+
+    # ------------------------------------------------------------------ uncertainty
+    @property
+    def has_uncertainty(self) -> bool:
+        """Whether the grid carries U (built with ``grid build --uncertainty``)."""
+        return self.uncertainty is not None
+
+    def _set_uncertainty(self, gu: GridUncertainty) -> None:
+        if gu.covariance.shape[:3] != tuple(self.steps):
+            raise ValueError(
+                f"uncertainty covariance has {gu.covariance.shape[:3]} nodes, the grid {self.steps}"
+            )
+        self.uncertainty = gu
+        gu.coefficients(self.axes)
+
+    def with_uncertainty(self, uncertainty: GridUncertainty | None) -> CorrectionGrid:
+        """A copy of this grid carrying ``uncertainty`` (None: without); not yet saved."""
+        import copy
+
+        out = copy.copy(self)
+        out.uncertainty = None
+        out.sha256 = None
+        if uncertainty is not None:
+            out._set_uncertainty(uncertainty)
+        return out
+
+    def _u_tables(self) -> tuple[Any, ...]:
+        return (self._lo, self._inv_d, self._shape, *self._knots, *self._spans)
+
+    def _correct_with_uncertainty(
+        self,
+        points_mm: ArrayLike,
+        stylus_mm: ArrayLike,
+        temps_C: Mapping[str, Any] | None,
+        inputs: Mapping[str, Any] | None,
+        outside: str | None,
+    ) -> tuple[FloatArray, NDArray[np.str_], FloatArray]:
+        inputs = self.derive_inputs(inputs)
+        pts = np.asarray(points_mm, dtype=np.float64)
+        if pts.ndim == 1 and pts.shape[0] == 3:
+            pts = pts[None, :]
+        out, status, _, _ = self._evaluate(pts, stylus_mm, temps_C, inputs, outside, False)
+        return out, status, self._expanded(pts, stylus_mm, temps_C, inputs, status)
+
+    def _expanded(
+        self,
+        pts: FloatArray,
+        stylus_mm: ArrayLike,
+        temps_C: Mapping[str, Any] | None,
+        inputs: Mapping[str, Any] | None,
+        status: NDArray[np.str_],
+    ) -> FloatArray:
+        if self.uncertainty is None:
+            return np.full((pts.shape[0], 3), np.nan)
+        stylus = np.asarray(stylus_mm, dtype=np.float64).reshape(-1, 3)
+        ok = status == "ok"
+        temps = {k: v for k, v in (inputs or {}).items() if k.startswith("T_")}
+        temps.update(temps_C or {})
+        return expanded_uncertainty_um(
+            self.uncertainty,
+            self.uncertainty.coefficients(self.axes),
+            self._u_tables(),
+            np.clip(np.where(np.isfinite(pts), pts, 0.0), self.lower_mm, self.upper_mm),
+            stylus,
+            temps,
+            ok,
+        )
+
+    def uncertainty_um(
+        self,
+        points_mm: ArrayLike,
+        stylus_mm: ArrayLike = (0.0, 0.0, 0.0),
+        temps_C: Mapping[str, Any] | None = None,
+        inputs: Mapping[str, Any] | None = None,
+        *,
+        outside: str | None = None,
+    ) -> tuple[FloatArray, NDArray[np.str_]]:
+        """U (N, 3) µm (k = 2 per component) and status of indicated ``points_mm``: the
+        uncertainty of what :meth:`correct` returns (NaN where the status is not ``ok`` or the
+        grid carries no uncertainty)."""
+        _, status, u = self._correct_with_uncertainty(
+            points_mm, stylus_mm, temps_C, inputs, outside
+        )
+        return u, status
+
+    def uncertainty_point(
+        self,
+        point_mm: ArrayLike,
+        stylus_mm: ArrayLike = (0.0, 0.0, 0.0),
+        temps_C: Mapping[str, Any] | None = None,
+        inputs: Mapping[str, Any] | None = None,
+        *,
+        outside: str | None = None,
+    ) -> tuple[tuple[float, float, float], str]:
+        """One reading's ``((Ux, Uy, Uz) µm, status)``, scalars (the daemon's path beside
+        :meth:`correct_point`); NaN when the status is not ``ok`` or the grid has no U."""
+        _, status = self.correct_point(point_mm, stylus_mm, temps_C, inputs, outside=outside)
+        if status != "ok" or self.uncertainty is None:
+            return _NAN3, status
+        p = np.asarray(point_mm, dtype=np.float64).reshape(1, 3)
+        u = self._expanded(p, stylus_mm, temps_C, inputs, np.array([status]))
+        return (float(u[0, 0]), float(u[0, 1]), float(u[0, 2])), status
 
     def error_um(
         self,

@@ -7,6 +7,9 @@ Layout: a NumPy ``.npz`` (zip) archive, read with ``allow_pickle=False``, holdin
   the runtime signals, stylus convention, build time and library version;
 * the payload arrays named in :data:`PAYLOAD_ARRAYS` (node quaternions (w, x, y, z),
   translations µm, per-signal sensitivity grids);
+* version 2 only (a grid carrying U): ``uncertainty_covariance`` (nx, ny, nz, 15), the residual
+  pose covariance per node, and the header object ``uncertainty`` (:mod:`.uncertainty`); it is a
+  payload array like the others (in the SHA-256, hence under the signature);
 * ``sha256``: the hex SHA-256 (as uint8) over every payload array (name, dtype, shape, bytes,
   in sorted order) followed by the header bytes;
 * optionally ``signature``: UTF-8 JSON (as uint8), an Ed25519 signature over the SHA-256 and the
@@ -45,8 +48,12 @@ G = TypeVar("G", bound="CorrectionGrid")
 __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "FORMAT_VERSION_UNCERTAINTY",
+    "OPTIONAL_ARRAYS",
     "PAYLOAD_ARRAYS",
     "SIGNATURE_MEMBER",
+    "SUPPORTED_VERSIONS",
+    "UNCERTAINTY_MEMBER",
     "GridContents",
     "GridFileError",
     "grid_header",
@@ -61,6 +68,13 @@ __all__ = [
 
 FORMAT_NAME = "cmm-grid"
 FORMAT_VERSION = 1
+#: Version 2 = version 1 + the ``uncertainty`` header object and the ``uncertainty_covariance``
+#: member (a grid carrying U). A grid without U is still written as version 1, byte for byte as
+#: before, so readers that know only version 1 keep reading it.
+FORMAT_VERSION_UNCERTAINTY = 2
+SUPPORTED_VERSIONS = (FORMAT_VERSION, FORMAT_VERSION_UNCERTAINTY)
+UNCERTAINTY_MEMBER = "uncertainty_covariance"  # (nx, ny, nz, 15), see .uncertainty
+OPTIONAL_ARRAYS = (UNCERTAINTY_MEMBER,)
 PAYLOAD_ARRAYS = (
     "q_work_stylus",  # (nx, ny, nz, 4) unit quaternions (w, x, y, z) of the error rotation
     "translation_um",  # (nx, ny, nz, 3) error translation at stylus offset 0, µm
@@ -100,7 +114,9 @@ def payload_sha256(arrays: Mapping[str, NDArray[Any]], header_bytes: bytes) -> s
 def write_grid_file(path: str | Path, header: Mapping[str, Any], arrays: Mapping[str, Any]) -> str:
     """Write atomically (temp file in the same folder, fsync, rename); return the SHA-256."""
     payload = {
-        name: np.ascontiguousarray(arrays[name], dtype=np.float64) for name in PAYLOAD_ARRAYS
+        name: np.ascontiguousarray(arrays[name], dtype=np.float64)
+        for name in (*PAYLOAD_ARRAYS, *OPTIONAL_ARRAYS)
+        if name in arrays
     }
     header_bytes = json.dumps(dict(header), sort_keys=True, indent=1).encode()
     sha = payload_sha256(payload, header_bytes)
@@ -116,7 +132,9 @@ def write_grid_members(
     signature: bytes | None,
 ) -> None:
     """Write the archive members as given (atomically, fsync); signing rewrites a file so."""
-    members: dict[str, Any] = {name: arrays[name] for name in PAYLOAD_ARRAYS}
+    members: dict[str, Any] = {
+        name: arrays[name] for name in (*PAYLOAD_ARRAYS, *OPTIONAL_ARRAYS) if name in arrays
+    }
     members["header"] = np.frombuffer(header_bytes, dtype=np.uint8)
     members["sha256"] = np.frombuffer(sha256.encode(), dtype=np.uint8)
     if signature is not None:
@@ -148,7 +166,11 @@ def read_grid_contents(path: str | Path) -> GridContents:
                 )
             header_bytes = npz["header"].tobytes()
             stored_sha = npz["sha256"].tobytes().decode("ascii", errors="replace")
-            arrays = {name: np.asarray(npz[name]) for name in PAYLOAD_ARRAYS}
+            arrays = {
+                name: np.asarray(npz[name])
+                for name in (*PAYLOAD_ARRAYS, *OPTIONAL_ARRAYS)
+                if name in names
+            }
             signature = npz[SIGNATURE_MEMBER].tobytes() if SIGNATURE_MEMBER in names else None
     except GridFileError:
         raise
@@ -174,10 +196,20 @@ def read_grid_contents(path: str | Path) -> GridContents:
             f"{source}: not a cmm-comp grid (format {fmt!r}, expected {FORMAT_NAME!r})"
         )
     version = header.get("format_version")
-    if version != FORMAT_VERSION:
+    if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
         raise GridFileError(
             f"{source}: unsupported grid format version {version!r} "
-            f"(this library reads version {FORMAT_VERSION})"
+            f"(this library reads versions {', '.join(map(str, SUPPORTED_VERSIONS))})"
+        )
+    has_u = UNCERTAINTY_MEMBER in arrays
+    if (version == FORMAT_VERSION_UNCERTAINTY) != has_u or (has_u != ("uncertainty" in header)):
+        raise GridFileError(
+            f"{source}: grid format version {version} "
+            + (
+                "needs the uncertainty member and header object"
+                if version == FORMAT_VERSION_UNCERTAINTY
+                else "cannot carry an uncertainty member or header object (that is version 2)"
+            )
         )
     for name, arr in arrays.items():
         if arr.dtype != np.float64:
@@ -205,9 +237,14 @@ def grid_header(grid: CorrectionGrid) -> dict[str, Any]:
     meta = dict(grid.metadata)
     machine = meta.pop("machine", {"name": "", "model": "", "sha256": ""})
     ref_c = next((s.reference for s in grid.signals if s.is_temperature), 20.0)
+    extra: dict[str, Any] = {}
+    if grid.uncertainty is not None:
+        extra["uncertainty"] = grid.uncertainty.to_header()
     return {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION,
+        "format_version": FORMAT_VERSION
+        if grid.uncertainty is None
+        else FORMAT_VERSION_UNCERTAINTY,
         "machine": machine,
         "volume": {"lower_mm": grid.lower_mm.tolist(), "upper_mm": grid.upper_mm.tolist()},
         "steps": list(grid.steps),
@@ -235,6 +272,7 @@ def grid_header(grid: CorrectionGrid) -> dict[str, Any]:
         "built_utc": meta.pop("built_utc", _dt.datetime.now(_dt.UTC).isoformat()),
         "library_version": meta.pop("library_version", _library_version()),
         **meta,
+        **extra,
     }
 
 
@@ -249,6 +287,8 @@ def save_grid(grid: CorrectionGrid, path: str | Path) -> str:
         "sensitivity_translation_um": grid.sensitivity_translation_um,
         "sensitivity_rotation_urad": grid.sensitivity_rotation_urad,
     }
+    if grid.uncertainty is not None:
+        arrays[UNCERTAINTY_MEMBER] = grid.uncertainty.covariance
     grid.sha256 = write_grid_file(path, header, arrays)
     return grid.sha256
 
@@ -272,6 +312,13 @@ def load_grid(
         verify(contents)
     header, arrays, sha = contents.header, contents.arrays, contents.sha256
     try:
+        uncertainty = None
+        if UNCERTAINTY_MEMBER in arrays:
+            from .uncertainty import GridUncertainty
+
+            uncertainty = GridUncertainty.from_header(
+                header["uncertainty"], arrays[UNCERTAINTY_MEMBER]
+            )
         machine = header["machine"]
         sigs = [
             GridSignal(str(s["name"]), float(s["reference"]), bool(s["needed"]))
@@ -301,6 +348,7 @@ def load_grid(
                 )
             },
             outside or header.get("outside_policy", "refuse"),
+            uncertainty,
         )
         if list(grid.steps) != list(header["steps"]):
             raise ValueError(f"header steps {header['steps']} do not match the arrays {grid.steps}")

@@ -1,0 +1,39 @@
+"""Public API of ``uncertainty`` (read by lazy_loader: names load on first use)."""
+
+from .adaptive import McResult, MonteCarloSettings, numerical_tolerance, run_monte_carlo
+from .fields import SquaredExponentialBasis, squared_exponential_basis
+from .model import TableUncertainty, UncertaintyModel, parse_uncertainty
+from .tasks import (
+    PointUncertainty,
+    TaskUncertainty,
+    e0_uncertainty,
+    flatness_uncertainty,
+    length_uncertainty,
+    plane_grid_points,
+    point_uncertainty,
+    sphere_probing_points,
+    sphere_uncertainty,
+)
+from .virtual_cmm import VirtualCMM
+
+__all__ = [
+    "McResult",
+    "MonteCarloSettings",
+    "PointUncertainty",
+    "SquaredExponentialBasis",
+    "TableUncertainty",
+    "TaskUncertainty",
+    "UncertaintyModel",
+    "VirtualCMM",
+    "e0_uncertainty",
+    "flatness_uncertainty",
+    "length_uncertainty",
+    "numerical_tolerance",
+    "parse_uncertainty",
+    "plane_grid_points",
+    "point_uncertainty",
+    "run_monte_carlo",
+    "sphere_probing_points",
+    "sphere_uncertainty",
+    "squared_exponential_basis",
+]

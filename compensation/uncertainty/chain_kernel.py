@@ -1,0 +1,125 @@
+"""The exact kinematic chain compiled (numba), for the many rows of a Monte Carlo.
+
+Identical mathematics to :func:`cmm_comp.compensation.kinematics.exact_pose` (full rigid-body
+transforms, ``R = Rx(εx)·Ry(εy)·Rz(εz)`` with exact sin/cos, squareness tilting the directions
+of travel; conventions in docs/conventions.md) — a test checks the two agree to 1e-9 µm — but
+one pass per row without temporary (N, 3, 3) arrays: ≈ 10× faster than the numpy form, which
+matters at millions of trials × points. Units: u mm, linear errors µm, angles and squareness
+µrad; out: rotation (R, 3, 3), translation µm.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+from numpy.typing import NDArray
+
+from ..kinematics import Chain
+from ..parametric_errors import AXIS_INDEX
+
+__all__ = ["chain_axes", "exact_pose_compiled"]
+
+FloatArray = NDArray[np.float64]
+
+
+def chain_axes(chain: Chain) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Axis indices of the tool side (base → stylus) and the workpiece side (base → work)."""
+    tool = np.array([AXIS_INDEX[a] for a in chain.tool], dtype=np.int64)
+    work = np.array([AXIS_INDEX[a] for a in chain.workpiece], dtype=np.int64)
+    return tool, work
+
+
+@njit(cache=True)
+def _rotation(ex, ey, ez, r):  # type: ignore[no-untyped-def]
+    """r[:] = Rx(ex)·Ry(ey)·Rz(ez), angles rad."""
+    cx, cy, cz = math.cos(ex), math.cos(ey), math.cos(ez)
+    sx, sy, sz = math.sin(ex), math.sin(ey), math.sin(ez)
+    r[0, 0] = cy * cz
+    r[0, 1] = -cy * sz
+    r[0, 2] = sy
+    r[1, 0] = cx * sz + sx * sy * cz
+    r[1, 1] = cx * cz - sx * sy * sz
+    r[1, 2] = -sx * cy
+    r[2, 0] = sx * sz - cx * sy * cz
+    r[2, 1] = sx * cz + cx * sy * sz
+    r[2, 2] = cx * cy
+
+
+@njit(cache=True, parallel=True)
+def _exact_rows(tool, work, u, errors, sq, out_rot, out_t):  # type: ignore[no-untyped-def]
+    n = u.shape[0]
+    for row in prange(n):
+        d = np.zeros((3, 3))  # d[k] = direction of travel of axis k
+        alpha, beta1, beta2 = sq[row, 0] * 1e-6, sq[row, 1] * 1e-6, sq[row, 2] * 1e-6
+        d[0, 0] = math.cos(alpha)
+        d[0, 1] = -math.sin(alpha)
+        d[1, 1] = 1.0
+        d[2, 0] = -math.sin(beta1) * math.cos(beta2)
+        d[2, 1] = -math.sin(beta2)
+        d[2, 2] = math.cos(beta1) * math.cos(beta2)
+        rk = np.empty((3, 3))
+        acc = np.eye(3)
+        tmp = np.empty((3, 3))
+        v = np.zeros(3)
+        w = np.empty(3)
+        for j in range(tool.shape[0] - 1, -1, -1):  # stylus side first
+            k = tool[j]
+            _rotation(
+                errors[row, k, 3] * 1e-6, errors[row, k, 4] * 1e-6, errors[row, k, 5] * 1e-6, rk
+            )
+            for i in range(3):
+                w[i] = (
+                    rk[i, 0] * v[0]
+                    + rk[i, 1] * v[1]
+                    + rk[i, 2] * v[2]
+                    + errors[row, k, i] * 1e-3
+                    + u[row, k] * d[k, i]
+                )
+            for i in range(3):
+                v[i] = w[i]
+                for c in range(3):
+                    tmp[i, c] = rk[i, 0] * acc[0, c] + rk[i, 1] * acc[1, c] + rk[i, 2] * acc[2, c]
+            for i in range(3):
+                for c in range(3):
+                    acc[i, c] = tmp[i, c]
+        for j in range(work.shape[0]):  # base → workpiece: p_work = T⁻¹ · p
+            k = work[j]
+            _rotation(
+                errors[row, k, 3] * 1e-6, errors[row, k, 4] * 1e-6, errors[row, k, 5] * 1e-6, rk
+            )
+            for i in range(3):
+                w[i] = v[i] + u[row, k] * d[k, i] + errors[row, k, i] * 1e-3
+            for i in range(3):  # rkᵀ · w
+                v[i] = rk[0, i] * w[0] + rk[1, i] * w[1] + rk[2, i] * w[2]
+                for c in range(3):
+                    tmp[i, c] = rk[0, i] * acc[0, c] + rk[1, i] * acc[1, c] + rk[2, i] * acc[2, c]
+            for i in range(3):
+                for c in range(3):
+                    acc[i, c] = tmp[i, c]
+        for i in range(3):
+            out_t[row, i] = (v[i] - u[row, i]) * 1000.0
+            for c in range(3):
+                out_rot[row, i, c] = acc[i, c]
+
+
+def exact_pose_compiled(
+    chain: Chain | tuple[NDArray[np.int64], NDArray[np.int64]],
+    u_mm: FloatArray,
+    errors: FloatArray,
+    squareness_urad: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`..kinematics.exact_pose` compiled: ``(R_work_stylus (N, 3, 3), t_um (N, 3))``.
+
+    ``chain`` a :class:`Chain` or its :func:`chain_axes`; ``u_mm`` (N, 3) positions from the
+    reference, ``errors`` (N, 3, 6) µm/µrad, ``squareness_urad`` (N, 3)."""
+    tool, work = chain_axes(chain) if isinstance(chain, Chain) else chain
+    u = np.ascontiguousarray(u_mm, dtype=np.float64)
+    e = np.ascontiguousarray(errors, dtype=np.float64)
+    s = np.ascontiguousarray(squareness_urad, dtype=np.float64)
+    n = u.shape[0]
+    rot = np.empty((n, 3, 3))
+    t = np.empty((n, 3))
+    _exact_rows(tool, work, u, e, s, rot, t)
+    return rot, t
