@@ -73,18 +73,29 @@ def test_a_reading_that_never_completes_does_not_stop_the_log(tmp_path: Path, wr
     ids = CanIds(node_id=cfg.can.node_id)
     n = 30
     with DaemonService(cfg, events_stream=None) as d:
+        assert d.logger is not None
+        counters_logged = [0]
+        log = d.logger.log
+
+        def counting_log(topic, payload, *args, **kw):
+            if topic == "/cmm/counters":
+                counters_logged[0] += 1
+            return log(topic, payload, *args, **kw)
+
+        d.logger.log = counting_log  # type: ignore[method-assign]
         bus = can.Bus(interface="virtual", channel=cfg.can.channel)
         try:
             with CanController(bus, answer_timeout_s=10.0) as ctl:
                 send_temps(ctl)
-                time.sleep(0.02)
                 answers = [ctl.exchange(RawReading(100 + i, CENTRE_MM)) for i in range(n // 2)]
                 for ax in (Axis.X, Axis.Y):  # Z never comes
                     bus.send(encode_message(RawAxis(ax, 5, round(CENTRE_MM[ax] * 1e6)), ids))
                 assert ctl.wait_answer(5, 10.0).status == "incomplete_reading"
                 assert _wait(lambda: d.metrics.answers.get("incomplete_reading", 0) == 1)
                 answers += [ctl.exchange(RawReading(100 + i, CENTRE_MM)) for i in range(n // 2, n)]
-                time.sleep(2.5 * cfg.metrics.period_s)  # counters of that period published
+                # the counters of the period holding these answers are published (no clock)
+                after = counters_logged[0]
+                assert _wait(lambda: counters_logged[0] >= max(2, after + 1), 60.0)
         finally:
             bus.shutdown()
         logger = d.logger
@@ -153,3 +164,34 @@ def test_an_existing_explicit_log_path_is_rotated_never_refused_or_overwritten(
         assert session["file"] == expected.name and session["requested_file"] == "session.mcap"
     assert first.read_bytes() == b"an earlier session"
     assert (tmp_path / "session.1.mcap").read_bytes() == b"another one"
+
+
+def test_log_drops_reach_the_status_page_exactly(tmp_path: Path) -> None:
+    """Drops of the session log are in the daemon's status (Prometheus), per topic and in
+    total, exactly: after the log stopped, 5 + 2 ``/cmm/modbus`` records (a topic this daemon,
+    Modbus off, never logs itself) are dropped and counted."""
+    import urllib.request
+
+    cfg = base_config(channel())
+    cfg.metrics.enabled = True
+    cfg.metrics.port = 0
+    cfg.mcap.path = str(tmp_path / "s.mcap")
+    cfg.mcap.writer = "thread"
+    cfg.check()
+    record = {"op": "read", "address": 0, "count": 1, "values": [1]}
+    with DaemonService(cfg, events_stream=None) as d:
+        assert d.logger is not None and d.metrics_server is not None
+        assert d.logger.stop(30.0)
+        assert d.logger.log_many("/cmm/modbus", [record] * 5) == 0
+        assert d.logger.log("/cmm/modbus", record) is False
+        assert d.logger.log("/cmm/modbus", record) is False
+        with urllib.request.urlopen(d.metrics_server.url, timeout=10) as resp:
+            text = resp.read().decode()
+    values = {
+        line.split()[0]: float(line.split()[1])
+        for line in text.splitlines()
+        if line.startswith("cmm_comp_mcap_")
+    }
+    assert values["cmm_comp_mcap_dropped_modbus"] == 7
+    per_topic = sum(v for k, v in values.items() if k.startswith("cmm_comp_mcap_dropped_"))
+    assert values["cmm_comp_mcap_dropped"] == per_topic >= 7

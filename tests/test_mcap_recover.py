@@ -169,6 +169,9 @@ def test_thread_writer_killed_at_a_random_moment_loses_only_the_last_chunk(
             time.sleep(0.01)
         assert "ready" in lines, "writer did not start"
         time.sleep(random.Random(seed).uniform(0.3, 1.5))
+        t0 = time.monotonic()  # a loaded machine: at least one flush acknowledged first
+        while not any(x.isdigit() and int(x) > 0 for x in lines) and time.monotonic() - t0 < 60:
+            time.sleep(0.01)
         acknowledged = max((int(x) for x in lines if x.isdigit()), default=0)
     finally:
         proc.send_signal(signal.SIGKILL)
@@ -192,7 +195,8 @@ def test_process_writer_child_killed_at_a_random_moment_loses_only_the_last_chun
     )
     deadline = time.monotonic() + random.Random(seed).uniform(0.3, 1.5)
     i = 0
-    while time.monotonic() < deadline:
+    # until the random moment, and until the child acknowledged a flush (a loaded machine)
+    while time.monotonic() < deadline or (lg.stats().flushed == 0 and i < 200_000):
         lg.log("/cmm/raw", {"seq": i, "x_mm": i * 0.001, "y_mm": 0.0, "z_mm": 0.0})
         i += 1
         time.sleep(0.0005)

@@ -151,7 +151,7 @@ def test_truncated_header_then_silence_closes_as_a_bad_frame() -> None:
 
 
 def test_idle_connection_is_closed_and_reported() -> None:
-    with threaded_server(MapDevice(), idle_timeout_s=0.3) as served:
+    with threaded_server(MapDevice(), idle_timeout_s=1.0) as served:
         with RawClient(served.port) as raw:
             assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x01"
             raw.wait_eof(WAIT_S)  # closed by the server, within a generous bound

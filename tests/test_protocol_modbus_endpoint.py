@@ -117,10 +117,10 @@ def test_flood_of_garbage_and_wrong_units_logs_a_bounded_number_of_lines(
 
 
 def test_idle_connection_closed_and_counted() -> None:
-    with modbus_daemon(idle_timeout_s=0.3) as (d, port, lines):
+    with modbus_daemon(idle_timeout_s=1.0) as (d, port, lines):
         with RawClient(port) as raw:
             assert raw.request(READ_INFO) == INFO_RESPONSE
-            raw.wait_eof()  # the daemon closes it: no data for 0.3 s
+            raw.wait_eof()  # the daemon closes it: no data for 1 s
         assert wait_for(lambda: d.metrics.get("modbus_idle_closed") == 1)
         assert d.metrics.get("modbus_connections") == 1
         assert 'cmm_comp_events_total{kind="modbus_idle_closed"} 1' in prometheus(d)

@@ -202,7 +202,9 @@ def child_main(
     except (EOFError, OSError):  # the parent died (EOF or broken pipe): finish the file
         parent_alive = False
     finally:
-        logger.stop(3600.0)  # the parent bounds the wait (and kills us if it must)
+        # drain and finish the file here, at this thread's normal priority: the writer thread
+        # at SCHED_IDLE gets next to no CPU on a saturated machine (the parent bounds the wait)
+        logger.finish_here(1.0)
         if parent_alive:
             with contextlib.suppress(OSError):
                 report("done")
