@@ -80,6 +80,12 @@ class Effect:
     def add_direct(self, ctx: EvalContext) -> None:
         """Hook 3: add to ``ctx.direct_um`` in place."""
 
+    def shortest_wavelength_mm(self) -> dict[str, float]:
+        """Per axis, the shortest spatial wavelength (mm) of this effect's shape along it: what
+        a correction grid's node spacing must resolve (empty for effects no finer than a few
+        oscillations over the volume, which the default grid already follows)."""
+        return {}
+
     def to_table(self) -> dict[str, Any]:
         """The ``[[effects]]`` table that recreates this effect (``cause`` included)."""
         raise NotImplementedError

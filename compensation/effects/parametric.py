@@ -112,6 +112,13 @@ class ParametricEffect(Effect):
             out = out + (c if k == 0 else c * legendre_shape(q_axis_mm, ref_mm, self.span_mm, k))
         return out
 
+    def shortest_wavelength_mm(self) -> dict[str, float]:
+        """A Legendre shape of order n has n zeros over the span: wavelength ≈ 2·span/n."""
+        n = max(self.orders, default=0)
+        if self.component in SQUARENESS or n < 1:
+            return {}
+        return {self.component[-1]: 2.0 * abs(self.span_mm[1] - self.span_mm[0]) / n}
+
     def modify_errors(self, ctx: EvalContext) -> None:
         if self.component in SQUARENESS:
             add_to_component(ctx, self.component, np.full(ctx.n, self.coefficients[0]))
@@ -357,6 +364,10 @@ class PeriodicEffect(Effect):
         w = 2.0 * math.pi * harmonic / self.period_mm
         q = np.asarray(q_mm, dtype=float)
         return np.cos(w * q) - math.cos(w * ref_mm), np.sin(w * q) - math.sin(w * ref_mm)
+
+    def shortest_wavelength_mm(self) -> dict[str, float]:
+        """The period of the highest harmonic."""
+        return {self.axis: self.period_mm / (1 + len(self.harmonics_um))}
 
     def modify_errors(self, ctx: EvalContext) -> None:
         k = AXIS_INDEX[self.axis]

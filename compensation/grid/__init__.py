@@ -23,8 +23,11 @@ from .build import (
     MAX_NODES,
     MAX_STEPS_PER_AXIS,
     MIN_STEPS_PER_AXIS,
+    NODES_PER_WAVELENGTH,
     MachineLike,
     default_steps,
+    effect_steps,
+    unresolved_effects,
 )
 from .correction_grid import CorrectionGrid
 from .file import GridFileError
@@ -38,6 +41,7 @@ __all__ = [
     "MAX_NODES",
     "MAX_STEPS_PER_AXIS",
     "MIN_STEPS_PER_AXIS",
+    "NODES_PER_WAVELENGTH",
     "STATUS_DTYPE",
     "VOLUME_TOL_MM",
     "CorrectionGrid",
@@ -46,8 +50,10 @@ __all__ = [
     "GridSignatureError",
     "MachineLike",
     "default_steps",
+    "effect_steps",
     "generate_signing_key",
     "make_grid_continuous",
     "point_status",
     "sign_grid",
+    "unresolved_effects",
 ]

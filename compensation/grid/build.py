@@ -26,12 +26,15 @@ __all__ = [
     "MAX_NODES",
     "MAX_STEPS_PER_AXIS",
     "MIN_STEPS_PER_AXIS",
+    "NODES_PER_WAVELENGTH",
     "TABLE_SPACING_FACTOR",
     "MachineLike",
     "build_from_machine",
     "check_steps",
     "default_steps",
+    "effect_steps",
     "grid_from_poses",
+    "unresolved_effects",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -50,14 +53,69 @@ TABLE_SPACING_FACTOR = 0.6
 MAX_DEFAULT_STEPS = 100
 
 
+#: Nodes per shortest wavelength of an effect's shape (a cyclic error, a table change of high
+#: order): the not-a-knot cubic spline through 8 nodes per period follows a sine to ~0.2 %.
+NODES_PER_WAVELENGTH = 8
+
+
+def _wavelengths(machine: Any) -> list[tuple[int, str, float]]:
+    """(axis index, cause, shortest wavelength mm) of every effect with a fine shape."""
+    out: list[tuple[int, str, float]] = []
+    for effect in getattr(machine, "effects", []):
+        hook = getattr(effect, "shortest_wavelength_mm", None)
+        for axis, wavelength in (hook() if callable(hook) else {}).items():
+            if wavelength > 0 and np.isfinite(wavelength):
+                out.append(("xyz".index(axis), str(getattr(effect, "cause", "")), wavelength))
+    return out
+
+
+def effect_steps(machine: Any) -> list[int]:
+    """Nodes per axis the machine's effects need: :data:`NODES_PER_WAVELENGTH` per shortest
+    wavelength (0 where no effect asks for more than the default)."""
+    vol = machine.volume
+    length = np.asarray(vol.upper_mm, dtype=np.float64) - np.asarray(vol.lower_mm, np.float64)
+    need = [0, 0, 0]
+    for k, _cause, wavelength in _wavelengths(machine):
+        if length[k] > 0:
+            n = int(np.ceil(NODES_PER_WAVELENGTH * length[k] / wavelength)) + 1
+            need[k] = max(need[k], n)
+    return need
+
+
+def unresolved_effects(machine: Any, steps: Sequence[int]) -> list[dict[str, Any]]:
+    """Effects whose shape the node spacing of ``steps`` follows with fewer than
+    :data:`NODES_PER_WAVELENGTH` nodes per wavelength: ``{"axis", "cause", "wavelength_mm",
+    "nodes_per_wavelength"}`` each (the grid's interpolation misses part of them)."""
+    vol = machine.volume
+    length = np.asarray(vol.upper_mm, dtype=np.float64) - np.asarray(vol.lower_mm, np.float64)
+    out: list[dict[str, Any]] = []
+    for k, cause, wavelength in _wavelengths(machine):
+        if length[k] <= 0:
+            continue
+        per = (int(steps[k]) - 1) * wavelength / float(length[k])
+        if per < NODES_PER_WAVELENGTH:
+            out.append(
+                {
+                    "axis": "xyz"[k],
+                    "cause": cause,
+                    "wavelength_mm": float(wavelength),
+                    "nodes_per_wavelength": float(per),
+                }
+            )
+    return out
+
+
 def default_steps(machine: Any) -> tuple[int, int, int]:
     """Nodes per axis when none are given: ``volume.steps`` (or :data:`DEFAULT_STEPS`), raised
     so the node spacing is at most ``TABLE_SPACING_FACTOR`` × the finest spacing of the tabulated
-    errors of that axis (at most :data:`MAX_DEFAULT_STEPS`)."""
+    errors of that axis (at most :data:`MAX_DEFAULT_STEPS`), and so the effects' shortest
+    wavelengths get :data:`NODES_PER_WAVELENGTH` nodes each (:func:`effect_steps`, at most
+    :data:`MAX_STEPS_PER_AXIS`); beyond :data:`MAX_NODES` the finest axis gives way."""
     vol = machine.volume
     base = list(getattr(vol, "steps", None) or DEFAULT_STEPS)
     lo = np.asarray(vol.lower_mm, dtype=np.float64)
     hi = np.asarray(vol.upper_mm, dtype=np.float64)
+    effect_need = effect_steps(machine)
     for table in getattr(machine, "tables", {}).values():
         pos = getattr(table, "position_mm", None)
         axis = getattr(getattr(table, "component", None), "axis", None)
@@ -68,6 +126,13 @@ def default_steps(machine: Any) -> tuple[int, int, int]:
         if spacing > 0:
             need = int(np.ceil((hi[k] - lo[k]) / (TABLE_SPACING_FACTOR * spacing))) + 1
             base[k] = max(base[k], min(need, MAX_DEFAULT_STEPS))
+    for k, n in enumerate(effect_need):
+        base[k] = max(base[k], min(n, MAX_STEPS_PER_AXIS))
+    # within the memory budget: the finest axis gives way first (what is left unresolved is
+    # recorded in the grid's metadata, see unresolved_effects)
+    while base[0] * base[1] * base[2] > MAX_NODES:
+        k = int(np.argmax(base))
+        base[k] = max(MIN_STEPS_PER_AXIS, int(MAX_NODES // (base[0] * base[1] * base[2] / base[k])))
     return (int(base[0]), int(base[1]), int(base[2]))
 
 
@@ -181,6 +246,7 @@ def build_from_machine(
         "reference_mm": np.asarray(getattr(vol, "reference_mm", lo), float).tolist(),
         "nonlinearity": nonlin,
         "signal_filters": [f.to_header() for f in signal_filters(getattr(machine, "effects", []))],
+        "unresolved_effects": unresolved_effects(machine, steps_ok),
     }
     return cls(
         lo,
