@@ -241,7 +241,7 @@ def export_tables(
                     "min_mm": t.knots.start_mm,
                     "max_mm": t.knots.end_mm,
                     "step_mm": t.knots.step_mm,
-                    "max_abs_mm": float(np.max(np.abs(t.values_mm))),
+                    "max_abs_mm": round(float(np.max(np.abs(t.values_mm))), 7),
                 }
             )
         extra["limits"] = {
@@ -337,13 +337,32 @@ def export_tables(
         },
         "uncompensated_um": raw,
         "residual_um": residual,
-        "left_out": left_out(d, plan),
+        "left_out": _with_remainder(left_out(d, plan), residual),
         "not_modelled_here": _runtime_parts(machine),
         "convention": "error = true - indicated (µm); residual = model error - what the tables "
         "take off, evaluated as the control interpolates; RMS and max of the 3-D vector",
         **extra,
     }
     return ExportResult(fmt, files, report, tables_info, represented, d, plan, residual)
+
+
+def _with_remainder(rows: list[dict[str, Any]], residual: dict[str, Any]) -> list[dict[str, Any]]:
+    """``rows`` plus, per output axis, what the measured residual holds beyond them:
+    interpolation between points, value rounding and three-axis terms."""
+    out = list(rows)
+    for a, stats in residual["per_axis"].items():
+        listed = sum(r["rms_um"] ** 2 for r in rows if r["output"] == a.upper())
+        rest = stats["rms"] ** 2 - listed
+        if rest >= 1e-6:
+            out.append(
+                {
+                    "output": a.upper(),
+                    "part": "interpolation between points, rounding, three-axis terms (measured)",
+                    "rms_um": float(np.sqrt(rest)),
+                }
+            )
+    out.sort(key=lambda r: -r["rms_um"])
+    return out
 
 
 def _runtime_parts(machine: Machine) -> list[str]:

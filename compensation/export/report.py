@@ -155,6 +155,7 @@ def export_html(result: ExportResult, png: bytes) -> str:
 body {{ font-family: sans-serif; margin: 1.5em; color: #222; max-width: 1400px; }}
 table {{ border-collapse: collapse; margin: 0.5em 0 1em; font-size: 13px; }}
 td, th {{ border: 1px solid #bbb; padding: 2px 8px; text-align: right; }}
+table.left td:nth-child(2) {{ text-align: left; }}
 th {{ background: #eee; }} tr.total td {{ font-weight: bold; }}
 .cols {{ display: flex; gap: 2em; flex-wrap: wrap; }}
 img {{ max-width: 100%; border: 1px solid #ccc; }}
@@ -170,7 +171,7 @@ interpolates them.</p>
 {extra}
 </div><div>
 <h2>Left for the daemon (≈ RMS, µm)</h2>
-<table><tr><th>output</th><th>part</th><th>RMS</th></tr>{left}</table>
+<table class="left"><tr><th>output</th><th>part</th><th>RMS</th></tr>{left}</table>
 </div></div>
 <img alt="tables vs model" src="data:image/png;base64,{img}">
 <h2>Tables</h2>
