@@ -121,23 +121,6 @@ def test_drift_is_named_and_extend_leaves_it_out(npl: Machine, tmp_path: Path) -
     assert "drift" not in (tmp_path / "x.toml").read_text()
 
 
-@pytest.mark.parametrize(
-    "effect",
-    [
-        CouplingEffect(
-            "ey_x", "y", [1.0, -2.0, 0.5], (0.0, 900.0), (0.0, 1150.0), (0, 1, 2), (1,), 3.0
-        ),
-        CouplingEffect(
-            "ez_y", "x", [1.0, 2.0, 3.0, 4.0], (0.0, 1150.0), (0.0, 900.0), (0, 1), (1, 2)
-        ),
-        CouplingEffect(
-            "ey_z", "x", [0.5, 1.0], (0.0, 600.0), (0.0, 900.0), (1, 2), (1,), -1.0, [2.0, -0.5]
-        ),
-        PeriodicEffect("x", 37.5, 1.0, -0.5, [[0.3, 0.1], [0.0, -0.2]]),
-        DriftEffect("y", (0.0, 3600.0), [1.0, 2.0], [0.5, -1.0, 0.25]),
-        ThermalGradientEffect("y", 4.0, -2.0, 0.7, 0.3, 1.1, offset_um_per_C=-0.6),
-    ],
-)
 def _term(npl: Machine, effect, q, signals):
     """What ``effect``'s own hooks add (errors, squareness, direct), evaluated directly — not
     through ``Machine.with_effects``, which itself goes through the effect's table."""
