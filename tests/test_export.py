@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -117,8 +115,14 @@ def test_direction_tables_carry_the_reversal_exactly() -> None:
     machine = Machine.from_parts(model="MB1", volume=((0, 600), (0, 400), (0, 300))).with_effects(
         [ReversalEffect("x", [1.5, 0.4], (0.0, 600.0))]
     )
-    for fmt, tol in (("sinumerik-cec", 0.051), ("twincat-cnc", 0.051), ("linuxcnc", 1e-3)):
-        result = export_tables(machine, fmt, (0, 0, 0), ExportOptions(**FAST))
+    for fmt, tol, file_type in (
+        ("sinumerik-cec", 0.051, 0),
+        ("twincat-cnc", 0.051, 0),
+        ("linuxcnc", 1e-3, 0),
+        ("linuxcnc", 1e-3, 1),
+    ):
+        opts = ExportOptions(linuxcnc_file_type=file_type, **FAST)
+        result = export_tables(machine, fmt, (0, 0, 0), opts)
         rep = result.report
         measured = _measured(machine, fmt, result.files, rep)
         _assert_same_residual(measured, rep["residual_um"])
@@ -243,6 +247,21 @@ def test_limits_and_bad_input() -> None:
         export_tables(machine, "linuxcnc", None, ExportOptions(eval_steps=(1, 5, 5)))
     with pytest.raises(ExportError, match="--format"):
         export_tables(machine, "heidenhain", None)
+    with pytest.raises(ExportError, match="axis-names"):
+        export_tables(machine, "sinumerik-cec", None, ExportOptions(cec_axis_names=("X1", ")", "")))
+    with pytest.raises(ExportError, match=r"distinct integers in 1…"):
+        export_tables(machine, "twincat-cnc", None, ExportOptions(twincat_axis_numbers=(0, 1, 2)))
+    with pytest.raises(ExportError, match="distinct"):
+        export_tables(machine, "linuxcnc", None, ExportOptions(linuxcnc_joints=(0, 0, 1)))
+    for bad_sum in (float("nan"), -1.0, float("inf")):
+        with pytest.raises(ExportError, match="cec-max-sum-mm"):
+            export_tables(
+                machine, "sinumerik-cec", None, ExportOptions(cec_max_sum_mm=bad_sum, **FAST)
+            )
+    with pytest.raises(ExportError, match="max-tables"):
+        export_tables(machine, "sinumerik-cec", None, ExportOptions(max_tables=0, **FAST))
+    with pytest.raises(ExportError, match="at least 2"):
+        export_tables(machine, "twincat-cnc", None, ExportOptions(points=-3))
     # errors beyond the format's value range: a clear error, never a limited table
     big = Machine.from_parts(
         model="MB1",
@@ -262,57 +281,35 @@ def test_limits_and_bad_input() -> None:
         export_tables(huge, "twincat-cnc", (0, 0, 0), ExportOptions(**FAST))
 
 
-def _cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "export", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        timeout=120,
-    )
+def test_cli_writes_everything_and_refuses_bad_input(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The command line in process (``cmm_comp.cli.main``: the same code as the entry point)."""
+    from cmm_comp.cli.main import main
 
-
-def test_cli_writes_everything_and_refuses_bad_input(tmp_path: Path) -> None:
     golden = str(GOLDEN / "golden-machine.toml")
     out = tmp_path / "cec"
-    run = _cli(
-        [
-            golden,
-            "--format",
-            "sinumerik-cec",
-            "--points",
-            "11",
-            "--eval-steps",
-            "9",
-            "7",
-            "5",
-            "-o",
-            str(out),
-        ],
-        tmp_path,
-    )
-    assert run.returncode == 0, run.stderr
-    assert {p.name for p in out.iterdir()} == {
-        "NC_CEC.INI",
-        "export.json",
-        "export.png",
-        "export.html",
-    }
+    args = ["export", golden, "--format", "sinumerik-cec", "--points", "11"]
+    assert main([*args, "--eval-steps", "9", "7", "5", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    names = {p.name for p in out.iterdir()}
+    assert names == {"NC_CEC.INI", "export.json", "export.png", "export.html"}
     report = json.loads((out / "export.json").read_text(encoding="utf-8"))
-    assert f"RMS {report['residual_um']['rms']:.3f} µm" in run.stdout
+    assert f"RMS {report['residual_um']['rms']:.3f} µm" in printed
     assert (out / "export.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "data:image/png;base64," in (out / "export.html").read_text(encoding="utf-8")
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    for args, message in (
+    for bad, message in (
+        (["--format", "linuxcnc", "--tool", "0", "nan", "0", "-o", str(tmp_path / "a")], "finite"),
+        (["--format", "linuxcnc", "--tool", "0", "0", "inf", "-o", str(tmp_path / "b")], "finite"),
+        (["--format", "linuxcnc", "-o", str(out)], "not empty"),
         (
-            [golden, "--format", "linuxcnc", "--tool", "0", "nan", "0", "-o", str(tmp_path / "a")],
-            "finite",
+            ["--format", "sinumerik-cec", "--points", "500", "-o", str(tmp_path / "c")],
+            "at most 200",
         ),
-        ([golden, "--format", "linuxcnc", "-o", str(out)], "not empty"),
     ):
-        bad = _cli(args, tmp_path)
-        assert bad.returncode == 2, bad.stderr
-        lines = bad.stderr.strip().splitlines()
-        assert lines[-1].startswith("cmm-comp: error: ") and message in lines[-1], bad.stderr
-        assert "Traceback" not in bad.stderr
-    assert not (tmp_path / "a").exists()
+        assert main(["export", golden, *bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("cmm-comp: error: ") and message in err[-1], err
+    assert not any((tmp_path / n).exists() for n in ("a", "b", "c"))
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # nothing lost

@@ -11,6 +11,7 @@ combination of travel directions of the axes whose error depends on it. Units: m
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from itertools import product
@@ -106,6 +107,32 @@ def _points(machine: Machine, fmt: str, opts: ExportOptions) -> tuple[list[int],
     return counts, limit, source
 
 
+_AXIS_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,15}$")
+
+
+def _check_axes(fmt: str, opts: ExportOptions) -> None:
+    """Axis names are identifiers (letter first, ≤ 16 letters, digits, _); TwinCAT logical axis
+    numbers are distinct and ≥ 1 (0 is not allowed), LinuxCNC joints distinct and ≥ 0."""
+    names = opts.cec_axis_names if fmt == "sinumerik-cec" else opts.twincat_axis_names
+    named = len(names) == 3 and all(isinstance(n, str) and _AXIS_NAME.match(n) for n in names)
+    if fmt != "linuxcnc" and not named:
+        raise ExportError(
+            f"--axis-names needs 3 identifiers (a letter, then letters, digits or _; at most "
+            f"16), got {list(names)}"
+        )
+    numbers, low, what = (
+        (opts.twincat_axis_numbers, 1, "TwinCAT logical axis numbers")
+        if fmt == "twincat-cnc"
+        else (opts.linuxcnc_joints, 0, "LinuxCNC joint numbers")
+    )
+    if fmt != "sinumerik-cec" and (
+        len(set(numbers)) != 3 or any(int(n) != n or n < low or n > 65535 for n in numbers)
+    ):
+        raise ExportError(
+            f"--axis-numbers: {what} must be 3 distinct integers in {low}…65535, got {list(numbers)}"
+        )
+
+
 def _check_eval_steps(steps: Sequence[int]) -> tuple[int, int, int]:
     if len(steps) != 3 or any(int(s) != s or s < 2 or s > _MAX_EVAL_STEPS for s in steps):
         raise ExportError(
@@ -185,6 +212,7 @@ def export_tables(
     opts = options or ExportOptions()
     say = progress or (lambda _line: None)
     tool = _check_tool(machine, machine.probe.offset_mm if tool_mm is None else tool_mm)
+    _check_axes(fmt, opts)
     steps = _check_eval_steps(opts.eval_steps)
     counts, limit, source = _points(machine, fmt, opts)
     lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
