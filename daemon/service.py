@@ -49,6 +49,12 @@ _COMPRESSION = {
 }
 
 
+SIGTERM_STOP_S = 12.0
+"""Time a SIGTERM/SIGINT stop may take, s, most of it the session log finishing its file: a
+loaded machine serves the log's writer last, and what it has not written when the time is up
+is lost (counted). Below the shipped systemd unit's ``TimeoutStopSec=15``."""
+
+
 class DaemonService:
     """All daemon parts wired together. Context manager; ``stop(timeout_s)``.
 
@@ -220,7 +226,7 @@ class DaemonService:
             if self._reload_requested.is_set():
                 self._reload_requested.clear()
                 self.request_reload()
-        self.stop()
+        self.stop(SIGTERM_STOP_S)
         return 0
 
     # ------------------------------------------------------------------ grid
