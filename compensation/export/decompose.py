@@ -31,13 +31,16 @@ from scipy.linalg import cho_factor, cho_solve, solve_triangular
 
 from ..machine import Machine
 from ..parametric_errors import AXES
-from .splines import FloatArray, Knots, axis_nodes, hat_matrix, mass_matrix, project
+from .splines import FloatArray, Knots, axis_nodes, coarser, evaluate, mass_matrix, project
 
 __all__ = ["Decomposition", "Interaction", "decompose", "direction_axes", "model_error_um"]
 
 #: Nodes per averaged axis: composite 3-point Gauss on this many pieces of the travel.
 _AVERAGE_PIECES = 4
 _PAIR_AVERAGE_PIECES = 2
+#: Two-axis terms are smooth (an angular error times an arm): they are fitted on at most this many
+#: points per axis (every r-th point of the table), then read at every point of the table.
+_PAIR_MAX_POINTS = 121
 
 
 @dataclass
@@ -153,8 +156,9 @@ def _pair(
     """Product terms (up to ``ranks`` per output) of the (a, b) interaction of every output, and
     the whole interaction's mean square per output (direction signals at 0)."""
     c = 3 - a - b
-    na, wa = axis_nodes(knots[a], lo[a], hi[a], 2)
-    nb, wb = axis_nodes(knots[b], lo[b], hi[b], 2)
+    ka, kb = coarser(knots[a], _PAIR_MAX_POINTS), coarser(knots[b], _PAIR_MAX_POINTS)
+    na, wa = axis_nodes(ka, lo[a], hi[a], 2)
+    nb, wb = axis_nodes(kb, lo[b], hi[b], 2)
     nc, wc = _average_nodes(lo[c], hi[c], _PAIR_AVERAGE_PIECES)
     nodes: list[FloatArray] = [np.empty(0)] * 3
     nodes[a], nodes[b], nodes[c] = na, nb, nc
@@ -166,15 +170,16 @@ def _pair(
     col = np.einsum("abk,a->bk", f, wa)
     tot = np.einsum("ak,a->k", row, wa)
     f = f - row[:, None, :] - col[None, :, :] + tot[None, None, :]
-    ba, ma = mass_matrix(knots[a], na, wa)
-    bb, mb = mass_matrix(knots[b], nb, wb)
+    ba, ma_sparse = mass_matrix(ka, na, wa)
+    bb, mb_sparse = mass_matrix(kb, nb, wb)
+    ma, mb = ma_sparse.toarray(), mb_sparse.toarray()
     la = np.linalg.cholesky(ma)
     lb = np.linalg.cholesky(mb)
     fa, fb = cho_factor(ma), cho_factor(mb)
     out: list[Interaction] = []
     totals = np.zeros(3)
     for k in range(3):
-        rhs = ba.T @ (wa[:, None] * f[:, :, k] * wb[None, :]) @ bb
+        rhs = np.asarray((bb.T @ (ba.T @ (wa[:, None] * f[:, :, k] * wb[None, :])).T).T)
         coef = cho_solve(fb, cho_solve(fa, rhs).T).T  # Ma⁻¹ rhs Mb⁻¹
         x = la.T @ coef @ lb
         u_s, s, vt = np.linalg.svd(x, full_matrices=False)
@@ -182,6 +187,9 @@ def _pair(
         for r in range(min(ranks, len(s))):
             u = solve_triangular(la.T, u_s[:, r] * s[r], lower=False)
             v = solve_triangular(lb.T, vt[r, :], lower=False)
+            # the coarse points are every r-th table point: the same function at every point
+            u = evaluate(ka, u, knots[a].positions())
+            v = evaluate(kb, v, knots[b].positions())
             out.append(Interaction(a=a, b=b, k=k, rank=r + 1, u=u, v=v, energy=float(s[r] ** 2)))
     return out, totals
 
@@ -255,8 +263,3 @@ def decompose(
         interactions=interactions,
         pair_energy=pair_energy,
     )
-
-
-def evaluate_table(knots: Knots, values: FloatArray, q_mm: FloatArray) -> FloatArray:
-    """A table's value at axis positions (linear interpolation, end values held)."""
-    return hat_matrix(knots, q_mm) @ values

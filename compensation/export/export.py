@@ -35,6 +35,8 @@ FORMATS = ("sinumerik-cec", "twincat-cnc", "linuxcnc")
 
 _QUANTUM_MM = 1e-4  # positions: 0.1 µm (TwinCAT's length unit; 4 decimals in the other files)
 _MAX_EVAL_STEPS = 201
+_MAX_EVAL_POINTS = 2_000_000  # grid nodes × direction combinations
+_CHUNK = 100_000  # points per model evaluation (bounds the memory)
 
 
 @dataclass
@@ -176,15 +178,17 @@ def measure_residual(
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """(residual, uncompensated) statistics µm over the evaluation grid and direction
     combinations: residual = model error − the error the tables take off."""
-    q = evaluation_points(machine, steps)
+    q_all = evaluation_points(machine, steps)
     res, raw = [], []
     for combo in direction_combinations(direction_axes(machine)):
-        e = model_error_um(machine, q, tool_mm, combo)
-        dirs = np.ones_like(q)
-        for a, s in combo.items():
-            dirs[:, a] = s
-        res.append(e - represented_um(q, dirs))
-        raw.append(e)
+        for start in range(0, len(q_all), _CHUNK):
+            q = q_all[start : start + _CHUNK]
+            e = model_error_um(machine, q, tool_mm, combo)
+            dirs = np.ones_like(q)
+            for a, s in combo.items():
+                dirs[:, a] = s
+            res.append(e - represented_um(q, dirs))
+            raw.append(e)
     return _stats(np.concatenate(res)), _stats(np.concatenate(raw))
 
 
@@ -214,6 +218,12 @@ def export_tables(
     tool = _check_tool(machine, machine.probe.offset_mm if tool_mm is None else tool_mm)
     _check_axes(fmt, opts)
     steps = _check_eval_steps(opts.eval_steps)
+    n_eval = int(np.prod(steps)) * len(direction_combinations(direction_axes(machine)))
+    if n_eval > _MAX_EVAL_POINTS:
+        raise ExportError(
+            f"--eval-steps {list(steps)}: {n_eval} evaluations (nodes × direction combinations), "
+            f"at most {_MAX_EVAL_POINTS}"
+        )
     counts, limit, source = _points(machine, fmt, opts)
     lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
     knots: tuple[Knots, Knots, Knots] = tuple(  # type: ignore[assignment]
@@ -242,12 +252,12 @@ def export_tables(
             resolution_mm=res_mm,
             min_rms_um=opts.min_rms_um,
         )
-        peak = total_extremes_mm(cec, d.direction_axes)
+        peak, exact = total_extremes_mm(cec, d.direction_axes)
         for k in range(3):
             if peak[k] > opts.cec_max_sum_mm:
                 raise ExportError(
                     f"sinumerik-cec: the total compensation of {AXES[k].upper()} reaches "
-                    f"{peak[k]:.4f} mm, above MD32720 $MA_CEC_MAX_SUM = {opts.cec_max_sum_mm:g} mm "
+                    f"{'' if exact else 'up to '}{peak[k]:.4f} mm, above MD32720 $MA_CEC_MAX_SUM = {opts.cec_max_sum_mm:g} mm "
                     "(the control would limit it and raise an alarm, leaving a wrong correction): "
                     "set --cec-max-sum-mm to your control's value, or correct the gross errors first"
                 )
@@ -279,6 +289,7 @@ def export_tables(
             "points_source": source,
             "cec_max_sum_mm": opts.cec_max_sum_mm,
             "total_compensation_peak_mm": peak.tolist(),
+            "total_compensation_peak_exact": exact,
             "value_resolution_um": opts.cec_resolution_um,
         }
         if opts.products and plan.products:

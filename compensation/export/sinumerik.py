@@ -26,7 +26,7 @@ import numpy as np
 from ..parametric_errors import AXES
 from .decompose import Decomposition
 from .plan import Plan, choose_greedy
-from .splines import FloatArray, Knots, hat_matrix
+from .splines import FloatArray, Knots, evaluate
 
 __all__ = ["CecTable", "build_cec", "cec_correction_mm", "render_cec"]
 
@@ -108,7 +108,7 @@ def cec_correction_mm(tables: Sequence[CecTable], q_mm: FloatArray, dirs: FloatA
     with travel directions ``dirs`` (N, 3) ±1 — the writer's own emulation of K3's rules."""
     q = np.asarray(q_mm, dtype=float)
     out = np.zeros((q.shape[0], 3))
-    value = [hat_matrix(t.knots, q[:, t.input_axis]) @ t.values_mm for t in tables]
+    value = [evaluate(t.knots, t.values_mm, q[:, t.input_axis]) for t in tables]
     active = [
         np.ones(q.shape[0], bool)
         if t.direction == 0
@@ -124,14 +124,30 @@ def cec_correction_mm(tables: Sequence[CecTable], q_mm: FloatArray, dirs: FloatA
     return out
 
 
-def total_extremes_mm(tables: Sequence[CecTable], direction_axes: Sequence[int]) -> FloatArray:
+#: Above this many combinations of points the peak total is bounded instead of enumerated.
+_MAX_ENUMERATED = 4_000_000
+
+
+def total_extremes_mm(
+    tables: Sequence[CecTable], direction_axes: Sequence[int]
+) -> tuple[FloatArray, bool]:
     """Largest |total compensation| per axis (3,) mm over every combination of the tables'
-    points (sums and products of piecewise-linear tables peak there) and travel directions."""
+    points (sums and products of piecewise-linear tables peak there) and travel directions, and
+    whether it is exact (True) or, for very large tables, an upper bound (the sum of each
+    table's largest |value| and each product's largest |factors|)."""
     if not tables:
-        return np.zeros(3)
+        return np.zeros(3), True
     knots_by_axis: dict[int, FloatArray] = {t.input_axis: t.knots.positions() for t in tables}
     axes_pos = [knots_by_axis.get(a, np.zeros(1)) for a in range(3)]
     shape = tuple(len(p) for p in axes_pos)
+    if int(np.prod(shape)) > _MAX_ENUMERATED:
+        bound = np.zeros(3)
+        for t in tables:
+            bound[t.output_axis] += float(np.max(np.abs(t.values_mm)))
+            if t.mult_by is not None:
+                other = tables[t.mult_by].values_mm
+                bound[t.output_axis] += float(np.max(np.abs(t.values_mm)) * np.max(np.abs(other)))
+        return bound, False
     peak = np.zeros(3)
     combos = (
         np.array(np.meshgrid(*[[1.0, -1.0]] * len(direction_axes), indexing="ij"))
@@ -158,7 +174,7 @@ def total_extremes_mm(tables: Sequence[CecTable], direction_axes: Sequence[int])
             if t.mult_by is not None:
                 total[t.output_axis] = total[t.output_axis] + along(t) * along(tables[t.mult_by])
         peak = np.maximum(peak, np.abs(total).reshape(3, -1).max(axis=1))
-    return peak
+    return peak, True
 
 
 def _num(v: float) -> str:

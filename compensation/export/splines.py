@@ -15,10 +15,21 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import sparse
+from scipy.sparse.linalg import spsolve
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["Knots", "axis_nodes", "hat_matrix", "make_knots", "mass_matrix", "project"]
+__all__ = [
+    "Knots",
+    "axis_nodes",
+    "coarser",
+    "evaluate",
+    "hat_matrix",
+    "make_knots",
+    "mass_matrix",
+    "project",
+]
 
 #: Gauss-Legendre nodes on [0, 1] and their weights (n = 2 and 3).
 _GAUSS = {
@@ -55,18 +66,38 @@ def make_knots(axis: int, lo_mm: float, hi_mm: float, count: int, quantum_mm: fl
     return Knots(axis=axis, start_mm=float(lo_mm), step_mm=float(step), count=int(count))
 
 
-def hat_matrix(knots: Knots, q_mm: FloatArray) -> FloatArray:
-    """(N, count) weights of linear interpolation between the points, the end values held
-    beyond the ends: ``table(q) = hat_matrix(knots, q) @ values``."""
+def _cells(knots: Knots, q_mm: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:
     q = np.clip(np.asarray(q_mm, dtype=float), knots.start_mm, knots.end_mm)
     s = (q - knots.start_mm) / knots.step_mm
-    i = np.clip(np.floor(s).astype(int), 0, knots.count - 2)
-    t = s - i
-    out = np.zeros((q.shape[0], knots.count))
-    rows = np.arange(q.shape[0])
-    out[rows, i] = 1.0 - t
-    out[rows, i + 1] += t
-    return out
+    i = np.clip(np.floor(s).astype(np.intp), 0, knots.count - 2)
+    return i, s - i
+
+
+def hat_matrix(knots: Knots, q_mm: FloatArray) -> sparse.csr_matrix:
+    """(N, count) sparse weights of linear interpolation between the points, the end values held
+    beyond the ends: ``table(q) = hat_matrix(knots, q) @ values``."""
+    i, t = _cells(knots, q_mm)
+    n = len(i)
+    rows = np.concatenate([np.arange(n), np.arange(n)])
+    cols = np.concatenate([i, i + 1])
+    return sparse.csr_matrix((np.concatenate([1.0 - t, t]), (rows, cols)), shape=(n, knots.count))
+
+
+def evaluate(knots: Knots, values: FloatArray, q_mm: FloatArray) -> FloatArray:
+    """The table's value at axis positions ``q_mm`` (linear interpolation, end values held)."""
+    i, t = _cells(knots, q_mm)
+    v = np.asarray(values, dtype=float)
+    return (1.0 - t) * v[i] + t * v[i + 1]
+
+
+def coarser(knots: Knots, max_count: int) -> Knots:
+    """``knots`` itself, or every r-th point (the last one reaching at least the same end) so
+    that at most ``max_count`` remain."""
+    if knots.count <= max_count:
+        return knots
+    r = math.ceil((knots.count - 1) / (max_count - 1))
+    count = math.ceil((knots.count - 1) / r) + 1
+    return Knots(knots.axis, knots.start_mm, knots.step_mm * r, count)
 
 
 def axis_nodes(
@@ -87,20 +118,20 @@ def axis_nodes(
 
 def mass_matrix(
     knots: Knots, nodes: FloatArray, weights: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """The hat matrix at ``nodes`` and the mass matrix ``Bᵀ W B`` (exact for the Gauss nodes of
-    :func:`axis_nodes`: products of hats are quadratic between points)."""
+) -> tuple[sparse.csr_matrix, sparse.csc_matrix]:
+    """The hat matrix at ``nodes`` and the (tridiagonal) mass matrix ``Bᵀ W B`` (exact for the
+    Gauss nodes of :func:`axis_nodes`: products of hats are quadratic between points)."""
     b = hat_matrix(knots, nodes)
-    return b, b.T @ (weights[:, None] * b)
+    return b, (b.T @ sparse.diags(weights) @ b).tocsc()
 
 
 def project(
     knots: Knots, nodes: FloatArray, weights: FloatArray, values: FloatArray
 ) -> tuple[FloatArray, float]:
-    """Least-squares table (values at the points) of a function sampled at ``nodes`` (columns of
-    ``values`` fitted independently) and the mean square of the fitted table over the travel."""
+    """Least-squares table (values at the points) of a function sampled at ``nodes`` and the
+    mean square of the fitted table over the travel."""
     b, m = mass_matrix(knots, nodes, weights)
-    rhs = b.T @ (weights[:, None] * np.asarray(values, dtype=float).reshape(len(nodes), -1))
-    coef = np.linalg.solve(m, rhs)
-    energy = float(np.einsum("ik,ij,jk->", coef, m, coef))
-    return coef.reshape((knots.count, *np.shape(values)[1:])), energy
+    rhs = b.T @ (weights * np.asarray(values, dtype=float))
+    coef = np.asarray(spsolve(m, rhs), dtype=float)
+    energy = float(coef @ (m @ coef))
+    return coef, energy

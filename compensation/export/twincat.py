@@ -26,7 +26,7 @@ import numpy as np
 from ..parametric_errors import AXES
 from .limits import SGN32, ExportError
 from .plan import Plan
-from .splines import FloatArray, Knots, hat_matrix
+from .splines import FloatArray, Knots, evaluate
 
 __all__ = ["TwinCatList", "build_twincat", "render_twincat", "twincat_error_um"]
 
@@ -94,13 +94,14 @@ def twincat_error_um(
     out = np.zeros((q.shape[0], 3))
     for entry in lists:
         k = entry.axis
-        w = hat_matrix(entry.knots, q[:, k])
-        table = np.where(dirs[:, k] > 0, w @ entry.pos_01um, w @ entry.neg_01um)
+        up = evaluate(entry.knots, entry.pos_01um, q[:, k])
+        down = evaluate(entry.knots, entry.neg_01um, q[:, k])
+        table = np.where(dirs[:, k] > 0, up, down)
         out[:, k] += table / 10.0
         if entry.cross_master is not None:
             assert entry.cross_knots is not None and entry.cross_01um is not None
-            wc = hat_matrix(entry.cross_knots, q[:, entry.cross_master])
-            out[:, k] += (wc @ entry.cross_01um) / 10.0
+            cross = evaluate(entry.cross_knots, entry.cross_01um, q[:, entry.cross_master])
+            out[:, k] += cross / 10.0
     return out
 
 
