@@ -97,9 +97,18 @@ def _reversal_machine() -> Machine:
     )
 
 
+@pytest.fixture(scope="module")
+def extended_toml(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The reversal machine written as a file, as `extend` writes one (Machine.to_toml)."""
+    path = tmp_path_factory.mktemp("extended") / "extended.toml"
+    _reversal_machine().to_toml(path)
+    return path
+
+
 @pytest.mark.parametrize("fmt", ["sinumerik-cec", "twincat-cnc", "linuxcnc"])
-def test_reported_residual_is_what_the_control_would_leave(fmt: str) -> None:
-    machine = _reversal_machine()
+def test_reported_residual_is_what_the_control_would_leave(fmt: str, extended_toml: Path) -> None:
+    machine = Machine.from_toml(extended_toml)
+    assert "[[effects]]" in extended_toml.read_text(encoding="utf-8")
     result = export_tables(machine, fmt, (0.0, 40.0, -150.0), ExportOptions(max_tables=14, **FAST))
     rep = result.report
     assert rep["evaluation"]["direction_axes"] == ["x", "y"]

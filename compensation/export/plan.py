@@ -117,14 +117,13 @@ def choose_greedy(
             stack.extend(cands[item].requires if item in cands else [])
         return need
 
-    def gain_of(item: Any) -> float:
-        c = cands[item]
-        g = c.gain
-        if c.kind == "plain":
-            k = c.key[1]
-            if not any(x[0] == "plain" and x[1][1] == k for x in chosen):
-                g += float(d.mean_um[k] ** 2)
-        return g
+    def gain_of(items: list[Any]) -> float:
+        """Mean square removed by adding ``items``; an output's mean counts once, with the
+        first plain table of that output."""
+        g = sum(cands[i].gain for i in items)
+        have = {x[1][1] for x in chosen if x[0] == "plain"}
+        new = {cands[i].key[1] for i in items if cands[i].kind == "plain"} - have
+        return g + sum(float(d.mean_um[k] ** 2) for k in new)
 
     while True:
         best, best_ratio = None, 0.0
@@ -137,7 +136,7 @@ def choose_greedy(
             cost = sum(cands[n].cost for n in need)
             if cost > budget:
                 continue
-            ratio = sum(gain_of(n) for n in need) / cost
+            ratio = gain_of(need) / cost
             if ratio > best_ratio:
                 best, best_ratio = key, ratio
         if best is None:
