@@ -73,16 +73,18 @@ class ExportResult:
     residual_stats: dict[str, Any] = field(default_factory=dict)
 
 
-def _check_tool(machine: Machine, tool_mm: Sequence[float] | FloatArray) -> FloatArray:
+def _check_tool(
+    machine: Machine, tool_mm: Sequence[float] | FloatArray, what: str = "--tool"
+) -> FloatArray:
     tool = np.asarray(tool_mm, dtype=float)
     if tool.shape != (3,):
-        raise ExportError(f"--tool needs 3 numbers (X Y Z mm), got {np.shape(tool_mm)}")
+        raise ExportError(f"{what} needs 3 numbers (X Y Z mm), got {np.shape(tool_mm)}")
     if not np.all(np.isfinite(tool)):
-        raise ExportError(f"--tool must be finite numbers (mm), got {tool.tolist()}")
+        raise ExportError(f"{what} must be finite numbers (mm), got {tool.tolist()}")
     reach = float(np.max(machine.volume.upper_mm - machine.volume.lower_mm))
     if np.any(np.abs(tool) > reach):
         raise ExportError(
-            f"--tool {tool.tolist()} mm is outside reason: each component must be within "
+            f"{what} {tool.tolist()} mm is outside reason: each component must be within "
             f"±{reach:g} mm (the machine's largest travel)"
         )
     return tool
@@ -215,7 +217,10 @@ def export_tables(
         raise ExportError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     opts = options or ExportOptions()
     say = progress or (lambda _line: None)
-    tool = _check_tool(machine, machine.probe.offset_mm if tool_mm is None else tool_mm)
+    if tool_mm is None:
+        tool = _check_tool(machine, machine.probe.offset_mm, "the machine's probe offset (--tool)")
+    else:
+        tool = _check_tool(machine, tool_mm)
     _check_axes(fmt, opts)
     steps = _check_eval_steps(opts.eval_steps)
     n_eval = int(np.prod(steps)) * len(direction_combinations(direction_axes(machine)))
