@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .adaptive import McResult, MonteCarloSettings, run_monte_carlo
+from .gum import gum_check, residual_covariance, residual_std
 from .model import UncertaintyModel
 from .virtual_cmm import Prepared, VirtualCMM
 
@@ -69,6 +70,8 @@ class PointUncertainty:
     U95_um: FloatArray
     mc: McResult | None
     model: dict[str, Any] = field(default_factory=dict)
+    gum_u_um: FloatArray | None = None
+    """First-order (GUM) standard uncertainty (N, 3) µm of the same model, for comparison."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,9 @@ class TaskUncertainty:
     mc: McResult
     nominal: dict[str, Any]
     model: dict[str, Any] = field(default_factory=dict)
+    gum: dict[str, Any] | None = None
+    """First-order (GUM) u of the outputs and the JCGM 101 §8 comparison (:func:`.gum.gum_check`);
+    None where the measurand is not linear in the residuals (a maximum, a range)."""
 
     def summary(self) -> dict[str, Any]:
         """JSON-able: per output y, u, U (k = 2), the coverage interval, U95; trials, stability."""
@@ -100,6 +106,9 @@ class TaskUncertainty:
                 for i, name in enumerate(self.outputs)
             },
             "monte_carlo": _mc_info(mc),
+            "gum_first_order": self.gum
+            if self.gum is not None
+            else "not applicable: the measurand is not linear in the residuals",
             "uncertainty_model": self.model,
         }
 
@@ -158,6 +167,18 @@ def _residual_runner(
     return draw
 
 
+def _gum(
+    vcmm: VirtualCMM, pts: FloatArray, stylus: FloatArray, sens: FloatArray, mc: McResult
+) -> dict[str, Any]:
+    """GUM u of outputs linear in the residuals, ``output_o = Σ sens[o, i, j]·r_ij`` (µm), and
+    the JCGM 101 §8 comparison with the Monte Carlo interval."""
+    cov = residual_covariance(
+        vcmm.machine, pts, stylus, vcmm.temps_C, vcmm.inputs, model=vcmm.model
+    )
+    u = np.sqrt(np.maximum(np.einsum("oai,aibj,obj->o", sens, cov, sens), 0.0))
+    return gum_check(u, mc.low, mc.high, mc.tolerance, 0.0, mc.probability)
+
+
 # ---------------------------------------------------------------------------- points
 
 
@@ -175,8 +196,10 @@ def point_uncertainty(
 ) -> PointUncertainty:
     """U of the corrected position at indicated ``points_mm`` (N, 3) for ``stylus_mm`` ((3,) or
     (N, 3) mm; None: the machine's probe offset) under ``temps_C``/``inputs`` (the sensors'
-    readings). Points not finite or outside the volume get a status and NaN, the others one
-    joint Monte Carlo (each point one probing)."""
+    readings). Points not finite (``invalid_input``), outside the volume (``outside_volume``) or
+    with a temperature / another signal given as NaN (``no_temperature`` / ``missing_input``) get
+    that status and NaN; the others one joint Monte Carlo (each point one probing). A signal not
+    given at all is the reference, as in the model."""
     q = _points(points_mm, "points")
     n = q.shape[0]
     p = np.broadcast_to(machine.stylus_or_probe(stylus_mm), (n, 3)).astype(float)
@@ -186,6 +209,12 @@ def point_uncertainty(
     status = np.where(~finite, "invalid_input", np.where(inside, "ok", "outside_volume")).astype(
         STATUS_DTYPE
     )
+    for mapping, flag in ((temps_C, "no_temperature"), (inputs, "missing_input")):
+        for value in (mapping or {}).values():
+            arr = np.broadcast_to(np.asarray(np.nan if value is None else value, float), (n,))
+            bad = ~np.isfinite(arr) & (status == "ok")
+            status[bad] = flag
+    inside = status == "ok"
     nan3 = np.full((n, 3), np.nan)
     out = {k: nan3.copy() for k in ("mean", "u", "low", "high", "U95")}
     vcmm = VirtualCMM(machine, model, _subset(temps_C, inside), _subset(inputs, inside))
@@ -202,6 +231,12 @@ def point_uncertainty(
         )
         for key in out:
             out[key][inside] = getattr(mc, key).reshape(-1, 3)
+        gum_u = nan3.copy()
+        gum_u[inside] = residual_std(
+            machine, q[inside], p[inside], vcmm.temps_C, vcmm.inputs, model=vcmm.model
+        )
+    else:
+        gum_u = nan3.copy()
     return PointUncertainty(
         points_mm=q,
         stylus_mm=p,
@@ -214,6 +249,7 @@ def point_uncertainty(
         U95_um=out["U95"],
         mc=mc,
         model=vcmm.model.describe(),
+        gum_u_um=gum_u,
     )
 
 
@@ -255,12 +291,15 @@ def length_uncertainty(
     prep = vcmm.prepare(pts, stylus_mm)
     runner = _residual_runner(vcmm, prep)
     mc = run_monte_carlo(lambda m, g: _length_errors_um(pts, runner(m, g)), rng, settings, progress)
+    direction = (pts[1] - pts[0]) / length
+    sens = np.stack([-direction, direction])[None]  # (1 output, 2 points, 3)
     return TaskUncertainty(
         task="length",
         outputs=("length_error_um",),
         mc=mc,
         nominal={"a_mm": pts[0].tolist(), "b_mm": pts[1].tolist(), "length_mm": length},
         model=vcmm.model.describe(),
+        gum=_gum(vcmm, pts, prep.stylus_mm, sens, mc),
     )
 
 
@@ -417,12 +456,16 @@ def sphere_uncertainty(
         return np.c_[(centre[None] - c) * 1000.0, (radius - r) * 1000.0]
 
     mc = run_monte_carlo(draw, rng, settings, progress)
+    normals = (pts - centre) / radius
+    proj = np.linalg.pinv(np.c_[normals, np.ones(len(pts))])  # outputs = proj · (n_i · r_i)
+    sens = proj[:, :, None] * normals[None, :, :]  # (4 outputs, N, 3)
     return TaskUncertainty(
         task="sphere",
         outputs=("centre_x_um", "centre_y_um", "centre_z_um", "radius_um"),
         mc=mc,
         nominal={"centre_mm": centre.tolist(), "radius_mm": radius, "n_points": len(pts)},
         model=vcmm.model.describe(),
+        gum=_gum(vcmm, pts, prep.stylus_mm, sens, mc),
     )
 
 

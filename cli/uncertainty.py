@@ -1,0 +1,472 @@
+"""``cmm-comp uncertainty MACHINE --points P.csv | --volume NX NY NZ | --length X1 Y1 Z1 X2 Y2 Z2 |
+--e0-test | --sphere X Y Z R | --plane X Y Z UX UY UZ VX VY VZ`` (docs/formats.md §3,
+docs/uncertainty.md): the virtual CMM's U of corrected points and of measurement tasks.
+
+Imports nothing heavy at module level (``cmm-comp --help`` stays numpy-free). Progress goes to
+stderr (on a terminal); results to CSV/JSON/PNG, written atomically; a bad input is one line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import math
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .common import load_machine, temps_from_args, write_json_atomic, write_text_atomic
+
+if TYPE_CHECKING:
+    from cmm_comp.compensation import Machine
+    from cmm_comp.compensation.uncertainty import MonteCarloSettings, PointUncertainty
+
+__all__ = ["add_parsers", "cmd_uncertainty"]
+
+_POINT_COLUMNS = (
+    "Ux_um", "Uy_um", "Uz_um",
+    "U95x_um", "U95y_um", "U95z_um",
+    "lowx_um", "lowy_um", "lowz_um", "highx_um", "highy_um", "highz_um",
+    "gum_ux_um", "gum_uy_um", "gum_uz_um",
+)  # fmt: skip
+
+
+def _progress(label: str) -> Any:
+    """A ``progress(trials, worst)`` callback writing one refreshed line on a terminal."""
+
+    def report(trials: int, worst: float) -> None:
+        if sys.stderr.isatty():
+            stab = "…" if math.isnan(worst) else f"{worst:.2f}"
+            print(
+                f"\r{label}: {trials} trials, stability 2s/δ = {stab} (≤ 1 to stop)   ",
+                end="",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    return report
+
+
+def _end_progress() -> None:
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+
+
+def _settings(args: argparse.Namespace, many_outputs: bool) -> MonteCarloSettings:
+    from cmm_comp.compensation.uncertainty import MonteCarloSettings
+
+    ndig = args.ndig if args.ndig is not None else (1 if many_outputs else 2)
+    try:
+        return MonteCarloSettings(
+            probability=args.probability,
+            trials=args.trials,
+            ndig=ndig,
+            tolerance=args.tolerance_um,
+            batch=args.batch,
+            max_trials=args.max_trials,
+        )
+    except ValueError as exc:
+        raise ValueError(f"uncertainty: {exc}") from None
+
+
+def _mode_flags(args: argparse.Namespace) -> list[str]:
+    given = [
+        name
+        for name, value in (
+            ("--points", args.points),
+            ("--volume", args.volume),
+            ("--length", args.length),
+            ("--e0-test", args.e0_test or None),
+            ("--sphere", args.sphere),
+            ("--plane", args.plane),
+        )
+        if value is not None
+    ]
+    if len(given) != 1:
+        raise ValueError(
+            "uncertainty: give exactly one of --points, --volume, --length, --e0-test, "
+            f"--sphere, --plane (got {', '.join(given) or 'none'})"
+        )
+    return given
+
+
+def _finite(values: list[float], what: str) -> list[float]:
+    bad = [v for v in values if not math.isfinite(v)]
+    if bad:
+        raise ValueError(f"uncertainty: {what} must be finite numbers, got {values}")
+    return values
+
+
+def cmd_uncertainty(args: argparse.Namespace) -> int:
+    """Run the virtual CMM for one task and write what was asked for."""
+    import numpy as np
+
+    (mode,) = _mode_flags(args)
+    machine = load_machine(args.machine)
+    model = machine.uncertainty_model()
+    if not args.quiet:
+        n_def = len(model.defaulted)
+        if n_def:
+            print(
+                f"cmm-comp: note: {n_def} uncertainty input(s) defaulted (not in [uncertainty]): "
+                f"{', '.join(model.defaulted[:6])}{' …' if n_def > 6 else ''} "
+                "(all listed in the JSON output)",
+                file=sys.stderr,
+            )
+    seed = args.seed
+    rng = np.random.default_rng(seed)
+    temps = temps_from_args(args)
+    stylus = _finite(list(args.probe), "--probe") if args.probe is not None else None
+    if mode in ("--points", "--volume"):
+        return _points_mode(args, machine, rng, temps, stylus, mode)
+    return _task_mode(args, machine, rng, temps, stylus, mode)
+
+
+def _points_mode(
+    args: argparse.Namespace,
+    machine: Machine,
+    rng: Any,
+    temps: dict[str, float] | None,
+    stylus: list[float] | None,
+    mode: str,
+) -> int:
+    import numpy as np
+
+    from cmm_comp.compensation.uncertainty import point_uncertainty
+
+    from .grid import read_points_csv
+
+    header: list[str] = []
+    rows: list[list[str]] = []
+    axes = None
+    signals: dict[str, Any] | None = temps
+    if mode == "--points":
+        header, rows, cols = read_points_csv(Path(args.points))
+        if not rows:
+            raise ValueError(f"{args.points}: no points")
+        pts = np.c_[cols["x"], cols["y"], cols["z"]]
+        sty: Any = stylus
+        if all(c in cols for c in ("px", "py", "pz")):
+            sty = np.c_[cols["px"], cols["py"], cols["pz"]]
+        signals = dict(temps or {})
+        signals.update({k: v for k, v in cols.items() if k.startswith("T_")})
+        inputs = {k: v for k, v in cols.items() if k.startswith("dir_")} or None
+    else:
+        steps = args.volume
+        if any(s < 2 or s > 200 for s in steps):
+            raise ValueError(f"uncertainty: --volume needs 2…200 nodes per axis, got {steps}")
+        lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
+        axes = [np.linspace(lo[k], hi[k], steps[k]) for k in range(3)]
+        pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        sty, inputs = stylus, None
+        header = ["x", "y", "z"]
+        rows = [[f"{v:.6f}" for v in p] for p in pts]
+    result = point_uncertainty(
+        machine,
+        pts,
+        sty,
+        signals or None,
+        inputs,
+        rng=rng,
+        settings=_settings(args, many_outputs=True),
+        progress=_progress("uncertainty"),
+    )
+    _end_progress()
+    ok = result.status == "ok"
+    mc = result.mc
+    if args.out is not None:
+        _write_points_csv(Path(args.out), header, rows, result)
+    summary: dict[str, Any] = {
+        "task": "points" if mode == "--points" else "volume",
+        "machine": machine.name,
+        "points": len(pts),
+        "ok": int(ok.sum()),
+        "stylus_mm": result.stylus_mm[0].tolist() if len(pts) else None,
+        "temperatures_C": temps or {},
+        "seed": args.seed,
+        "U_k2_um": _stats(result.U_um[ok]),
+        "U95_zero_centred_um": _stats(result.U95_um[ok]),
+        "gum_vs_monte_carlo_u_ratio": _ratio(result.gum_u_um, result.u_um, ok),
+        "monte_carlo": None if mc is None else _mc_json(mc),
+        "uncertainty_model": result.model,
+    }
+    if axes is not None:
+        summary["steps"] = [len(a) for a in axes]
+    if args.json is not None:
+        write_json_atomic(args.json, summary)
+    if args.plot is not None:
+        from cmm_comp.compensation.uncertainty.plots import plot_points_u, plot_volume_u
+
+        if axes is not None:
+            u_grid = result.U_um.reshape(len(axes[0]), len(axes[1]), len(axes[2]), 3)
+            plot_volume_u(
+                axes, u_grid, args.plot, title=f"{machine.name}: U (k = 2) over the volume"
+            )
+        else:
+            plot_points_u(pts, result.U_um, args.plot, title=f"{machine.name}: U (k = 2)")
+    u = result.U_um[ok]
+    trials = "" if mc is None else f", {mc.trials} trials{'' if mc.stable else ' (NOT stable)'}"
+    if u.size:
+        print(
+            f"{int(ok.sum())}/{len(pts)} points ok{trials}: U (k = 2) x {np.max(u[:, 0]):.3g}, "
+            f"y {np.max(u[:, 1]):.3g}, z {np.max(u[:, 2]):.3g} µm at most"
+        )
+    else:
+        print(f"0/{len(pts)} points ok: nothing to evaluate (see the status column)")
+    if mc is not None and not mc.stable and args.trials is None:
+        print(
+            "cmm-comp: warning: the Monte Carlo did not stabilise within --max-trials "
+            f"({mc.trials}); worst 2s/δ = {mc.worst:.2f}",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def _write_points_csv(
+    path: Path, header: list[str], rows: list[list[str]], result: PointUncertainty
+) -> None:
+    buf = io.StringIO(newline="")
+    writer = csv.writer(buf)
+    writer.writerow([*header, *_POINT_COLUMNS, "status"])
+    arrays = (result.U_um, result.U95_um, result.low_um, result.high_um, result.gum_u_um)
+    for i, row in enumerate(rows):
+        cells = []
+        for arr in arrays:
+            assert arr is not None
+            cells += ["" if not math.isfinite(v) else f"{v:.4f}" for v in arr[i]]
+        writer.writerow([*row, *cells, str(result.status[i])])
+    write_text_atomic(path, buf.getvalue())
+
+
+def _stats(values: Any) -> dict[str, float] | None:
+    import numpy as np
+
+    v = np.asarray(values, dtype=float)
+    if v.size == 0:
+        return None
+    return {
+        "max": float(v.max()),
+        "mean": float(v.mean()),
+        "min": float(v.min()),
+        "max_x": float(v[:, 0].max()),
+        "max_y": float(v[:, 1].max()),
+        "max_z": float(v[:, 2].max()),
+    }
+
+
+def _ratio(gum: Any, mc: Any, ok: Any) -> dict[str, float] | None:
+    import numpy as np
+
+    if gum is None or not ok.any():
+        return None
+    g, m = np.asarray(gum)[ok], np.asarray(mc)[ok]
+    keep = m > 0
+    if not keep.any():
+        return None
+    r = g[keep] / m[keep]
+    return {"min": float(r.min()), "max": float(r.max())}
+
+
+def _mc_json(mc: Any) -> dict[str, Any]:
+    import numpy as np
+
+    return {
+        "trials": mc.trials,
+        "runs": mc.runs,
+        "stable": mc.stable,
+        "worst_2s_over_tolerance": None if not np.isfinite(mc.worst) else float(mc.worst),
+        "coverage_probability": mc.probability,
+        "interval_method": mc.interval_method,
+    }
+
+
+def _task_mode(
+    args: argparse.Namespace,
+    machine: Machine,
+    rng: Any,
+    temps: dict[str, float] | None,
+    stylus: list[float] | None,
+    mode: str,
+) -> int:
+    import numpy as np
+
+    from cmm_comp.compensation import uncertainty as unc
+
+    settings = _settings(args, many_outputs=False)
+    progress = _progress("uncertainty")
+    kw: dict[str, Any] = {"rng": rng, "settings": settings, "progress": progress}
+    mpe_ratio_limit = None
+    if mode == "--length":
+        c = _finite(list(args.length), "--length")
+        result = unc.length_uncertainty(machine, c[:3], c[3:], stylus, temps, **kw)
+    elif mode == "--e0-test":
+        from cmm_comp.sim_controller.iso10360 import length_test
+
+        tests = length_test(machine.volume.lower_mm, machine.volume.upper_mm)
+        pairs = np.array([[t.a_mm, t.b_mm] for t in tests])
+        mpe = None
+        if args.mpe is not None:
+            mpe = (float(args.mpe[0]), float(args.mpe[1]))
+            mpe_ratio_limit = 1.0
+        result = unc.e0_uncertainty(machine, pairs, stylus, temps, mpe=mpe, **kw)
+    elif mode == "--sphere":
+        x, y, z, r = _finite(list(args.sphere), "--sphere")
+        pts = unc.sphere_probing_points([x, y, z], r, args.sphere_points)
+        result = unc.sphere_uncertainty(machine, pts, stylus, temps, **kw)
+    else:
+        v = _finite(list(args.plane), "--plane")
+        pts = unc.plane_grid_points(v[0:3], v[3:6], v[6:9], args.plane_points, args.plane_points)
+        result = unc.flatness_uncertainty(machine, pts, stylus, temps, **kw)
+    _end_progress()
+    summary = result.summary()
+    summary["machine"] = machine.name
+    summary["seed"] = args.seed
+    summary["temperatures_C"] = temps or {}
+    if result.task == "e0":  # keep the JSON readable: the per-length outputs in one table
+        outputs = summary["outputs"]
+        lengths = result.nominal["lengths_mm"]
+        summary["length_errors"] = [
+            {"length_mm": lengths[i], **outputs.pop(f"length_error_um[{i}]")}
+            for i in range(len(lengths))
+        ]
+    if args.json is not None:
+        write_json_atomic(args.json, summary)
+    mc = result.mc
+    if args.plot is not None:
+        from cmm_comp.compensation.uncertainty.plots import plot_histogram
+
+        if mc.values is None:
+            raise ValueError("uncertainty: too many trials kept no values to plot a histogram")
+        gum_u = result.gum["u"] if result.gum is not None else [None] * len(result.outputs)
+        shown = [
+            i for i, name in enumerate(result.outputs) if not name.startswith("length_error_um[")
+        ]
+        panels = [
+            (
+                result.outputs[i],
+                mc.values[:, i],
+                (float(mc.low[i]), float(mc.high[i])),
+                gum_u[i],
+                mpe_ratio_limit if result.outputs[i] == "E0_over_MPE" else None,
+            )
+            for i in shown
+        ]
+        plot_histogram(
+            panels, args.plot, title=f"{machine.name}: {result.task}, {mc.trials} virtual machines"
+        )
+    for i, name in enumerate(result.outputs):
+        if name.startswith("length_error_um["):
+            continue
+        print(
+            f"{name}: mean {mc.mean[i]:.4g}, u {mc.u[i]:.3g}, U (k = 2) {2 * mc.u[i]:.3g}, "
+            f"95 % interval [{mc.low[i]:.4g}, {mc.high[i]:.4g}]"
+        )
+    if "p_pass" in result.nominal:
+        print(f"probability of passing the E0 test: {result.nominal['p_pass']:.3f}")
+    print(f"{mc.trials} trials, {'stable' if mc.stable else 'NOT stable'} (JCGM 101 §7.9)")
+    if not mc.stable and args.trials is None:
+        print(
+            f"cmm-comp: warning: the Monte Carlo did not stabilise within --max-trials "
+            f"({mc.trials}); worst 2s/δ = {mc.worst:.2f}",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``uncertainty`` to the ``cmm-comp`` subcommands."""
+    p = sub.add_parser(
+        "uncertainty",
+        help="virtual CMM: U of corrected points and of measurement tasks (Monte Carlo)",
+        description="The virtual CMM (ISO/TS 15530-4, JCGM 101 Monte Carlo): draws machines "
+        "consistent with the machine's [uncertainty] model and reports U of what the "
+        "correction leaves (docs/uncertainty.md).",
+    )
+    p.add_argument("machine", type=Path, help="machine description (machine.toml)")
+    task = p.add_argument_group("the task (exactly one)")
+    task.add_argument(
+        "--points", type=Path, metavar="POINTS.csv", help="points (x,y,z[,px,py,pz][,T_x…])"
+    )
+    task.add_argument(
+        "--volume",
+        nargs=3,
+        type=int,
+        metavar=("NX", "NY", "NZ"),
+        help="U at the nodes of a grid over the volume",
+    )
+    task.add_argument(
+        "--length",
+        nargs=6,
+        type=float,
+        metavar=("X1", "Y1", "Z1", "X2", "Y2", "Z2"),
+        help="a length between two points, mm",
+    )
+    task.add_argument(
+        "--e0-test", action="store_true", help="the ISO 10360-2 E0 test (105 lengths)"
+    )
+    task.add_argument(
+        "--sphere",
+        nargs=4,
+        type=float,
+        metavar=("X", "Y", "Z", "R"),
+        help="a sphere's centre from probing points, mm",
+    )
+    task.add_argument("--plane", nargs=9, type=float, metavar=("X", "Y", "Z", "UX", "UY", "UZ", "VX", "VY", "VZ"), help="the flatness of a plane: corner and two edges, mm")  # fmt: skip
+    p.add_argument(
+        "--sphere-points",
+        type=int,
+        default=25,
+        help="probing points on the sphere (25: ISO 10360-5)",
+    )
+    p.add_argument("--plane-points", type=int, default=5, help="points per edge of the plane")
+    p.add_argument(
+        "--mpe",
+        nargs=2,
+        type=float,
+        metavar=("A_UM", "K"),
+        help="E0,MPE = A + L/K µm (L mm): probability of passing",
+    )
+    p.add_argument(
+        "--probe",
+        nargs=3,
+        type=float,
+        metavar=("XP", "YP", "ZP"),
+        help="stylus offset, mm (default [probe] offset)",
+    )
+    for axis in ("x", "y", "z"):
+        p.add_argument(
+            f"--temp-{axis}",
+            type=float,
+            metavar="C",
+            help=f"{axis.upper()} scale temperature as read, °C",
+        )
+    p.add_argument("--temp-wp", type=float, metavar="C", help="workpiece temperature as read, °C")
+    mc = p.add_argument_group("Monte Carlo (JCGM 101)")
+    mc.add_argument("--seed", type=int, default=0, help="random seed (default 0: reproducible)")
+    mc.add_argument("--trials", type=int, help="a fixed number of trials (no stopping rule)")
+    mc.add_argument(
+        "--ndig",
+        type=int,
+        help="significant digits of u the result must be stable to (default 2; 1 for --points/--volume)",
+    )
+    mc.add_argument(
+        "--tolerance-um", type=float, help="numerical tolerance of u in µm (instead of --ndig)"
+    )
+    mc.add_argument(
+        "--batch", type=int, help="trials per run (default max(J, 10⁴), fewer for many points)"
+    )
+    mc.add_argument(
+        "--max-trials", type=int, default=1_000_000, help="stop here even if not stable"
+    )
+    mc.add_argument(
+        "--probability", type=float, default=0.95, help="coverage probability (default 0.95)"
+    )
+    out = p.add_argument_group("output")
+    out.add_argument("--out", type=Path, help="CSV of U per point (--points, --volume)")
+    out.add_argument("--json", type=Path, help="JSON summary")
+    out.add_argument(
+        "--plot", type=Path, help="PNG: U over the volume / at the points, or histograms"
+    )
+    out.add_argument("--quiet", action="store_true", help="no note about defaulted inputs")  # fmt: skip
+    p.set_defaults(handler=cmd_uncertainty)
