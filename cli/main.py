@@ -20,6 +20,7 @@ _REGISTRARS: tuple[tuple[str, str], ...] = (
     ("cmm_comp.cli.daemon", "add_parsers"),
     ("cmm_comp.cli.demo", "add_parsers"),
     ("cmm_comp.cli.mcap", "add_parsers"),
+    ("cmm_comp.cli.uncertainty", "add_parsers"),
     ("cmm_comp.cli.export", "add_parsers"),
 )
 
