@@ -13,7 +13,7 @@ import io
 import math
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .common import load_machine, write_text_atomic
 
@@ -53,20 +53,49 @@ def cmd_grid_build(args: argparse.Namespace) -> int:
     grid = CorrectionGrid.build(machine, steps=args.steps, progress=progress)
     if sys.stderr.isatty():
         print(file=sys.stderr)
+    if args.uncertainty:
+        grid = _add_uncertainty(grid, machine, args)
     sha = grid.save(args.output)
     print(
         f"wrote {args.output}: {machine.name} ({machine.model}), steps {list(grid.steps)}, "
         f"signals {[s.name for s in grid.signals]}, sha256 {sha[:16]}…"
     )
-    for u in grid.metadata.get("unresolved_effects", []):
-        print(
-            f"warning: the {u['cause']} effect along {u['axis']} has a wavelength of "
-            f"{u['wavelength_mm']:g} mm; these steps give it {u['nodes_per_wavelength']:.1f} "
-            "nodes per wavelength (8 needed): the grid only partly corrects it — use more "
-            "--steps along that axis or a smaller volume",
-            file=sys.stderr,
-        )
     return 0
+
+
+def _add_uncertainty(grid: Any, machine: Any, args: argparse.Namespace) -> Any:
+    """The grid carrying U per node from the virtual CMM (docs/uncertainty.md)."""
+    import numpy as np
+
+    from cmm_comp.compensation.uncertainty.grid_field import add_uncertainty
+
+    if args.uncertainty_trials < 2:
+        raise ValueError(f"--uncertainty-trials must be ≥ 2, got {args.uncertainty_trials}")
+
+    def progress(fraction: float, message: str) -> None:
+        if sys.stderr.isatty():
+            print(
+                f"\rgrid uncertainty: {int(100 * fraction):3d} % {message}", end="", file=sys.stderr
+            )
+
+    out = add_uncertainty(
+        grid,
+        machine,
+        rng=np.random.default_rng(args.seed),
+        seed=args.seed,
+        trials=args.uncertainty_trials,
+        rel_tolerance=args.uncertainty_tolerance,
+        progress=progress,
+    )
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    info = out.uncertainty.info if out.uncertainty is not None else {}
+    defaulted = len(info.get("defaulted", []))
+    print(
+        f"uncertainty: {info.get('trials')} virtual machines per node"
+        + (f", {defaulted} input(s) defaulted (see the grid header)" if defaulted else "")
+    )
+    return out
 
 
 def cmd_grid_keygen(args: argparse.Namespace) -> int:
@@ -134,17 +163,26 @@ def cmd_correct(args: argparse.Namespace) -> int:
     signals = {c: cols[c] for c in _signal_columns() if c in cols}
     temps = {k: v for k, v in signals.items() if k.startswith("T_")}
     inputs = {k: v for k, v in signals.items() if not k.startswith("T_")}
-    corrected, status = grid.correct(pts, stylus, temps or None, inputs or None)
+    corrected, status, u_um = grid.correct(
+        pts, stylus, temps or None, inputs or None, with_uncertainty=True
+    )
     out = Path(args.output)
     buf = io.StringIO(newline="")
     writer = csv.writer(buf)
-    writer.writerow([*header, "cx", "cy", "cz", "status"])
-    for row, c, st in zip(rows, corrected, status, strict=True):
+    writer.writerow([*header, "cx", "cy", "cz", "Ux_um", "Uy_um", "Uz_um", "status"])
+    for row, c, u, st in zip(rows, corrected, u_um, status, strict=True):
         cells = ["" if math.isnan(v) else f"{v:.6f}" for v in c]
-        writer.writerow([*row, *cells, st])
+        u_cells = ["" if math.isnan(v) else f"{v:.4f}" for v in u]
+        writer.writerow([*row, *cells, *u_cells, st])
     write_text_atomic(out, buf.getvalue())
     n_ok = int(np.sum(status == "ok"))
     print(f"wrote {out}: {len(rows)} points, {n_ok} ok, {len(rows) - n_ok} flagged")
+    if not grid.has_uncertainty:
+        print(
+            "cmm-comp: note: the grid carries no uncertainty: Ux_um, Uy_um, Uz_um are empty "
+            "(build it with `cmm-comp grid build --uncertainty`)",
+            file=sys.stderr,
+        )
     return 0
 
 
@@ -162,6 +200,26 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
         metavar=("NX", "NY", "NZ"),
         help="nodes per axis (default: the machine's [volume] steps)",
     )
+    b.add_argument(
+        "--uncertainty",
+        action="store_true",
+        help="also store U per node from the virtual CMM (docs/uncertainty.md)",
+    )
+    b.add_argument(
+        "--uncertainty-trials",
+        type=int,
+        default=1000,
+        metavar="N",
+        help="virtual machines per node (default 1000; the adaptive runs' size with "
+        "--uncertainty-tolerance)",
+    )
+    b.add_argument(
+        "--uncertainty-tolerance",
+        type=float,
+        metavar="REL",
+        help="adaptive: add runs until every node's u is stable to REL (2s ≤ REL·u), e.g. 0.05",
+    )
+    b.add_argument("--seed", type=int, default=0, help="random seed of the virtual CMM (default 0)")
     b.set_defaults(handler=cmd_grid_build)
     k = grid_sub.add_parser("keygen", help="make an Ed25519 key pair for signing grids")
     k.add_argument(
