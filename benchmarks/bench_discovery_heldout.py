@@ -243,6 +243,21 @@ def run_one(plan: Plan, args: argparse.Namespace, cli: str, env: dict[str, str])
 
 
 # ------------------------------------------------------------------------------------ main
+def _tree_state() -> list[str]:
+    """Uncommitted changes under the code the CLI runs (the install is editable)."""
+    try:
+        out = subprocess.run(
+            ["git", "status", "--porcelain", "--", "compensation", "cli"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return ["unknown"]
+    return [line.strip() for line in out.splitlines() if line.strip()]
+
+
 def _git_commit() -> str:
     try:
         return subprocess.run(
@@ -369,6 +384,7 @@ def main(argv: list[str]) -> int:
         "jobs": args.jobs,
         "child_blas_threads": blas,
         "load_average_start": os.getloadavg(),
+        "uncommitted_start": _tree_state(),
     }
     plans = build_plans(args)
     print(f"bench_discovery_heldout: {len(plans)} cases, --jobs {args.jobs}", file=sys.stderr)
@@ -393,6 +409,8 @@ def main(argv: list[str]) -> int:
     outs.sort(key=lambda o: order[o.plan.case_id])
     meta["total_wall_s"] = time.perf_counter() - t0
     meta["load_average_end"] = os.getloadavg()
+    meta["commit_end"] = _git_commit()
+    meta["uncommitted_end"] = _tree_state()
     lines, summary = report(outs, args, meta)
     print("\n".join(lines))
     print(

@@ -85,6 +85,13 @@ def report(
         f"held-out discovery benchmark at {meta['commit'][:12]} ({meta['started']}), "
         f"{len(outs)} cases, --jobs {args.jobs}, child BLAS threads {meta['child_blas_threads']}"
     ]
+    if meta.get("commit_end") and meta["commit_end"] != meta["commit"]:
+        lines.append(f"NOTE: HEAD moved to {meta['commit_end'][:12]} during the run")
+    dirty = sorted(set(meta.get("uncommitted_start", [])) | set(meta.get("uncommitted_end", [])))
+    if dirty:
+        lines.append(
+            f"NOTE: uncommitted changes under compensation/ or cli/ during the run: {', '.join(dirty)}"
+        )
     ran = [o for o in outs if o.summary]
     singles = [o for o in ran if o.plan.kind == "single"]
     pairs = [o for o in ran if o.plan.kind == "pair"]
