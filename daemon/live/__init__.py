@@ -1,0 +1,18 @@
+"""The live view: the daemon's session-log topics and a 3-D scene of the corrections, streamed
+over the Foxglove WebSocket protocol (``foxglove-sdk``, optional extra ``live``; docs/live.md).
+
+* :mod:`.settings` - the ``[live]`` configuration section and its checks;
+* :mod:`.payloads` - one logged message to the JSON the view sends (non-finite as ``null``);
+* :mod:`.scene` - the correction vectors as ``foxglove.SceneUpdate`` arrows;
+* :mod:`.sink` - :class:`LiveSink`: bounded queue, sender thread, WebSocket server;
+* :mod:`.fanout` - :class:`LiveFanOut`: the MCAP logger and the sink behind one
+  ``SessionLogger``.
+
+``foxglove`` is imported only when a sink starts.
+"""
+
+import lazy_loader as _lazy
+
+# Names are listed once, in __init__.pyi (type checkers read it); each loads on first use, so
+# importing one submodule never drags in the whole package.
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -1,0 +1,38 @@
+"""Public API of ``live`` (read by lazy_loader: names load on first use)."""
+
+from .fanout import LiveFanOut
+from .server import SUBPROTOCOL, LiveServer, LiveStartError, open_live_server
+from .settings import (
+    LIVE_RULES,
+    LiveConfigError,
+    LiveSection,
+    host_problem,
+    live_problems,
+    live_section_from_table,
+)
+from .sink import (
+    LATCHED_TOPICS,
+    SCENE_TOPIC,
+    STREAMED_TOPICS,
+    LiveSink,
+    LiveStats,
+)
+
+__all__ = [
+    "LATCHED_TOPICS",
+    "LIVE_RULES",
+    "SCENE_TOPIC",
+    "STREAMED_TOPICS",
+    "SUBPROTOCOL",
+    "LiveConfigError",
+    "LiveFanOut",
+    "LiveSection",
+    "LiveServer",
+    "LiveSink",
+    "LiveStartError",
+    "LiveStats",
+    "host_problem",
+    "live_problems",
+    "live_section_from_table",
+    "open_live_server",
+]

@@ -1,0 +1,482 @@
+""":class:`LiveSink`: the daemon's session-log topics, live, over the Foxglove WebSocket protocol.
+
+The sink is one more consumer of what the daemon already hands its session log (compact record
+tuples and dicts, ``log`` / ``log_many``, see ``sessionlog``): :class:`.fanout.LiveFanOut` gives
+each call to the MCAP logger and to the sink. On the calling (reply) thread the sink only
+
+* drops the call at once when nobody is subscribed to the topic (counted ``not_encoded``; the
+  newest ``/cmm/status`` and ``/cmm/grid`` are kept by reference, to greet a new subscriber),
+* else appends the batch to a bounded queue under one short lock; when the queue holds more than
+  ``queue`` messages the **oldest** are dropped (a live view wants the newest), counted exactly
+  per topic.
+
+A sender thread (``live-sender``) takes the queue, builds each JSON object (the same payload as
+the MCAP log, ``stamp = {sec, nsec}``, non-finite numbers as ``null``, counted), and hands it to
+the SDK's server (``foxglove-sdk``: a Rust WebSocket server on its own threads) with the log time
+as the message time; it also builds ``/cmm/scene`` (:mod:`.scene`) at most ``scene_rate_hz``
+times a second. It runs at normal priority: it shares the GIL with the reply path, and a thread
+of lower OS priority could be preempted while holding the GIL (priority inversion). Its work is
+sliced (the GIL is offered back every few messages) and wakes when the producer kicks it (the
+line is quiet) or every 10 ms.
+
+Errors never stop the daemon: a message that cannot be encoded is counted and passed to
+``on_error``, an unexpected error in the sender loop is reported and the loop goes on. A server
+that cannot listen raises :class:`LiveStartError` (one line) from :meth:`LiveSink.start`.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Self
+
+from ..osthread import name_os_thread
+from .payloads import encode_live, live_object
+from .server import LiveServer, LiveStartError, open_live_server
+from .settings import LiveSection, host_problem
+
+_log = logging.getLogger(__name__)
+
+STREAMED_TOPICS: tuple[str, ...] = (
+    "/cmm/raw",
+    "/cmm/corrected",
+    "/cmm/temperature",
+    "/cmm/status",
+    "/cmm/counters",
+    "/cmm/grid",
+)
+"""Session-log topics the live view streams, with the MCAP log's schema names and payloads
+(the CAN/Modbus frame topics and ``/cmm/log_error`` are for the file only)."""
+LATCHED_TOPICS: frozenset[str] = frozenset({"/cmm/status", "/cmm/grid"})
+"""Rare topics whose newest message is sent again to each new subscriber."""
+SCENE_TOPIC = "/cmm/scene"
+"""The derived ``foxglove.SceneUpdate`` channel (protobuf) of the correction vectors."""
+CORRECTED = "/cmm/corrected"
+POLL_S = 0.01
+"""The sender wakes at least this often, s."""
+YIELD_EVERY = 16
+"""The sender offers the GIL back after this many messages."""
+STATUS_PERIOD_S = 1.0
+"""Drops are reported to clients (a protocol ``status`` message) at most this often, s."""
+_PENDING_MAX = 4096
+"""Scene points kept between two scene updates (older ones are decimated away)."""
+
+
+@dataclass(frozen=True)
+class LiveStats:
+    """Counters since start. For the streamed topics every message offered ends in exactly one
+    of ``not_encoded`` (nobody subscribed to its topic when it was offered or sent: never
+    encoded), ``dropped`` (the queue was full: the oldest go), ``sent`` (encoded and handed to
+    the server) or ``encode_errors`` (could not be built or encoded), or still waits
+    (``queue_len``); so ``offered = not_encoded + dropped + sent + encode_errors + queue_len``.
+    ``nulled``: non-finite numbers sent as ``null``. ``replayed``: latched messages sent again
+    to new subscribers. Scene: ``scene_updates`` sent, ``scene_points`` drawn, ``scene_decimated``
+    left out by the per-update limit, ``scene_skipped`` not drawable (a missing or non-finite
+    position or correction)."""
+
+    offered: int
+    not_encoded: int
+    dropped: int
+    sent: int
+    encode_errors: int
+    queue_len: int
+    nulled: int
+    replayed: int
+    scene_updates: int
+    scene_points: int
+    scene_decimated: int
+    scene_skipped: int
+    clients: int
+    subscriptions: int
+    dropped_by_topic: Mapping[str, int] = field(default_factory=dict)
+
+    def counters(self) -> dict[str, int]:
+        """The counters the daemon publishes (``/cmm/counters``, Prometheus ``cmm_comp_…``)."""
+        return {
+            "live_sent": self.sent,
+            "live_dropped": self.dropped,
+            "live_not_encoded": self.not_encoded,
+            "live_encode_errors": self.encode_errors,
+            "live_nulled": self.nulled,
+            "live_scene_updates": self.scene_updates,
+            "live_clients": self.clients,
+            "live_subscriptions": self.subscriptions,
+        }
+
+
+class LiveSink:
+    """Stream the session-log topics and ``/cmm/scene`` to Foxglove WebSocket clients.
+
+    ``with LiveSink(settings).start() as live: live.log_many(topic, records)``; or
+    :meth:`start` then :meth:`stop`. Thread-safe producers; never blocks them.
+
+    :param settings: the ``[live]`` section (checked again here: a bad host is refused).
+    :param on_error: called with each problem (a message that could not be encoded, a failure in
+        the sender loop), in the sender thread; its own failure is logged, never raised.
+    :param name: server name shown by clients.
+    """
+
+    def __init__(
+        self,
+        settings: LiveSection,
+        on_error: Callable[[BaseException], None] | None = None,
+        name: str = "cmm-comp",
+    ) -> None:
+        why = host_problem(settings.host, settings.allow_remote)
+        if why is not None:
+            raise LiveStartError(f"live.host = {why}")
+        self.settings = settings
+        self._name = name
+        self._on_error = on_error
+        self._lock = threading.Lock()
+        self._batches: collections.deque[tuple[str, Sequence[Any], int]] = collections.deque()
+        self._queued = 0
+        self._limit = int(settings.queue)
+        self._wanted: frozenset[str] = frozenset()
+        self._latest: dict[str, tuple[Any, int]] = {}
+        self._replay: set[str] = set()
+        self._subs: dict[int, set[int]] = {}  # channel id -> client ids
+        self._sub_lock = threading.Lock()
+        self._topic_of: dict[int, str] = {}
+        # counters (feeders, under _lock)
+        self._offered = 0
+        self._idle = 0
+        self._dropped = 0
+        self._dropped_by: dict[str, int] = {}
+        # counters (sender thread only)
+        self._unsent = 0
+        self._sent = 0
+        self._errors = 0
+        self._nulled = 0
+        self._replayed = 0
+        self._scene_updates = 0
+        self._scene_points = 0
+        self._scene_decimated = 0
+        self._scene_skipped = 0
+        self._pending: list[Any] = []
+        self._next_slot = 0
+        self._last_scene = 0.0
+        self._last_status = 0.0
+        self._reported_drops = 0
+        self.error: BaseException | None = None
+        self._wake = threading.Event()
+        self._stopping = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._server: LiveServer | None = None
+        self._channels: dict[str, Any] = {}
+        self._scene_channel: Any = None
+        self._scene_mod: Any = None
+        self._stopped = False
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> Self:
+        """Create the channels and the server, start the sender thread. Raises
+        :class:`LiveStartError` (one line) when ``foxglove-sdk`` is missing or the address
+        cannot be bound; nothing is left running then."""
+        try:
+            from . import scene
+        except ImportError as exc:
+            raise LiveStartError(
+                f"live view: the foxglove-sdk package is not installed ({exc}); install it "
+                "with pip install 'cmm-comp[live]' or set live.enabled = false"
+            ) from None
+        self._scene_mod = scene
+        self._server = open_live_server(
+            self.settings,
+            STREAMED_TOPICS,
+            SCENE_TOPIC,
+            self._subscribed,
+            self._name,
+            self._topic_of,
+        )
+        self._scene_channel = self._server.scene
+        self._channels = self._server.channels  # producers start taking messages now
+        self._thread = threading.Thread(target=self._run, name="live-sender", daemon=True)
+        self._thread.start()
+        return self
+
+    @property
+    def port(self) -> int:
+        """The port the server listens on (the chosen one when ``port = 0``)."""
+        return self._server.port if self._server is not None else 0
+
+    @property
+    def url(self) -> str:
+        """``ws://host:port`` for Foxglove's *Open connection → Foxglove WebSocket*."""
+        host = self.settings.host
+        host = f"[{host}]" if ":" in host else host
+        return f"ws://{host}:{self.port}"
+
+    def stop(self, timeout_s: float = 2.0) -> bool:
+        """Send what is queued, stop the sender thread and the server (connections closed).
+        True when done within ``timeout_s`` (s). Idempotent."""
+        if self._stopped:
+            return True
+        self._stopped = True
+        deadline = time.monotonic() + timeout_s
+        self._stopping.set()
+        self._wake.set()
+        ok = True
+        if self._thread is not None:
+            self._thread.join(max(0.0, deadline - time.monotonic()))
+            ok = not self._thread.is_alive()
+        if self._server is not None:
+            try:
+                self._server.stop()
+            except Exception as exc:  # reported, the daemon's stop goes on
+                self._report(exc)
+                ok = False
+        return ok
+
+    def close(self) -> None:
+        """Stop with the default timeout."""
+        self.stop()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ producers
+    def log(self, topic: str, payload: Any, log_time_ns: int | None = None) -> bool:
+        """Offer one message (as :meth:`log_many` with one payload). Never blocks. Returns True
+        when it was taken or not wanted, False when the sink is stopped."""
+        return self.log_many(topic, (payload,), log_time_ns) > 0
+
+    def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
+        """Offer ``payloads`` of ``topic`` (record tuples or dicts, as the session log takes
+        them) with one log time (integer ns since the epoch; now if None). Never blocks; the
+        sequence and its payloads must not be changed afterwards. Returns ``len(payloads)``
+        (0 once stopped); topics the view does not stream are ignored."""
+        n = len(payloads)
+        if not n or topic not in self._channels:
+            return n
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        if topic in LATCHED_TOPICS:
+            self._latest[topic] = (payloads[-1], log_time_ns)
+        if self._stopped:
+            return 0
+        wanted = topic in self._wanted
+        with self._lock:
+            self._offered += n
+            if not wanted:
+                self._idle += n
+                return n
+            self._batches.append((topic, payloads, log_time_ns))
+            self._queued += n
+            if self._queued > self._limit:
+                self._drop_oldest()
+        return n
+
+    def _drop_oldest(self) -> None:
+        """Drop the oldest messages until the queue holds ``queue`` (lock held)."""
+        excess = self._queued - self._limit
+        batches = self._batches
+        while excess > 0:
+            topic, items, t_ns = batches[0]
+            k = len(items)
+            if k <= excess:
+                batches.popleft()
+                cut = k
+            else:
+                batches[0] = (topic, items[excess:], t_ns)
+                cut = excess
+            excess -= cut
+            self._queued -= cut
+            self._dropped += cut
+            self._dropped_by[topic] = self._dropped_by.get(topic, 0) + cut
+
+    def kick(self) -> None:
+        """Let the sender work now (the producer is idle); cheap when nothing waits."""
+        if self._queued:
+            self._wake.set()
+
+    # ------------------------------------------------------------------ subscriptions
+    def _subscribed(self, client_id: int, channel_id: int, on: bool) -> None:
+        topic = self._topic_of.get(channel_id)
+        if topic is None:
+            return
+        with self._sub_lock:
+            clients = self._subs.setdefault(channel_id, set())
+            if on:
+                clients.add(client_id)
+                if topic in LATCHED_TOPICS:
+                    self._replay.add(topic)
+            else:
+                clients.discard(client_id)
+            wanted = set()
+            for cid, who in self._subs.items():
+                if who:
+                    t = self._topic_of[cid]
+                    wanted.add(CORRECTED if t == SCENE_TOPIC else t)
+            self._wanted = frozenset(wanted)
+        self._wake.set()
+
+    def _sub_counts(self) -> tuple[int, int]:
+        with self._sub_lock:
+            clients = set().union(*self._subs.values()) if self._subs else set()
+            return len(clients), sum(len(v) for v in self._subs.values())
+
+    # ------------------------------------------------------------------ statistics
+    def stats(self) -> LiveStats:
+        """A snapshot of the counters (exact after :meth:`stop`)."""
+        with self._lock:
+            offered, idle, dropped = self._offered, self._idle, self._dropped
+            queued, by_topic = self._queued, dict(self._dropped_by)
+        clients, subs = self._sub_counts()
+        return LiveStats(
+            offered=offered,
+            not_encoded=idle + self._unsent,
+            dropped=dropped,
+            sent=self._sent,
+            encode_errors=self._errors,
+            queue_len=queued,
+            nulled=self._nulled,
+            replayed=self._replayed,
+            scene_updates=self._scene_updates,
+            scene_points=self._scene_points,
+            scene_decimated=self._scene_decimated,
+            scene_skipped=self._scene_skipped,
+            clients=clients,
+            subscriptions=subs,
+            dropped_by_topic=by_topic,
+        )
+
+    def counters(self) -> dict[str, int]:
+        """``stats().counters()``."""
+        return self.stats().counters()
+
+    # ------------------------------------------------------------------ sender thread
+    def _run(self) -> None:
+        name_os_thread()
+        while True:
+            self._wake.wait(POLL_S)
+            self._wake.clear()
+            stopping = self._stopping.is_set()
+            try:
+                self._drain()
+                self._replay_latched()
+                self._scene_tick(time.monotonic(), force=stopping)
+                self._status_tick(time.monotonic())
+            except Exception as exc:  # a bug: reported, the loop goes on
+                self._report(exc)
+            if stopping:
+                return
+
+    def _drain(self) -> None:
+        with self._lock:
+            if not self._batches:
+                return
+            batches, self._batches = self._batches, collections.deque()
+            self._queued = 0
+        done = 0
+        for topic, payloads, t_ns in batches:
+            channel = self._channels[topic]
+            live = channel.has_sinks()
+            scene = topic == CORRECTED and self._scene_channel.has_sinks()
+            if not live and not scene:
+                self._unsent += len(payloads)
+                continue
+            for payload in payloads:
+                self._one(topic, channel, payload, t_ns, live, scene)
+                done += 1
+                if done % YIELD_EVERY == 0:
+                    time.sleep(0)  # offer the GIL to the reply path
+
+    def _one(
+        self, topic: str, channel: Any, payload: Any, t_ns: int, live: bool, scene: bool
+    ) -> None:
+        try:
+            if live:
+                data, obj, nulled = encode_live(topic, payload, t_ns)
+                channel.log(data, log_time=t_ns)
+                self._sent += 1
+                self._nulled += nulled
+            else:
+                obj = live_object(topic, payload, t_ns)
+                self._unsent += 1
+        except Exception as exc:  # malformed record, not JSON: counted, never fatal
+            self._errors += 1
+            self._report(ValueError(f"live view: {topic} message not sent: {exc}"))
+            return
+        if scene:
+            point = self._scene_mod.point_from_corrected(obj, t_ns)
+            if point is None:
+                self._scene_skipped += 1
+            else:
+                self._pending.append(point)
+                if len(self._pending) > _PENDING_MAX:
+                    cut = len(self._pending) - _PENDING_MAX // 2
+                    del self._pending[:cut]
+                    self._scene_decimated += cut
+
+    def _replay_latched(self) -> None:
+        if not self._replay:
+            return
+        with self._sub_lock:
+            topics, self._replay = self._replay, set()
+        for topic in topics:
+            latest = self._latest.get(topic)
+            if latest is None:
+                continue
+            payload, t_ns = latest
+            try:
+                data, _, _ = encode_live(topic, payload, t_ns)
+                self._channels[topic].log(data, log_time=t_ns)
+                self._replayed += 1
+            except Exception as exc:
+                self._report(ValueError(f"live view: {topic} latched message not sent: {exc}"))
+
+    def _scene_tick(self, now: float, force: bool = False) -> None:
+        if not self._pending:
+            return
+        if not force and now - self._last_scene < 1.0 / self.settings.scene_rate_hz:
+            return
+        self._last_scene = now
+        pending, self._pending = self._pending, []
+        if not self._scene_channel.has_sinks():
+            return
+        s = self.settings
+        picked = [
+            pending[i] for i in self._scene_mod.pick_evenly(len(pending), s.scene_arrows_per_update)
+        ]
+        self._scene_decimated += len(pending) - len(picked)
+        update = self._scene_mod.scene_update(
+            picked, self._next_slot, s.scene_arrows, s.arrow_mm_per_um
+        )
+        self._next_slot = (self._next_slot + len(picked)) % s.scene_arrows
+        self._scene_channel.log(update, log_time=picked[-1].t_ns)
+        self._scene_updates += 1
+        self._scene_points += len(picked)
+
+    def _status_tick(self, now: float) -> None:
+        dropped = self._dropped
+        if self._server is None or dropped == self._reported_drops:
+            return
+        if now - self._last_status < STATUS_PERIOD_S:
+            return
+        self._last_status = now
+        new, self._reported_drops = dropped - self._reported_drops, dropped
+        try:
+            self._server.warn_clients(
+                f"cmm-comp live view: {new} messages dropped (queue full; {dropped} in all)",
+                "live-drops",
+            )
+        except Exception as exc:
+            self._report(exc)
+
+    def _report(self, exc: BaseException) -> None:
+        if self.error is None:
+            self.error = exc
+        _log.warning("live view: %s", exc)
+        if self._on_error is not None:
+            try:
+                self._on_error(exc)
+            except Exception:  # the handler's own failure is logged, never raised here
+                _log.exception("live view on_error handler raised")
