@@ -474,7 +474,7 @@ class LiveSink:
     def _report(self, exc: BaseException) -> None:
         if self.error is None:
             self.error = exc
-        _log.warning("live view: %s", exc)
+        _log.warning("%s", exc)
         if self._on_error is not None:
             try:
                 self._on_error(exc)
