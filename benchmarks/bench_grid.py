@@ -5,7 +5,11 @@
   and 7: the whole node pose), median of 5 interleaved runs;
 * single point: ``correct_point`` and ``correct`` on one reading, p50/p99 µs, vs a bare numpy
   call measured in the same run;
-* build: ``CorrectionGrid.build`` at 50×50×50 on the example machine (target < 10 s).
+* build: ``CorrectionGrid.build`` at 50×50×50 on the example machine (target < 10 s);
+* uncertainty (issue 13): the same 20×20×10 grid carrying U per node — its correction path with
+  U not asked for vs the grid without U (the hot path may not slow down by more than 10 %), and
+  with ``with_uncertainty=True`` (the extra cost of U), batch and single point, interleaved in
+  the same run.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 from cmm_comp.compensation.grid import CorrectionGrid  # noqa: E402
 from cmm_comp.compensation.machine import Machine  # noqa: E402
+from cmm_comp.compensation.uncertainty.grid_field import add_uncertainty  # noqa: E402
 
 
 def _median_time(fn, reps: int) -> float:  # type: ignore[no-untyped-def]
@@ -54,27 +59,47 @@ def main() -> int:
     n = 1_000_000
     pts = rng.uniform(machine.volume.lower_mm, machine.volume.upper_mm, size=(n, 3))
     stylus = np.array([0.0, 0.0, -120.0])
+    ugrid = add_uncertainty(grid, machine, rng=np.random.default_rng(0), trials=200)
+    ugrid.correct(pts[:1000], stylus, temps, with_uncertainty=True)
     rgi3 = RegularGridInterpolator(grid.axes, grid.translation_um, method="linear")
     pose7 = np.concatenate([grid.q_work_stylus, grid.translation_um], axis=-1)
     rgi7 = RegularGridInterpolator(grid.axes, pose7, method="linear")
     grid.correct(pts[:1000], stylus, temps)
     rgi3(pts[:1000])
-    runs: dict[str, list[float]] = {"grid": [], "grid_temps": [], "rgi3": [], "rgi7": []}
+    runs: dict[str, list[float]] = {
+        "grid": [],
+        "grid_temps": [],
+        "rgi3": [],
+        "rgi7": [],
+        "ugrid_no_u": [],
+        "ugrid_with_u": [],
+    }
     t_shift = {k: np.full(n, 21.0) for k in temps}
     for _ in range(5):  # interleaved, so that load changes hit all alike
         runs["rgi3"].append(_median_time(lambda: rgi3(pts), 1))
         runs["grid"].append(_median_time(lambda: grid.correct(pts, stylus, temps), 1))
+        runs["ugrid_no_u"].append(_median_time(lambda: ugrid.correct(pts, stylus, temps), 1))
+        runs["ugrid_with_u"].append(
+            _median_time(lambda: ugrid.correct(pts, stylus, temps, with_uncertainty=True), 1)
+        )
         runs["rgi7"].append(_median_time(lambda: rgi7(pts), 1))
         runs["grid_temps"].append(_median_time(lambda: grid.correct(pts, stylus, t_shift), 1))
     batch = {k: float(np.median(v)) for k, v in runs.items()}
     p = tuple(pts[0])
     t_scalar = {k: 21.0 for k in temps}
     one = pts[:1]
-    single = {
-        "correct_point": _percentiles_us(lambda: grid.correct_point(p, stylus, t_scalar), 20000),
-        "correct_N1": _percentiles_us(lambda: grid.correct(one, stylus, t_scalar), 20000),
-        "numpy_add_baseline": _percentiles_us(lambda: np.add(one, 1.0), 20000),
-    }
+    single: dict[str, tuple[float, float]] = {}
+    for _ in range(2):  # interleaved halves: the grid with U and without alike
+        for key, fn in (
+            ("correct_point", lambda: grid.correct_point(p, stylus, t_scalar)),
+            ("correct_point_ugrid", lambda: ugrid.correct_point(p, stylus, t_scalar)),
+            ("uncertainty_point_ugrid", lambda: ugrid.uncertainty_point(p, stylus, t_scalar)),
+            ("correct_N1", lambda: grid.correct(one, stylus, t_scalar)),
+            ("numpy_add_baseline", lambda: np.add(one, 1.0)),
+        ):
+            p50, p99 = _percentiles_us(fn, 10000)
+            old = single.get(key)
+            single[key] = (p50, p99) if old is None else ((old[0] + p50) / 2, (old[1] + p99) / 2)
     t0 = time.perf_counter()
     CorrectionGrid.build(machine, steps=(50, 50, 50))
     build50 = time.perf_counter() - t0
@@ -89,6 +114,10 @@ def main() -> int:
         "ratio_vs_rgi_linear_3values": batch["grid"] / batch["rgi3"],
         "ratio_vs_rgi_linear_7values": batch["grid"] / batch["rgi7"],
         "ratio_with_temperatures_vs_rgi3": batch["grid_temps"] / batch["rgi3"],
+        "ratio_hot_path_grid_with_u_stored_vs_without": batch["ugrid_no_u"] / batch["grid"],
+        "ratio_correct_with_uncertainty_vs_without": batch["ugrid_with_u"] / batch["grid"],
+        "ratio_single_correct_point_ugrid_vs_grid": single["correct_point_ugrid"][0]
+        / single["correct_point"][0],
         "single_point_us": {k: {"p50": v[0], "p99": v[1]} for k, v in single.items()},
         "build_50x50x50_s": build50,
         "first_build_20x20x10_s_incl_kernel_load": first_build_s,
@@ -105,6 +134,14 @@ def main() -> int:
     )
     print(
         f"{'ratio grid with temperatures / RGI (3)':<46}{result['ratio_with_temperatures_vs_rgi3']:>12.2f}"
+    )
+    print(
+        f"{'ratio hot path, grid carrying U / without':<46}"
+        f"{result['ratio_hot_path_grid_with_u_stored_vs_without']:>12.3f}"
+    )
+    print(
+        f"{'ratio correct with U returned / without':<46}"
+        f"{result['ratio_correct_with_uncertainty_vs_without']:>12.3f}"
     )
     for key, (p50, p99) in single.items():
         print(f"{'single ' + key + ' p50 / p99 (µs)':<46}{p50:>6.1f} /{p99:>5.1f}")

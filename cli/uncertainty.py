@@ -193,6 +193,18 @@ def _points_mode(
     }
     if axes is not None:
         summary["steps"] = [len(a) for a in axes]
+    if ok.any():
+        from cmm_comp.compensation.uncertainty import uncertainty_budget
+
+        worst = int(np.flatnonzero(ok)[np.argmax(np.max(result.U_um[ok], axis=1))])
+        sub_t = {
+            k: np.atleast_1d(v)[worst if np.ndim(v) else 0] for k, v in (signals or {}).items()
+        }
+        budget = uncertainty_budget(machine, pts[worst], result.stylus_mm[worst], sub_t or None)
+        summary["budget_first_order_at_largest_U"] = {
+            "point_mm": pts[worst].tolist(),
+            "u_um_by_input": {k: v[0].tolist() for k, v in budget.items()},
+        }
     if args.json is not None:
         write_json_atomic(args.json, summary)
     if args.plot is not None:

@@ -376,3 +376,18 @@ def test_point_statuses_and_bad_task_inputs() -> None:
         )
     with pytest.raises(ValueError, match="temperatures must be finite"):
         length_uncertainty(machine, [1, 1, 1], [100, 1, 1], None, {"T_x": math.inf}, **kw)
+
+
+def test_budget_groups_add_up_to_the_total() -> None:
+    from cmm_comp.compensation.uncertainty import residual_std, uncertainty_budget
+
+    machine = _machine_with_everything()
+    pts = np.array([[10, 20, 30], [690, 590, 440.0]])
+    temps = {"T_x": 23.0, "T_y": 17.5, "T_wp": 24.0}
+    budget = uncertainty_budget(machine, pts, None, temps)
+    total = residual_std(machine, pts, None, temps)
+    assert np.allclose(np.sqrt(sum(v**2 for v in budget.values())), total, rtol=1e-10)
+    assert np.allclose(budget["probing"], 0.3)  # the section's probe_um
+    # the random parts alone are the paper's RSS without its probing term
+    rss = machine.random_error(pts) / 2.0
+    assert np.allclose(budget["random_parts"] ** 2 + 0.6**2 / 4, rss**2, rtol=1e-10)

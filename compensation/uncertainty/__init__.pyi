@@ -2,6 +2,7 @@
 
 from .adaptive import McResult, MonteCarloSettings, numerical_tolerance, run_monte_carlo
 from .fields import SquaredExponentialBasis, squared_exponential_basis
+from .gum import BUDGET_GROUPS, residual_covariance, residual_std, uncertainty_budget
 from .model import TableUncertainty, UncertaintyModel, parse_uncertainty
 from .tasks import (
     PointUncertainty,
@@ -17,6 +18,7 @@ from .tasks import (
 from .virtual_cmm import VirtualCMM
 
 __all__ = [
+    "BUDGET_GROUPS",
     "McResult",
     "MonteCarloSettings",
     "PointUncertainty",
@@ -32,8 +34,11 @@ __all__ = [
     "parse_uncertainty",
     "plane_grid_points",
     "point_uncertainty",
+    "residual_covariance",
+    "residual_std",
     "run_monte_carlo",
     "sphere_probing_points",
     "sphere_uncertainty",
     "squared_exponential_basis",
+    "uncertainty_budget",
 ]

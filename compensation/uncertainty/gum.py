@@ -15,6 +15,7 @@ residuals (a length, a sphere centre) gets ``u² = sᵀ·C·s``.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,7 +29,23 @@ from .model import UncertaintyModel
 if TYPE_CHECKING:
     from ..machine import Machine
 
-__all__ = ["gum_check", "residual_covariance", "residual_std"]
+__all__ = [
+    "BUDGET_GROUPS",
+    "gum_check",
+    "residual_covariance",
+    "residual_std",
+    "uncertainty_budget",
+]
+
+#: Input groups of :func:`uncertainty_budget`.
+BUDGET_GROUPS = (
+    "calibration",
+    "random_parts",
+    "squareness",
+    "scale_thermal",
+    "workpiece_thermal",
+    "probing",
+)
 
 FloatArray = NDArray[np.float64]
 K95 = 1.959963984540054  # the Gaussian coverage factor for p = 0.95
@@ -42,9 +59,11 @@ def residual_covariance(
     inputs: Mapping[str, Any] | None = None,
     *,
     model: UncertaintyModel | None = None,
+    random_parts: bool = True,
 ) -> FloatArray:
     """First-order covariance (N, 3, N, 3) µm² of the residuals at N probing points (each point
-    its own probing: random parts and probing errors independent between points)."""
+    its own probing: random parts and probing errors independent between points);
+    ``random_parts=False`` leaves the tables' random parts out (for a budget)."""
     mdl = model if model is not None else machine.uncertainty_model()
     q = np.asarray(points_mm, dtype=float).reshape(-1, 3)
     n = q.shape[0]
@@ -64,7 +83,7 @@ def residual_covariance(
         cov += np.einsum("ai,ab,bj->aibj", g, ck, g)
     diag = np.zeros((n, 3, 3))
     for table in machine.tables.values():
-        if not table.has_random:
+        if not (table.has_random and random_parts):
             continue
         c = table.component
         k = AXIS_INDEX[c.axis]
@@ -106,6 +125,7 @@ def residual_std(
     inputs: Mapping[str, Any] | None = None,
     *,
     model: UncertaintyModel | None = None,
+    random_parts: bool = True,
 ) -> FloatArray:
     """First-order standard uncertainty (N, 3) µm of each corrected point's components."""
     q = np.asarray(points_mm, dtype=float).reshape(-1, 3)
@@ -116,7 +136,9 @@ def residual_std(
         sl = slice(i, i + step)
         sub_t = _slice_signals(temps_C, sl, q.shape[0])
         sub_i = _slice_signals(inputs, sl, q.shape[0])
-        c = residual_covariance(machine, q[sl], p[sl], sub_t, sub_i, model=model)
+        c = residual_covariance(
+            machine, q[sl], p[sl], sub_t, sub_i, model=model, random_parts=random_parts
+        )
         m = c.shape[0]
         out[sl] = np.sqrt(np.maximum(c[np.arange(m), :, np.arange(m), :].diagonal(0, 1, 2), 0))
     return out
@@ -159,4 +181,56 @@ def gum_check(
         "d_high": d_high.tolist(),
         "validated": bool(np.all(valid)),
         "rule": "JCGM 101 §8.2: |y ∓ U_p − y_low/high| ≤ δ",
+    }
+
+
+def uncertainty_budget(
+    machine: Machine,
+    points_mm: ArrayLike,
+    stylus_mm: ArrayLike | None = None,
+    temps_C: Mapping[str, Any] | None = None,
+    inputs: Mapping[str, Any] | None = None,
+    *,
+    model: UncertaintyModel | None = None,
+) -> dict[str, FloatArray]:
+    """First-order uncertainty budget: per input group (:data:`BUDGET_GROUPS`) the standard
+    uncertainty (N, 3) µm it alone gives each corrected point; the groups are independent, so
+    their squares add up to the total's."""
+    mdl = model if model is not None else machine.uncertainty_model()
+    zero3 = np.zeros(3)
+    nothing = replace(
+        mdl,
+        tables={},
+        squareness_urad=zero3,
+        scale_temperature_C=zero3,
+        expansion=zero3,
+        workpiece_temperature_C=0.0,
+        workpiece_expansion=0.0,
+        probe_um=0.0,
+    )
+    only = {
+        "calibration": replace(nothing, tables=mdl.tables),
+        "random_parts": nothing,
+        "squareness": replace(nothing, squareness_urad=mdl.squareness_urad),
+        "scale_thermal": replace(
+            nothing, scale_temperature_C=mdl.scale_temperature_C, expansion=mdl.expansion
+        ),
+        "workpiece_thermal": replace(
+            nothing,
+            workpiece_temperature_C=mdl.workpiece_temperature_C,
+            workpiece_expansion=mdl.workpiece_expansion,
+        ),
+        "probing": replace(nothing, probe_um=mdl.probe_um),
+    }
+    return {
+        group: residual_std(
+            machine,
+            points_mm,
+            stylus_mm,
+            temps_C,
+            inputs,
+            model=sub,
+            random_parts=group == "random_parts",
+        )
+        for group, sub in only.items()
     }

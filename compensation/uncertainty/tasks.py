@@ -351,7 +351,10 @@ def e0_uncertainty(
     mc = run_monte_carlo(draw, rng, base.with_batch_for(prep.n), progress)
     names = ["E0_um", *(["E0_over_MPE"] if mpe_um is not None else [])]
     names += [f"length_error_um[{i}]" for i in range(len(lengths))]
-    nominal: dict[str, Any] = {"lengths_mm": lengths.tolist(), "n_lengths": len(lengths)}
+    nominal: dict[str, Any] = {
+        "lengths_mm": np.round(lengths, 6).tolist(),
+        "n_lengths": len(lengths),
+    }
     if mpe_um is not None:
         nominal["mpe"] = {"A_um": float(mpe[0]), "K": float(mpe[1])}  # type: ignore[index]
         if mc.values is not None:
