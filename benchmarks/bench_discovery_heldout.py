@@ -345,6 +345,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     )
     p.add_argument("--keep", type=Path, default=None, help="keep every case's folder here")
     p.add_argument("--out", type=Path, default=RESULTS, help="results JSON")
+    p.add_argument(
+        "--from-json",
+        type=Path,
+        default=None,
+        help="print the tables of an earlier run's results JSON (runs nothing)",
+    )
     args = p.parse_args(argv)
     if args.jobs < 1:
         p.error("--jobs must be ≥ 1")
@@ -355,8 +361,37 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return args
 
 
+def reprint(path: Path) -> int:
+    """Print the tables of a results JSON written by an earlier run."""
+    try:
+        payload = json.loads(path.read_text())
+        meta = payload["meta"]
+        records = payload["cases"]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        print(f"bench_discovery_heldout: cannot read results {path}: {exc}", file=sys.stderr)
+        return 2
+    args = parse_args([a for a in meta.get("argv", []) if a != "--from-json"])
+    args.jobs = meta.get("jobs", args.jobs)
+    outs = []
+    for r in records:
+        default_rule = r["seed"] % 2 == 0 if r["kind"] == "clean" else r["seed"] == 0
+        rule = r.get("design_rule", "default" if default_rule else "variant")
+        plan = Plan(r["kind"], tuple(r["causes"]), tuple(r["sizes"]), r["seed"], rule, r["case_id"])
+        o = Outcome(plan, summary=r.get("case") or {}, score=r.get("score") or {})
+        o.wall_s = r["wall_s"] if r.get("wall_s") is not None else float("nan")
+        o.cpu_s = r["cpu_s"] if r.get("cpu_s") is not None else float("nan")
+        o.elapsed_s, o.exit_code, o.error = r.get("elapsed_s"), r.get("exit_code"), r.get("error")
+        o.design_redraws = int((r.get("case") or {}).get("design_redraws", 0))
+        outs.append(o)
+    lines, _ = report(outs, args, meta)
+    print("\n".join(lines))
+    return 0
+
+
 def main(argv: list[str]) -> int:
     args = parse_args(argv)
+    if args.from_json is not None:
+        return reprint(args.from_json)
     cli = str(ROOT / ".venv" / "bin" / "cmm-comp")
     if not Path(cli).exists():
         cli = shutil.which("cmm-comp") or ""
@@ -373,10 +408,10 @@ def main(argv: list[str]) -> int:
     for var in BLAS_VARS:
         if blas != "inherit":
             env[var] = blas
-        elif USER_BLAS[var] is None:
+        elif (user := USER_BLAS[var]) is None:
             env.pop(var, None)  # this process set it for itself, not for the diagnoses
         else:
-            env[var] = USER_BLAS[var]
+            env[var] = user
     meta = {
         "commit": _git_commit(),
         "started": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -428,6 +463,7 @@ def main(argv: list[str]) -> int:
                 "causes": list(o.plan.causes),
                 "sizes": list(o.plan.sizes),
                 "seed": o.plan.seed,
+                "design_rule": o.plan.design_rule,
                 "case": o.summary,
                 "score": o.score,
                 "wall_s": o.wall_s,
