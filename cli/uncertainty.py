@@ -218,7 +218,7 @@ def _points_mode(
         else:
             plot_points_u(pts, result.U_um, args.plot, title=f"{machine.name}: U (k = 2)")
     u = result.U_um[ok]
-    trials = "" if mc is None else f", {mc.trials} trials{'' if mc.stable else ' (NOT stable)'}"
+    trials = "" if mc is None else f", {mc.trials} trials{_stability(mc, args)}"
     if u.size:
         print(
             f"{int(ok.sum())}/{len(pts)} points ok{trials}: U (k = 2) x {np.max(u[:, 0]):.3g}, "
@@ -233,6 +233,12 @@ def _points_mode(
             file=sys.stderr,
         )
     return 0
+
+
+def _stability(mc: Any, args: argparse.Namespace) -> str:
+    if args.trials is not None:
+        return " (a fixed number: no stopping rule)"
+    return ", stable (JCGM 101 §7.9)" if mc.stable else ", NOT stable"
 
 
 def _write_points_csv(
@@ -365,7 +371,10 @@ def _task_mode(
             for i in shown
         ]
         plot_histogram(
-            panels, args.plot, title=f"{machine.name}: {result.task}, {mc.trials} virtual machines"
+            panels,
+            args.plot,
+            title=f"{machine.name}: {result.task}, {mc.trials} virtual machines",
+            limit_label="pass limit E0/MPE =",
         )
     for i, name in enumerate(result.outputs):
         if name.startswith("length_error_um["):
@@ -376,7 +385,7 @@ def _task_mode(
         )
     if "p_pass" in result.nominal:
         print(f"probability of passing the E0 test: {result.nominal['p_pass']:.3f}")
-    print(f"{mc.trials} trials, {'stable' if mc.stable else 'NOT stable'} (JCGM 101 §7.9)")
+    print(f"{mc.trials} trials{_stability(mc, args)}")
     if not mc.stable and args.trials is None:
         print(
             f"cmm-comp: warning: the Monte Carlo did not stabilise within --max-trials "

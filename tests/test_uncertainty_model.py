@@ -210,3 +210,19 @@ def test_basis_rejects_bad_spans() -> None:
         squared_exponential_basis(0.0, math.inf, 1.0)
     point = squared_exponential_basis(5.0, 5.0, 1.0)  # a zero-length span: a constant
     assert np.allclose(point.features(np.array([5.0, 7.0])), 1.0)
+
+
+def test_the_formats_doc_example_section_loads(tmp_path: Path) -> None:
+    """docs/formats.md §1.11's example, appended to a machine, loads with the values it shows."""
+    import re
+
+    text = (ROOT / "docs" / "formats.md").read_text(encoding="utf-8")
+    blocks = [b for b in re.findall(r"```toml\n(.*?)```", text, re.S) if "[uncertainty]" in b]
+    assert len(blocks) == 1
+    path = tmp_path / "m.toml"
+    path.write_text(NPL.read_text() + "\n" + blocks[0])
+    u = Machine.from_toml(path).uncertainty_model()
+    assert u.probe_um == 0.25 and list(u.squareness_urad) == [1.0, 1.0, 1.5]
+    assert u.tables["dx_x"].correlation_mm == 50.0 and u.tables["ex_x"].u == 0.3
+    assert u.tables["dz_y"].u == 1.5 and u.workpiece_expansion == 1.2
+    assert "uncertainty.probe_um" not in u.defaulted
