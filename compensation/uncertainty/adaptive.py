@@ -40,7 +40,8 @@ ProgressFn = Callable[[int, float], None]
 
 @dataclass(frozen=True)
 class MonteCarloSettings:
-    """How many trials: ``trials`` fixed (no stopping rule), or adaptive (JCGM 101 §7.9) with
+    """How many trials: ``trials`` fixed (no stopping rule; split into runs of about ``batch``,
+    as equal as possible, so the run-to-run stability is still reported), or adaptive (JCGM 101 §7.9) with
     runs of ``batch`` trials (None: max(J, 10⁴)) until stable to ``ndig`` significant digits of
     u (or to ``tolerance`` in the output's unit), at most ``max_trials``. ``probability`` p of the
     coverage interval. ``keep_values_limit``: most output values (trials × outputs) kept in memory."""
@@ -148,7 +149,11 @@ def run_monte_carlo(
     (``worst`` = max 2s/δ, NaN before the second run). Non-finite outputs raise ValueError."""
     s = settings or MonteCarloSettings()
     size = s.run_size()
-    target = s.trials if s.trials is not None else s.max_trials
+    if s.trials is not None:  # a fixed number in runs as equal as possible (none tiny)
+        n_runs = max(1, round(s.trials / size))
+        plan = [len(c) for c in np.array_split(np.arange(s.trials), n_runs)]
+    else:  # adaptive: runs of one size, as many as fit under max_trials
+        plan = [size] * max(1, s.max_trials // size) if s.max_trials >= size else [s.max_trials]
     stats: list[FloatArray] = []
     sizes: list[int] = []
     kept: list[FloatArray] = []
@@ -157,10 +162,7 @@ def run_monte_carlo(
     worst = math.nan
     stable = False
     tol = np.zeros(0)
-    while done < target:
-        m = min(size, target - done)
-        if m < 2:
-            break
+    for m in plan:
         y = np.asarray(draw(m, rng), dtype=float)
         if y.ndim != 2 or y.shape[0] != m:
             raise ValueError(f"a run must give ({m}, K) values, got {y.shape}")
