@@ -31,6 +31,7 @@ from cmm_comp.daemon.live import (
     LiveStartError,
 )
 from cmm_comp.daemon.live import sink as sink_module
+from cmm_comp.daemon.sessionlog.encoding import encode_message, json_encoder
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message
 
 T0_NS = 1_700_000_000_123_456_789
@@ -104,6 +105,23 @@ def connect(sink: LiveSink, topics: list[str]) -> FoxgloveClient:
     return client
 
 
+def wrap_encoders(monkeypatch: pytest.MonkeyPatch, hook: Callable[[str], None]) -> None:
+    """Call ``hook(name)`` before every encoding the sender does: the record fast path
+    (``FAST_JSON``), the general path (``encode_live``) and building an object (``live_object``)."""
+
+    def wrapped(name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def call(*a: Any) -> Any:
+            hook(name)
+            return fn(*a)
+
+        return call
+
+    monkeypatch.setattr(sink_module, "encode_live", wrapped("encode", sink_module.encode_live))
+    monkeypatch.setattr(sink_module, "live_object", wrapped("object", sink_module.live_object))
+    fast = {t: wrapped("fast", f) for t, f in sink_module.FAST_JSON.items()}
+    monkeypatch.setattr(sink_module, "FAST_JSON", fast)
+
+
 def by_topic(msgs: list[Message]) -> dict[str, list[Message]]:
     out: dict[str, list[Message]] = {}
     for m in msgs:
@@ -161,6 +179,10 @@ def test_values_arrive_as_fed(sink: LiveSink, errors: list[BaseException]) -> No
         sink.log_many("/cmm/can_rx", [(1, False, 0, b"", 0.0, "c", False, False, False)])
         sink.kick()
         got = by_topic(client.receive(8))
+    dumps = json_encoder()
+    for rec, m in zip([*raws, *corrs], [*got["/cmm/raw"], *got["/cmm/corrected"]], strict=True):
+        # byte for byte what the MCAP session log writes for the same record and time
+        assert m.payload == encode_message(m.topic, rec, m.log_time_ns, dumps)
     for i, m in enumerate(got["/cmm/raw"]):
         assert m.log_time_ns == T0_NS
         assert m.json() == {
@@ -317,18 +339,7 @@ def test_nothing_is_encoded_without_a_subscriber(
     sink: LiveSink, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     calls: list[str] = []
-    real_encode, real_object = sink_module.encode_live, sink_module.live_object
-
-    def encode(*a: Any) -> Any:
-        calls.append("encode")
-        return real_encode(*a)
-
-    def build(*a: Any) -> Any:
-        calls.append("object")
-        return real_object(*a)
-
-    monkeypatch.setattr(sink_module, "encode_live", encode)
-    monkeypatch.setattr(sink_module, "live_object", build)
+    wrap_encoders(monkeypatch, calls.append)
     for i in range(500):
         sink.log("/cmm/raw", raw_rec(i, 1.0, 2.0, 3.0), T0_NS + i)
     sink.log_many("/cmm/corrected", [corr_rec(i, (0, 0, 0), "ok", (1, 1, 1)) for i in range(500)])
@@ -344,7 +355,7 @@ def test_nothing_is_encoded_without_a_subscriber(
         (m,) = client.receive(1)
         assert m.json()["seq"] == 7
     s = sink.stats()
-    assert calls == ["encode"]
+    assert calls == ["fast"]  # one record, by the session log's fast path
     assert (s.offered, s.not_encoded, s.sent, s.dropped) == (2001, 2000, 1, 0)
 
 
@@ -354,15 +365,13 @@ def test_overload_drops_the_oldest_and_counts_each(
     """The sender is held inside its first message; 100 more arrive in batches of 7 into a queue
     of 10: exactly the 90 oldest are dropped and the 10 newest are sent once it goes on."""
     entered, gate = threading.Event(), threading.Event()
-    real_encode = sink_module.encode_live
 
-    def held(*a: Any) -> Any:
+    def hold(name: str) -> None:
         if not entered.is_set():
             entered.set()
             assert gate.wait(10.0)
-        return real_encode(*a)
 
-    monkeypatch.setattr(sink_module, "encode_live", held)
+    wrap_encoders(monkeypatch, hold)
     with (
         LiveSink(settings(queue=10), on_error=errors.append).start() as sink,
         connect(sink, ["/cmm/raw"]) as client,
@@ -430,6 +439,18 @@ def test_bad_values_never_stop_the_sink(sink: LiveSink, errors: list[BaseExcepti
     assert (s.scene_skipped, s.scene_points) == (1, 1)  # the NaN correction is not drawn
     assert len(errors) == 3 and all("message not sent" in str(e) for e in errors)
     assert "/cmm/raw" in str(errors[0]) and "/cmm/counters" in str(errors[2])
+
+
+def test_a_bad_log_time_is_counted_not_sent(sink: LiveSink, errors: list[BaseException]) -> None:
+    with connect(sink, ["/cmm/raw"]) as client:
+        sink.log_many("/cmm/raw", [raw_rec(1, 0.0, 0.0, 0.0)] * 2, -1)
+        sink.log_many("/cmm/raw", [raw_rec(2, 0.0, 0.0, 0.0)], 1.5e18)  # type: ignore[arg-type]
+        sink.log("/cmm/raw", raw_rec(3, 0.0, 0.0, 0.0), T0_NS)
+        sink.kick()
+        (m,) = client.receive(1)
+    assert m.json()["seq"] == 3
+    assert (sink.stats().encode_errors, sink.stats().sent) == (3, 1)
+    assert "log time -1 is not integer ns" in str(errors[0])
 
 
 def test_a_failing_error_handler_does_not_stop_the_sink() -> None:

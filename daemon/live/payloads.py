@@ -19,9 +19,9 @@ from typing import Any
 from ..sessionlog.records import expand
 from ..sessionlog.schemas import stamp_from_ns
 
-_dumps: Callable[[Any], str] = json.JSONEncoder(
-    separators=(",", ":"), allow_nan=False, ensure_ascii=False
-).encode
+_dumps: Callable[[Any], str] = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
+"""The session log's encoder (``sessionlog.encoding.json_encoder``): compact, ASCII, strict, so
+a valid message's bytes are the MCAP log's bytes (and its fast path's, ``sessionlog.fastjson``)."""
 
 MAX_DEPTH = 16
 """Deepest nesting walked when replacing non-finite numbers (deeper payloads are refused)."""

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any, Self
 
 from ..osthread import name_os_thread
+from ..sessionlog.fastjson import FAST_JSON
 from .payloads import encode_live, live_object
 from .server import LiveServer, LiveStartError, open_live_server
 from .settings import LiveSection, host_problem
@@ -62,6 +63,7 @@ YIELD_EVERY = 16
 """The sender offers the GIL back after this many messages."""
 STATUS_PERIOD_S = 1.0
 """Drops are reported to clients (a protocol ``status`` message) at most this often, s."""
+_TIME_NS_MAX = 2**64 - 1
 _PENDING_MAX = 4096
 """Scene points kept between two scene updates (older ones are decimated away)."""
 
@@ -383,38 +385,68 @@ class LiveSink:
             if not live and not scene:
                 self._unsent += len(payloads)
                 continue
+            if type(t_ns) is not int or not 0 <= t_ns <= _TIME_NS_MAX:
+                self._errors += len(payloads)
+                self._report(
+                    ValueError(f"live view: {topic}: log time {t_ns!r:.40} is not integer ns")
+                )
+                continue
+            fast = FAST_JSON.get(topic) if live else None
             for payload in payloads:
-                self._one(topic, channel, payload, t_ns, live, scene)
+                self._one(topic, channel, payload, t_ns, live, scene, fast)
                 done += 1
                 if done % YIELD_EVERY == 0:
                     time.sleep(0)  # offer the GIL to the reply path
 
     def _one(
-        self, topic: str, channel: Any, payload: Any, t_ns: int, live: bool, scene: bool
+        self,
+        topic: str,
+        channel: Any,
+        payload: Any,
+        t_ns: int,
+        live: bool,
+        scene: bool,
+        fast: Callable[[tuple[Any, ...], int], bytes | None] | None,
     ) -> None:
+        """Send one message (``live``: its channel has a subscriber) and/or add it to the
+        scene. A record takes the session log's fast path (``sessionlog.fastjson``: the same
+        bytes) unless a field is not plain and finite; then the general path (NaN → null)."""
+        obj = None
         try:
             if live:
-                data, obj, nulled = encode_live(topic, payload, t_ns)
+                data = fast(payload, t_ns) if fast is not None and type(payload) is tuple else None
+                if data is None:
+                    data, obj, nulled = encode_live(topic, payload, t_ns)
+                    self._nulled += nulled
                 channel.log(data, log_time=t_ns)
                 self._sent += 1
-                self._nulled += nulled
             else:
-                obj = live_object(topic, payload, t_ns)
                 self._unsent += 1
         except Exception as exc:  # malformed record, not JSON: counted, never fatal
             self._errors += 1
             self._report(ValueError(f"live view: {topic} message not sent: {exc}"))
             return
         if scene:
-            point = self._scene_mod.point_from_corrected(obj, t_ns)
-            if point is None:
-                self._scene_skipped += 1
-            else:
-                self._pending.append(point)
-                if len(self._pending) > _PENDING_MAX:
-                    cut = len(self._pending) - _PENDING_MAX // 2
-                    del self._pending[:cut]
-                    self._scene_decimated += cut
+            self._add_to_scene(payload, obj, t_ns)
+
+    def _add_to_scene(self, payload: Any, obj: dict[str, Any] | None, t_ns: int) -> None:
+        scene = self._scene_mod
+        if type(payload) is tuple:
+            point = scene.point_from_record(payload, t_ns)
+        else:
+            try:
+                obj = obj if obj is not None else live_object(CORRECTED, payload, t_ns)
+                point = scene.point_from_corrected(obj, t_ns)
+            except Exception:  # not a corrected object: nothing to draw
+                point = None
+        if point is None:
+            self._scene_skipped += 1
+            return
+        self._pending.append(point)
+        if len(self._pending) > _PENDING_MAX:
+            cut = len(self._pending) - _PENDING_MAX // 2
+            del self._pending[:cut]
+            self._scene_decimated += cut
 
     def _replay_latched(self) -> None:
         if not self._replay:
