@@ -62,7 +62,7 @@ from .status import (
     check_policy,
     statuses,
 )
-from .uncertainty import GridUncertainty, expanded_uncertainty_um
+from .uncertainty import GridUncertainty, expanded_uncertainty_point, expanded_uncertainty_um
 
 __all__ = ["CorrectionGrid"]
 
@@ -232,6 +232,9 @@ class CorrectionGrid:
         self._ncomp_all = 3 + 6 * len(self.signals)
         self._lock = threading.Lock()
         self._dummy_q = np.zeros((1, 4))
+        self._u_point = np.zeros((1, 3))
+        self._u_cov = np.zeros((1, 15))
+        self._u_out = np.zeros(3)
         self._dummy_t = np.zeros((1, 3))
         if not _WARM["done"]:  # compile or load the cached kernels now, not on first use
             p = np.array([0.5 * (self.lower_mm + self.upper_mm)])
@@ -580,6 +583,42 @@ class CorrectionGrid:
         )
         return u, status
 
+    def correct_point_with_uncertainty(
+        self,
+        point_mm: ArrayLike,
+        stylus_mm: ArrayLike = (0.0, 0.0, 0.0),
+        temps_C: Mapping[str, Any] | None = None,
+        inputs: Mapping[str, Any] | None = None,
+        *,
+        outside: str | None = None,
+    ) -> tuple[tuple[float, float, float], str, tuple[float, float, float]]:
+        """One reading: ``((cx, cy, cz) mm, status, (Ux, Uy, Uz) µm)`` — :meth:`correct_point`
+        and U (k = 2 per component) in one call, scalars throughout (the daemon's path). U is
+        NaN when the status is not ``ok`` or the grid carries no uncertainty."""
+        out, status = self.correct_point(point_mm, stylus_mm, temps_C, inputs, outside=outside)
+        gu = self.uncertainty
+        if status != "ok" or gu is None:
+            return out, status, _NAN3
+        x, y, z = map(float, point_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
+        px, py, pz = map(float, stylus_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
+        temps: dict[str, Any] = {}
+        for m in (inputs, temps_C):  # temperatures from temps_C win, as for the correction
+            if m:
+                temps.update({k: v for k, v in m.items() if k.startswith("T_") and v is not None})
+        with self._lock:
+            u = expanded_uncertainty_point(
+                gu,
+                gu.coefficients(self.axes),
+                self._u_tables(),
+                (x, y, z),
+                (px, py, pz),
+                temps,
+                self._u_point,
+                self._u_cov,
+                self._u_out,
+            )
+        return out, status, u
+
     def uncertainty_point(
         self,
         point_mm: ArrayLike,
@@ -589,14 +628,12 @@ class CorrectionGrid:
         *,
         outside: str | None = None,
     ) -> tuple[tuple[float, float, float], str]:
-        """One reading's ``((Ux, Uy, Uz) µm, status)``, scalars (the daemon's path beside
-        :meth:`correct_point`); NaN when the status is not ``ok`` or the grid has no U."""
-        _, status = self.correct_point(point_mm, stylus_mm, temps_C, inputs, outside=outside)
-        if status != "ok" or self.uncertainty is None:
-            return _NAN3, status
-        p = np.asarray(point_mm, dtype=np.float64).reshape(1, 3)
-        u = self._expanded(p, stylus_mm, temps_C, inputs, np.array([status]))
-        return (float(u[0, 0]), float(u[0, 1]), float(u[0, 2])), status
+        """One reading's ``((Ux, Uy, Uz) µm, status)`` (see
+        :meth:`correct_point_with_uncertainty`)."""
+        _, status, u = self.correct_point_with_uncertainty(
+            point_mm, stylus_mm, temps_C, inputs, outside=outside
+        )
+        return u, status
 
     def error_um(
         self,

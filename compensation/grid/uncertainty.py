@@ -167,6 +167,25 @@ class GridUncertainty:
             raise ValueError(f"coverage factor must be finite and > 0, got {self.coverage_factor}")
         self.covariance = np.ascontiguousarray(cov)
         self._coef: FloatArray | None = None
+        t = self.thermal
+        if t.workpiece_expansion == 0.0:  # no workpiece term in the model: none in U
+            wp = [0.0, 0.0, 0.0]
+        else:
+            wp = [t.workpiece_expansion, t.u_workpiece_expansion, t.u_workpiece_temperature_C]
+        scale = [  # an axis contributes only as variance_um2 says
+            (a, ua, ut) if not (ua == 0.0 and (a == 0.0 or ut == 0.0)) else (0.0, 0.0, 0.0)
+            for a, ua, ut in zip(t.expansion, t.u_expansion, t.u_temperature_C, strict=True)
+        ]
+        #: [reference_C, reference (3), α (3), uα (3), uT (3), α_wp, uα_wp, uT_wp, fixture (3),
+        #: probe σ², coverage factor] for the compiled single-point path.
+        self.thermal_vector = np.array(
+            [
+                t.reference_C, *t.reference_mm,
+                *(v[0] for v in scale), *(v[1] for v in scale), *(v[2] for v in scale),
+                *wp, *t.workpiece_fixture_mm, self.probe_um**2, self.coverage_factor,
+            ],
+            dtype=np.float64,
+        )  # fmt: skip
 
     def to_header(self) -> dict[str, Any]:
         """The grid header's ``uncertainty`` object (JSON)."""
@@ -258,34 +277,46 @@ def variance_from_covariance(cov: FloatArray, stylus_mm: FloatArray) -> FloatArr
 def eval_spline(points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
     """Tricubic B-spline values (N, C) of ``coef`` (nx, ny, nz, C) at clamped ``points`` (N, 3)
     mm (same knots and cell spans as the grid's translation spline)."""
+    for n in prange(points.shape[0]):
+        _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out)
+
+
+@njit(cache=True)
+def eval_spline_serial(points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
+    """:func:`eval_spline` without threads (one reading: no thread-pool wake-up)."""
+    for n in range(points.shape[0]):
+        _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out)
+
+
+@njit(cache=True)
+def _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
     nx, ny, nz = shape[0], shape[1], shape[2]
     ncomp = coef.shape[3]
-    for n in prange(points.shape[0]):
-        bx = np.empty(4)
-        by = np.empty(4)
-        bz = np.empty(4)
-        left = np.empty(4)
-        right = np.empty(4)
-        px, py, pz = points[n, 0], points[n, 1], points[n, 2]
-        i, _ = _locate(px, lo[0], inv_d[0], nx)
-        j, _ = _locate(py, lo[1], inv_d[1], ny)
-        k, _ = _locate(pz, lo[2], inv_d[2], nz)
-        sxn, syn, szn = spanx[i], spany[j], spanz[k]
-        _basis3(tx, sxn, px, bx, left, right)
-        _basis3(ty, syn, py, by, left, right)
-        _basis3(tz, szn, pz, bz, left, right)
-        for c in range(ncomp):
-            out[n, c] = 0.0
-        for a in range(4):
-            ia = sxn - 3 + a
-            for b in range(4):
-                jb = syn - 3 + b
-                wab = bx[a] * by[b]
-                for cc in range(4):
-                    kc = szn - 3 + cc
-                    wgt = wab * bz[cc]
-                    for c in range(ncomp):
-                        out[n, c] += wgt * coef[ia, jb, kc, c]
+    bx = np.empty(4)
+    by = np.empty(4)
+    bz = np.empty(4)
+    left = np.empty(4)
+    right = np.empty(4)
+    px, py, pz = points[n, 0], points[n, 1], points[n, 2]
+    i, _ = _locate(px, lo[0], inv_d[0], nx)
+    j, _ = _locate(py, lo[1], inv_d[1], ny)
+    k, _ = _locate(pz, lo[2], inv_d[2], nz)
+    sxn, syn, szn = spanx[i], spany[j], spanz[k]
+    _basis3(tx, sxn, px, bx, left, right)
+    _basis3(ty, syn, py, by, left, right)
+    _basis3(tz, szn, pz, bz, left, right)
+    for c in range(ncomp):
+        out[n, c] = 0.0
+    for a in range(4):
+        ia = sxn - 3 + a
+        for b in range(4):
+            jb = syn - 3 + b
+            wab = bx[a] * by[b]
+            for cc in range(4):
+                kc = szn - 3 + cc
+                wgt = wab * bz[cc]
+                for c in range(ncomp):
+                    out[n, c] += wgt * coef[ia, jb, kc, c]
 
 
 def expanded_uncertainty_um(
@@ -322,3 +353,74 @@ def expanded_uncertainty_um(
     var += gu.thermal.variance_um2(pts, temps) + gu.probe_um**2
     out[idx] = gu.coverage_factor * np.sqrt(var)
     return out
+
+
+def expanded_uncertainty_point(
+    gu: GridUncertainty,
+    coef: FloatArray,
+    tables: tuple[Any, ...],
+    point: tuple[float, float, float],
+    stylus: tuple[float, float, float],
+    temps_C: Mapping[str, Any],
+    buf_point: FloatArray,
+    buf_cov: FloatArray,
+    buf_out: FloatArray,
+) -> tuple[float, float, float]:
+    """U (µm, k = ``gu.coverage_factor``) of one point whose status is ok, the single-reading
+    path: one compiled call (:func:`_point_kernel`); ``buf_*`` are scratch arrays the caller
+    owns and locks ((1, 3), (1, 15), (3,)). Same mathematics as :func:`expanded_uncertainty_um`."""
+    th = gu.thermal_vector
+    ref_c = th[0]
+    d_t = [0.0, 0.0, 0.0, 0.0]
+    for i, name in enumerate(("T_x", "T_y", "T_z", "T_wp")):
+        value = temps_C.get(name)
+        if value is not None:
+            d_t[i] = float(value) - ref_c
+    lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
+    buf_point[0, 0], buf_point[0, 1], buf_point[0, 2] = point
+    _point_kernel(
+        buf_point, stylus[0], stylus[1], stylus[2], d_t[0], d_t[1], d_t[2], d_t[3],
+        lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef, th, buf_cov, buf_out,
+    )  # fmt: skip
+    return float(buf_out[0]), float(buf_out[1]), float(buf_out[2])
+
+
+@njit(cache=True)
+def _point_kernel(  # type: ignore[no-untyped-def]
+    point, px, py, pz, dtx, dty, dtz, dtw,
+    lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out,
+):  # fmt: skip
+    """U of one point: spline of the covariance entries, the stylus rule, the thermal terms
+    (``th`` = :attr:`GridUncertainty.thermal_vector`), the probing σ², the coverage factor."""
+    _spline_row(0, point, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, cov)
+    c = cov[0]
+    out[0] = (
+        c[0]
+        + 2e-3 * (pz * c[3] - py * c[4])
+        + 1e-6 * (pz * pz * c[10] + py * py * c[11] - 2 * py * pz * c[14])
+    )
+    out[1] = (
+        c[1]
+        + 2e-3 * (px * c[6] - pz * c[5])
+        + 1e-6 * (px * px * c[11] + pz * pz * c[9] - 2 * px * pz * c[13])
+    )
+    out[2] = (
+        c[2] + 2e-3 * (py * c[7] - px * c[8])
+        + 1e-6 * (py * py * c[9] + px * px * c[10] - 2 * px * py * c[12])
+    )  # fmt: skip
+    for k in range(3):
+        if out[k] < 0.0:
+            out[k] = 0.0
+    dts = (dtx, dty, dtz)
+    for k in range(3):
+        a, ua, ut = th[4 + k], th[7 + k], th[10 + k]
+        lever = (point[0, k] - th[1 + k]) / 1000.0
+        dt = dts[k]
+        out[k] += (a * a * ut * ut + dt * dt * ua * ua + ua * ua * ut * ut) * lever * lever
+    a, ua, ut = th[13], th[14], th[15]
+    f = a * a * ut * ut + dtw * dtw * ua * ua + ua * ua * ut * ut
+    for k in range(3):
+        lever = (point[0, k] - th[16 + k]) / 1000.0
+        out[k] += f * lever * lever
+    for k in range(3):
+        out[k] = th[20] * math.sqrt(out[k] + th[19])
