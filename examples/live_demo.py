@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    settings = LiveSection(enabled=True, host=args.host, port=args.port, scene_arrows=400)
+    settings = LiveSection(enabled=True, host=args.host, port=args.port, scene_keep_arrows=400)
     with LiveSink(
         settings, on_error=lambda e: print(f"live: {e}", file=sys.stderr)
     ).start() as sink:

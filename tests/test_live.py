@@ -242,7 +242,7 @@ def rotate(q_wxyz: tuple[float, float, float, float], v: tuple[float, ...]) -> l
     ]
 
 
-def test_scene_arrows_point_along_the_correction(sink: LiveSink) -> None:
+def test_scene_keep_arrows_point_along_the_correction(sink: LiveSink) -> None:
     cases = [  # (seq, answered position nm, status, correction µm)
         (1, (250_003_000, 400_000_000, 100_012_000), "ok", (3.0, -4.0, 12.0)),
         (2, (500_000_000, 100_000_000, 50_000_000), "not_thermally_corrected", (-2.5, 0.0, 0.0)),
@@ -304,7 +304,7 @@ def test_scene_arrows_point_along_the_correction(sink: LiveSink) -> None:
 
 
 def test_scene_decimates_and_cycles_its_slots() -> None:
-    with LiveSink(settings(scene_arrows=6, scene_arrows_per_update=4)).start() as sink:
+    with LiveSink(settings(scene_keep_arrows=6, scene_max_new_arrows=4)).start() as sink:
         with connect(sink, [SCENE_TOPIC]) as client:
             cls = protobuf_class(client.channels[SCENE_TOPIC])
             batch = [corr_rec(i, (1_000_000 * i, 0, 0), "ok", (1.0, 0.0, 0.0)) for i in range(100)]

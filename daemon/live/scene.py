@@ -9,7 +9,7 @@ true − indicated), drawn ``arrow_mm_per_um`` mm long per µm; its colour says 
 in metres in frame ``cmm`` (the machine frame; mm / 1000), as Foxglove's 3-D panel expects.
 
 Each point is one scene entity with id ``correction/<slot>``; slots cycle through
-``scene_arrows``, so the viewer keeps the newest ``scene_arrows`` points and every update
+``scene_keep_arrows``, so the viewer keeps the newest ``scene_keep_arrows`` points and every update
 carries only the new ones (its cost does not grow with the history). Entity ``probe`` is a
 sphere at the newest point. Metadata on every entity gives ``seq``, ``status`` and the
 correction in µm (shown when hovering in Foxglove).

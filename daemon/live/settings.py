@@ -52,9 +52,9 @@ class LiveSection:
     """Messages waiting for the sender thread; when full the oldest are dropped (counted)."""
     scene_rate_hz: float = 20.0
     """At most this many ``/cmm/scene`` updates per second."""
-    scene_arrows: int = 256
+    scene_keep_arrows: int = 256
     """Correction arrows kept in the 3-D scene (the newest replace the oldest)."""
-    scene_arrows_per_update: int = 8
+    scene_max_new_arrows: int = 8
     """At most this many new arrows per scene update (evenly picked among the new readings, the
     newest always included): bounds the scene's cost at high reading rates."""
     arrow_mm_per_um: float = 5.0
@@ -65,8 +65,8 @@ LIVE_RULES: dict[str, Range] = {
     "port": Range(0, 65535),
     "queue": Range(1, 1_000_000, unit="messages"),
     "scene_rate_hz": Range(0.0, 1000.0, lo_open=True, unit="Hz"),
-    "scene_arrows": Range(1, 100_000),
-    "scene_arrows_per_update": Range(1, 10_000),
+    "scene_keep_arrows": Range(1, 100_000),
+    "scene_max_new_arrows": Range(1, 10_000),
     "arrow_mm_per_um": Range(0.0, 1e6, lo_open=True, unit="mm/µm"),
 }
 """Allowed range of every numeric ``[live]`` key (NaN and ±inf never allowed)."""

@@ -476,13 +476,13 @@ class LiveSink:
             return
         s = self.settings
         picked = [
-            pending[i] for i in self._scene_mod.pick_evenly(len(pending), s.scene_arrows_per_update)
+            pending[i] for i in self._scene_mod.pick_evenly(len(pending), s.scene_max_new_arrows)
         ]
         self._scene_decimated += len(pending) - len(picked)
         update = self._scene_mod.scene_update(
-            picked, self._next_slot, s.scene_arrows, s.arrow_mm_per_um
+            picked, self._next_slot, s.scene_keep_arrows, s.arrow_mm_per_um
         )
-        self._next_slot = (self._next_slot + len(picked)) % s.scene_arrows
+        self._next_slot = (self._next_slot + len(picked)) % s.scene_keep_arrows
         self._scene_channel.log(update, log_time=picked[-1].t_ns)
         self._scene_updates += 1
         self._scene_points += len(picked)
