@@ -109,9 +109,16 @@ class FoxgloveClient:
             del self._subs[sid]
         self.ws.send(json.dumps({"op": "unsubscribe", "subscriptionIds": ids}))
 
+    def _message(self, frame: bytes) -> Message | None:
+        opcode, sid, log_time = MESSAGE_HEADER.unpack_from(frame, 0)
+        if opcode != MESSAGE_DATA:
+            return None
+        return Message(self._subs[sid], log_time, bytes(frame[MESSAGE_HEADER.size :]))
+
     def receive(self, count: int, timeout_s: float | None = None) -> list[Message]:
         """The next ``count`` Message Data frames (text frames in between are handled)."""
-        out: list[Message] = []
+        out: list[Message] = self.backlog[:count]
+        del self.backlog[:count]
         deadline = time.monotonic() + (timeout_s or self.timeout_s)
         while len(out) < count:
             left = deadline - time.monotonic()
@@ -123,15 +130,13 @@ class FoxgloveClient:
                 continue
             if isinstance(frame, str):
                 self._handle_text(json.loads(frame))
-                continue
-            opcode, sid, log_time = MESSAGE_HEADER.unpack_from(frame, 0)
-            if opcode != MESSAGE_DATA:
-                continue
-            out.append(Message(self._subs[sid], log_time, bytes(frame[MESSAGE_HEADER.size :])))
+            elif (msg := self._message(frame)) is not None:
+                out.append(msg)
         return out
 
     def drain_text(self, timeout_s: float = 0.2) -> None:
-        """Handle text frames arriving within ``timeout_s`` (status messages …)."""
+        """Handle what arrives within ``timeout_s``: text frames (status messages …) at once,
+        Message Data kept for :meth:`receive`."""
         deadline = time.monotonic() + timeout_s
         while (left := deadline - time.monotonic()) > 0:
             try:
@@ -140,6 +145,8 @@ class FoxgloveClient:
                 return
             if isinstance(frame, str):
                 self._handle_text(json.loads(frame))
+            elif (msg := self._message(frame)) is not None:
+                self.backlog.append(msg)
 
     def close(self) -> None:
         self.ws.__exit__(None, None, None)
