@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from ..kinematics import Chain
 from ..parametric_errors import AXIS_INDEX
 
-__all__ = ["chain_axes", "exact_pose_compiled"]
+__all__ = ["chain_axes", "exact_pose_compiled", "residual_compiled"]
 
 FloatArray = NDArray[np.float64]
 
@@ -47,61 +47,62 @@ def _rotation(ex, ey, ez, r):  # type: ignore[no-untyped-def]
     r[2, 2] = cx * cy
 
 
+@njit(cache=True)
+def _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, slot):  # type: ignore[no-untyped-def]
+    """The exact error pose of one row into ``out_rot[slot]``, ``out_t[slot]`` (µm)."""
+    d = np.zeros((3, 3))  # d[k] = direction of travel of axis k
+    alpha, beta1, beta2 = sq[row, 0] * 1e-6, sq[row, 1] * 1e-6, sq[row, 2] * 1e-6
+    d[0, 0] = math.cos(alpha)
+    d[0, 1] = -math.sin(alpha)
+    d[1, 1] = 1.0
+    d[2, 0] = -math.sin(beta1) * math.cos(beta2)
+    d[2, 1] = -math.sin(beta2)
+    d[2, 2] = math.cos(beta1) * math.cos(beta2)
+    rk = np.empty((3, 3))
+    acc = np.eye(3)
+    tmp = np.empty((3, 3))
+    v = np.zeros(3)
+    w = np.empty(3)
+    for j in range(tool.shape[0] - 1, -1, -1):  # stylus side first
+        k = tool[j]
+        _rotation(errors[row, k, 3] * 1e-6, errors[row, k, 4] * 1e-6, errors[row, k, 5] * 1e-6, rk)
+        for i in range(3):
+            w[i] = (
+                rk[i, 0] * v[0]
+                + rk[i, 1] * v[1]
+                + rk[i, 2] * v[2]
+                + errors[row, k, i] * 1e-3
+                + u[row, k] * d[k, i]
+            )
+        for i in range(3):
+            v[i] = w[i]
+            for c in range(3):
+                tmp[i, c] = rk[i, 0] * acc[0, c] + rk[i, 1] * acc[1, c] + rk[i, 2] * acc[2, c]
+        for i in range(3):
+            for c in range(3):
+                acc[i, c] = tmp[i, c]
+    for j in range(work.shape[0]):  # base → workpiece: p_work = T⁻¹ · p
+        k = work[j]
+        _rotation(errors[row, k, 3] * 1e-6, errors[row, k, 4] * 1e-6, errors[row, k, 5] * 1e-6, rk)
+        for i in range(3):
+            w[i] = v[i] + u[row, k] * d[k, i] + errors[row, k, i] * 1e-3
+        for i in range(3):  # rkᵀ · w
+            v[i] = rk[0, i] * w[0] + rk[1, i] * w[1] + rk[2, i] * w[2]
+            for c in range(3):
+                tmp[i, c] = rk[0, i] * acc[0, c] + rk[1, i] * acc[1, c] + rk[2, i] * acc[2, c]
+        for i in range(3):
+            for c in range(3):
+                acc[i, c] = tmp[i, c]
+    for i in range(3):
+        out_t[slot, i] = (v[i] - u[row, i]) * 1000.0
+        for c in range(3):
+            out_rot[slot, i, c] = acc[i, c]
+
+
 @njit(cache=True, parallel=True)
 def _exact_rows(tool, work, u, errors, sq, out_rot, out_t):  # type: ignore[no-untyped-def]
-    n = u.shape[0]
-    for row in prange(n):
-        d = np.zeros((3, 3))  # d[k] = direction of travel of axis k
-        alpha, beta1, beta2 = sq[row, 0] * 1e-6, sq[row, 1] * 1e-6, sq[row, 2] * 1e-6
-        d[0, 0] = math.cos(alpha)
-        d[0, 1] = -math.sin(alpha)
-        d[1, 1] = 1.0
-        d[2, 0] = -math.sin(beta1) * math.cos(beta2)
-        d[2, 1] = -math.sin(beta2)
-        d[2, 2] = math.cos(beta1) * math.cos(beta2)
-        rk = np.empty((3, 3))
-        acc = np.eye(3)
-        tmp = np.empty((3, 3))
-        v = np.zeros(3)
-        w = np.empty(3)
-        for j in range(tool.shape[0] - 1, -1, -1):  # stylus side first
-            k = tool[j]
-            _rotation(
-                errors[row, k, 3] * 1e-6, errors[row, k, 4] * 1e-6, errors[row, k, 5] * 1e-6, rk
-            )
-            for i in range(3):
-                w[i] = (
-                    rk[i, 0] * v[0]
-                    + rk[i, 1] * v[1]
-                    + rk[i, 2] * v[2]
-                    + errors[row, k, i] * 1e-3
-                    + u[row, k] * d[k, i]
-                )
-            for i in range(3):
-                v[i] = w[i]
-                for c in range(3):
-                    tmp[i, c] = rk[i, 0] * acc[0, c] + rk[i, 1] * acc[1, c] + rk[i, 2] * acc[2, c]
-            for i in range(3):
-                for c in range(3):
-                    acc[i, c] = tmp[i, c]
-        for j in range(work.shape[0]):  # base → workpiece: p_work = T⁻¹ · p
-            k = work[j]
-            _rotation(
-                errors[row, k, 3] * 1e-6, errors[row, k, 4] * 1e-6, errors[row, k, 5] * 1e-6, rk
-            )
-            for i in range(3):
-                w[i] = v[i] + u[row, k] * d[k, i] + errors[row, k, i] * 1e-3
-            for i in range(3):  # rkᵀ · w
-                v[i] = rk[0, i] * w[0] + rk[1, i] * w[1] + rk[2, i] * w[2]
-                for c in range(3):
-                    tmp[i, c] = rk[0, i] * acc[0, c] + rk[1, i] * acc[1, c] + rk[2, i] * acc[2, c]
-            for i in range(3):
-                for c in range(3):
-                    acc[i, c] = tmp[i, c]
-        for i in range(3):
-            out_t[row, i] = (v[i] - u[row, i]) * 1000.0
-            for c in range(3):
-                out_rot[row, i, c] = acc[i, c]
+    for row in prange(u.shape[0]):
+        _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, row)
 
 
 def exact_pose_compiled(
@@ -123,3 +124,48 @@ def exact_pose_compiled(
     t = np.empty((n, 3))
     _exact_rows(tool, work, u, e, s, rot, t)
     return rot, t
+
+
+@njit(cache=True, parallel=True)
+def _residual_rows(tool, work, u, errors, sq, rot0, t0, stylus, out):  # type: ignore[no-untyped-def]
+    """Residual (µm) = t − t0 + 1000·(R − R0)·p of every row; row r belongs to point r mod N."""
+    n_pts = rot0.shape[0]
+    n = u.shape[0]
+    for row in prange(n):
+        rot = np.empty((1, 3, 3))
+        t = np.empty((1, 3))
+        _pose_row(tool, work, u, errors, sq, row, rot, t, 0)
+        p = row % n_pts
+        for i in range(3):
+            acc = t[0, i] - t0[p, i]
+            for c in range(3):
+                acc += 1000.0 * (rot[0, i, c] - rot0[p, i, c]) * stylus[p, c]
+            out[row, i] = acc
+
+
+def residual_compiled(
+    axes: tuple[NDArray[np.int64], NDArray[np.int64]],
+    u_mm: FloatArray,
+    errors: FloatArray,
+    squareness_urad: FloatArray,
+    rotation0: FloatArray,
+    translation0_um: FloatArray,
+    stylus_mm: FloatArray,
+) -> FloatArray:
+    """Residual at the stylus, ``t − t0 + 1000·(R − R0)·p`` µm (rows, 3), of the exact chain
+    (as :func:`exact_pose_compiled`) against the nominal pose (N points; rows trial-major,
+    row r is point r mod N)."""
+    tool, work = axes
+    out = np.empty((u_mm.shape[0], 3))
+    _residual_rows(
+        tool,
+        work,
+        np.ascontiguousarray(u_mm, dtype=np.float64),
+        np.ascontiguousarray(errors, dtype=np.float64),
+        np.ascontiguousarray(squareness_urad, dtype=np.float64),
+        np.ascontiguousarray(rotation0, dtype=np.float64),
+        np.ascontiguousarray(translation0_um, dtype=np.float64),
+        np.ascontiguousarray(stylus_mm, dtype=np.float64),
+        out,
+    )
+    return out

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..parametric_errors import AXIS_INDEX, parse_component
 from ..thermal.roles import WORKPIECE, scale_role
-from .chain_kernel import chain_axes, exact_pose_compiled
+from .chain_kernel import chain_axes, exact_pose_compiled, residual_compiled
 from .fields import squared_exponential_basis
 from .model import UncertaintyModel
 
@@ -138,7 +138,8 @@ class VirtualCMM:
                 rows.append(tu.u_per_m * ((uniq - tu.reference_mm) / 1000.0)[None, :])
             if tu.u_relative > 0:
                 rows.append(tu.u_relative * np.asarray(value, dtype=float)[None, :])
-            blocks.append(np.vstack(rows))
+            # one factor for the three parts: as few normal numbers as distinct positions
+            blocks.append(_sampling_factor(np.vstack(rows).T).T)
             source.append(columns + inverse.reshape(-1))
             target.append(np.arange(n) * 18 + k * 6 + c.slot)
             columns += len(uniq)
@@ -245,19 +246,33 @@ class VirtualCMM:
             self.model.squareness_urad * rng.standard_normal((t, 1, 3))
         )
         u = np.broadcast_to(prep.u_mm, (t, n, 3)).reshape(-1, 3)
-        rot, trans = exact_pose_compiled(
-            self._axes, u, errors.reshape(-1, 3, 6), np.broadcast_to(sq, (t, n, 3)).reshape(-1, 3)
-        )
+        sq_rows = np.broadcast_to(sq, (t, n, 3)).reshape(-1, 3)
+        if not pose:
+            res = residual_compiled(
+                self._axes,
+                u,
+                errors.reshape(-1, 3, 6),
+                sq_rows,
+                prep.rotation0,
+                prep.translation0_um,
+                prep.stylus_mm,
+            ).reshape(t, n, 3)
+            return self._add_thermal_and_probing(prep, res, rng)
+        rot, trans = exact_pose_compiled(self._axes, u, errors.reshape(-1, 3, 6), sq_rows)
         rot = rot.reshape(t, n, 3, 3)
         d_t = trans.reshape(t, n, 3) - prep.translation0_um[None]
-        if pose:
-            rel = np.einsum("tnij,nkj->tnik", rot, prep.rotation0)  # R_true · R_modelᵀ
-            w = np.empty((t, n, 3))
-            w[..., 0] = 0.5 * (rel[..., 2, 1] - rel[..., 1, 2])
-            w[..., 1] = 0.5 * (rel[..., 0, 2] - rel[..., 2, 0])
-            w[..., 2] = 0.5 * (rel[..., 1, 0] - rel[..., 0, 1])
-            return np.concatenate([d_t, 1e6 * w], axis=-1)
-        res = d_t + 1000.0 * np.einsum("tnij,nj->tni", rot - prep.rotation0[None], prep.stylus_mm)
+        rel = np.einsum("tnij,nkj->tnik", rot, prep.rotation0)  # R_true · R_modelᵀ
+        w = np.empty((t, n, 3))
+        w[..., 0] = 0.5 * (rel[..., 2, 1] - rel[..., 1, 2])
+        w[..., 1] = 0.5 * (rel[..., 0, 2] - rel[..., 2, 0])
+        w[..., 2] = 0.5 * (rel[..., 1, 0] - rel[..., 0, 1])
+        return np.concatenate([d_t, 1e6 * w], axis=-1)
+
+    def _add_thermal_and_probing(
+        self, prep: Prepared, res: FloatArray, rng: np.random.Generator
+    ) -> FloatArray:
+        """Add the exact thermal residuals and the probing errors to ``res`` (t, N, 3) µm."""
+        t, n = res.shape[0], res.shape[1]
         for k, alpha, d_temp, u_a, u_t in prep.scale:
             e_a = u_a * rng.standard_normal((t, 1))
             e_t = u_t * rng.standard_normal((t, 1))
