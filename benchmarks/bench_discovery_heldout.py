@@ -173,6 +173,8 @@ def _run_cli(
 
 def run_one(plan: Plan, args: argparse.Namespace, cli: str, env: dict[str, str]) -> Outcome:
     outcome = Outcome(plan)
+    outcome.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
+    outcome.code = code_fingerprint()
     case = None
     for attempt in range(DESIGN_REDRAWS):
         try:
@@ -256,6 +258,16 @@ def _tree_state() -> list[str]:
     except (OSError, subprocess.CalledProcessError):
         return ["unknown"]
     return [line.strip() for line in out.splitlines() if line.strip()]
+
+
+def code_fingerprint() -> str:
+    """HEAD plus the uncommitted files under compensation/ and cli/ with their modification times:
+    changes when the code the CLI runs changes (git metadata and mtimes only, no content)."""
+    state = [_git_commit()]
+    for line in _tree_state():
+        path = ROOT / line.split()[-1]
+        state.append(f"{line}@{path.stat().st_mtime_ns if path.exists() else 0}")
+    return f"{state[0][:12]}+{zlib.crc32('|'.join(state).encode()):08x}"
 
 
 def _git_commit() -> str:
@@ -382,6 +394,7 @@ def reprint(path: Path) -> int:
         o.cpu_s = r["cpu_s"] if r.get("cpu_s") is not None else float("nan")
         o.elapsed_s, o.exit_code, o.error = r.get("elapsed_s"), r.get("exit_code"), r.get("error")
         o.design_redraws = int((r.get("case") or {}).get("design_redraws", 0))
+        o.started_utc, o.code = r.get("started_utc"), r.get("code")
         outs.append(o)
     lines, _ = report(outs, args, meta)
     print("\n".join(lines))
@@ -471,6 +484,8 @@ def main(argv: list[str]) -> int:
                 "elapsed_s": o.elapsed_s,
                 "exit_code": o.exit_code,
                 "error": o.error,
+                "started_utc": o.started_utc,
+                "code": o.code,
             }
             for o in outs
         ],

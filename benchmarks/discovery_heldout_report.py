@@ -24,6 +24,8 @@ class Outcome:
     error: str | None = None
     stderr_tail: str = ""
     design_redraws: int = 0
+    started_utc: str | None = None
+    code: str | None = None  # fingerprint of the code the CLI ran (HEAD + uncommitted files)
 
 
 def _pct(k: int, n: int) -> str:
