@@ -18,7 +18,13 @@ Per reading it records the time spent in the three calls (what the reply path pa
 feeder's wake-up lateness after each sleep (how long a thread that wakes for the next frame
 waits, e.g. for the GIL held by the sender thread), plus the process CPU time per reading
 (sender thread and the SDK's server threads included). Figures are p50/p99 over all rounds and
-ratios against ``off`` of the same run.
+differences against ``off`` of the same run.
+
+``--daemon`` (once ``[live]`` is wired into the daemon's configuration): the daemon's reply
+latency, as ``benchmarks/bench_daemon.py`` measures it (a simulated controller on a ``virtual``
+CAN bus in the same process, 1 kHz, last raw frame → status frame, MCAP on with the default
+writer), with ``[live]`` off, on without a client, and on with the subscribed client in another
+process; the three cases in interleaved rounds, a new daemon per round.
 """
 
 from __future__ import annotations
@@ -129,6 +135,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--rate-hz", type=float, default=1000.0)
     parser.add_argument("--client", help=argparse.SUPPRESS)
+    parser.add_argument("--daemon", action="store_true", help="also the daemon's reply latency")
+    parser.add_argument("--daemon-n", type=int, default=3000, help="readings per daemon case")
     args = parser.parse_args(argv)
     if args.client:
         client_main(args.client)
@@ -225,6 +233,7 @@ def main(argv: list[str]) -> int:
         f"scene updates {busy_stats.scene_updates}; idle sink: not encoded "
         f"{idle_stats.not_encoded}, sent {idle_stats.sent}"
     )
+    daemon = bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz) if args.daemon else None
     result = {
         "benchmark": "bench_live",
         "python": sys.version.split()[0],
@@ -242,11 +251,104 @@ def main(argv: list[str]) -> int:
             "scene_points": busy_stats.scene_points,
         },
         "idle_sink": {"not_encoded": idle_stats.not_encoded, "sent": idle_stats.sent},
+        "daemon_reply_latency_us": daemon,
     }
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {RESULTS.relative_to(ROOT)}")
     return 0
+
+
+def start_client(url: str) -> subprocess.Popen[str]:
+    """The subscribed client in its own process; returns once it has subscribed."""
+    client = subprocess.Popen(
+        [sys.executable, __file__, "--client", url],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert client.stdout is not None
+    line = client.stdout.readline().strip()
+    if line != "subscribed":
+        client.kill()
+        raise RuntimeError(f"the client did not subscribe: {line!r}")
+    return client
+
+
+def stop_client(client: subprocess.Popen[str]) -> dict[str, int]:
+    assert client.stdin is not None and client.stdout is not None
+    client.stdin.close()
+    line = client.stdout.readline().strip()
+    client.wait(10)
+    return json.loads(line) if line else {}
+
+
+def bench_live_daemon(n: int, rounds: int, rate_hz: float) -> dict[str, Any] | None:
+    """The daemon's reply latency with the live view off / on idle / on with a client."""
+    import tempfile
+    import uuid
+
+    import can
+    from bench_daemon import config, interleaved, measure, readings
+
+    from cmm_comp.compensation.grid import CorrectionGrid
+    from cmm_comp.compensation.machine import Machine
+    from cmm_comp.daemon.config import DaemonConfig
+    from cmm_comp.daemon.service import DaemonService
+    from cmm_comp.sim_controller.controller import CanController
+
+    if not hasattr(DaemonConfig(), "live"):
+        print("daemon: [live] is not wired into the daemon yet; skipped", file=sys.stderr)
+        return None
+    machine = Machine.from_toml(ROOT / "examples" / "machines" / "npl-bridge.toml")
+    rs = readings(n + 200, np.random.default_rng(1))
+    received: dict[str, int] = {}
+    with tempfile.TemporaryDirectory() as tmpd:
+        tmp = Path(tmpd)
+        grid = tmp / "npl.grid"
+        CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
+
+        def one_round(name: str) -> tuple[list[float], int]:
+            ch = f"bench-live-{uuid.uuid4().hex[:8]}"
+            cfg = config(grid, "virtual", ch, str(tmp / f"{ch}.mcap"))
+            cfg.live.enabled = name != "live off"
+            cfg.live.port = 0
+            with (
+                DaemonService(cfg, events_stream=None) as d,
+                can.Bus(interface="virtual", channel=ch) as bus,
+                CanController(bus) as ctl,
+            ):
+                client = None
+                if name == "live on, subscribed":
+                    assert d.live is not None
+                    client = start_client(d.live.url)
+                    deadline = time.monotonic() + 5.0
+                    while d.live.stats().subscriptions < 7 and time.monotonic() < deadline:
+                        time.sleep(0.01)
+                try:
+                    out = measure(ctl, rs, rate_hz)
+                finally:
+                    if client is not None:
+                        for topic, k in stop_client(client).items():
+                            received[topic] = received.get(topic, 0) + k
+            return out
+
+        print("daemon rounds …", file=sys.stderr)
+        res = interleaved(
+            ["live off", "live on, no client", "live on, subscribed"], rounds, one_round
+        )
+    off = res["live off"]
+    print(f"\ndaemon reply latency (virtual CAN, {rate_hz:g} Hz, MCAP on), µs, {rounds} rounds")
+    print("| case | p50 | p99 | p50 − off | p99 − off | lost |")
+    print("|---|---|---|---|---|---|")
+    for name in ("live off", "live on, no client", "live on, subscribed"):
+        r = res[name]
+        print(
+            f"| {name} | {r['p50']:.0f} | {r['p99']:.0f} | {r['p50'] - off['p50']:+.0f} | "
+            f"{r['p99'] - off['p99']:+.0f} | {res[f'{name}_lost']} |"
+        )
+    print(f"client received (all rounds): {received}")
+    return {**res, "client_received": received}
 
 
 if __name__ == "__main__":

@@ -16,8 +16,8 @@ the SDK's server (``foxglove-sdk``: a Rust WebSocket server on its own threads) 
 as the message time; it also builds ``/cmm/scene`` (:mod:`.scene`) at most ``scene_rate_hz``
 times a second. It runs at normal priority: it shares the GIL with the reply path, and a thread
 of lower OS priority could be preempted while holding the GIL (priority inversion). Its work is
-sliced (the GIL is offered back every few messages) and wakes when the producer kicks it (the
-line is quiet) or every 10 ms.
+sliced (the GIL is offered back every few messages); it wakes every 10 ms, or at once when a
+producer's ``kick`` finds the queue half full or a client subscribes.
 
 Errors never stop the daemon: a message that cannot be encoded is counted and passed to
 ``on_error``, an unexpected error in the sender loop is reported and the loop goes on. A server
@@ -138,6 +138,7 @@ class LiveSink:
         self._batches: collections.deque[tuple[str, Sequence[Any], int]] = collections.deque()
         self._queued = 0
         self._limit = int(settings.queue)
+        self._kick_min = max(1, self._limit // 2)
         self._wanted: frozenset[str] = frozenset()
         self._latest: dict[str, tuple[Any, int]] = {}
         self._replay: set[str] = set()
@@ -295,8 +296,11 @@ class LiveSink:
             self._dropped_by[topic] = self._dropped_by.get(topic, 0) + cut
 
     def kick(self) -> None:
-        """Let the sender work now (the producer is idle); cheap when nothing waits."""
-        if self._queued:
+        """The producer is idle: wake the sender only when the queue is half full. Otherwise
+        the sender's own 10 ms poll takes the batch: waking a thread per reading (an
+        ``Event.set``, a context switch and a GIL hand-off each) cost the feeding thread ~3×
+        and the process ~2× the CPU in ``benchmarks/bench_live.py`` (docs/live.md)."""
+        if self._queued >= self._kick_min:
             self._wake.set()
 
     # ------------------------------------------------------------------ subscriptions
