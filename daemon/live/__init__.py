@@ -4,7 +4,10 @@ over the Foxglove WebSocket protocol (``foxglove-sdk``, optional extra ``live``;
 * :mod:`.settings` - the ``[live]`` configuration section and its checks;
 * :mod:`.payloads` - one logged message to the JSON the view sends (non-finite as ``null``);
 * :mod:`.scene` - the correction vectors as ``foxglove.SceneUpdate`` arrows;
+* :mod:`.server` - the ``foxglove-sdk`` side: its own context, the channels, the server;
 * :mod:`.sink` - :class:`LiveSink`: bounded queue, sender thread, WebSocket server;
+* :mod:`.process` - :class:`LiveProcessSink`: the same with the sender and the server in a
+  child process (:mod:`.child`), the daemon's default; :func:`live_sink` picks by setting;
 * :mod:`.fanout` - :class:`LiveFanOut`: the MCAP logger and the sink behind one
   ``SessionLogger``.
 

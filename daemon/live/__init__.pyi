@@ -1,9 +1,11 @@
 """Public API of ``live`` (read by lazy_loader: names load on first use)."""
 
 from .fanout import LiveFanOut
+from .process import LiveChildError, LiveProcessSink, live_sink
 from .server import SUBPROTOCOL, LiveServer, LiveStartError, open_live_server
 from .settings import (
     LIVE_RULES,
+    SENDERS,
     LiveConfigError,
     LiveSection,
     host_problem,
@@ -22,10 +24,13 @@ __all__ = [
     "LATCHED_TOPICS",
     "LIVE_RULES",
     "SCENE_TOPIC",
+    "SENDERS",
     "STREAMED_TOPICS",
     "SUBPROTOCOL",
+    "LiveChildError",
     "LiveConfigError",
     "LiveFanOut",
+    "LiveProcessSink",
     "LiveSection",
     "LiveServer",
     "LiveSink",
@@ -34,5 +39,6 @@ __all__ = [
     "host_problem",
     "live_problems",
     "live_section_from_table",
+    "live_sink",
     "open_live_server",
 ]

@@ -59,6 +59,11 @@ class LiveSection:
     newest always included): bounds the scene's cost at high reading rates."""
     arrow_mm_per_um: float = 5.0
     """Magnification of the correction arrows: drawn length, mm, per µm of correction."""
+    sender: str = "process"
+    """Where the JSON encoding, the scene and the WebSocket server run: ``process`` (a child
+    process at ``SCHED_IDLE``: its own GIL, only spare CPU; the daemon keeps the cheap queue)
+    or ``thread`` (a thread of the daemon: shares the reply path's GIL, adds to its p99;
+    docs/live.md)."""
 
 
 LIVE_RULES: dict[str, Range] = {
@@ -70,6 +75,10 @@ LIVE_RULES: dict[str, Range] = {
     "arrow_mm_per_um": Range(0.0, 1e6, lo_open=True, unit="mm/µm"),
 }
 """Allowed range of every numeric ``[live]`` key (NaN and ±inf never allowed)."""
+
+
+SENDERS = ("process", "thread")
+"""Allowed values of ``live.sender``."""
 
 
 def _section_types() -> dict[str, Any]:
@@ -115,6 +124,8 @@ def live_problems(section: LiveSection, where: str, skip: set[str] | None = None
         if _bad_number(value, rule):
             shown = repr(value) if isinstance(value, float) else str(value)
             out.append(f"{where}: live.{key} = {shown}; allowed: {rule.describe()}")
+    if "live.sender" not in skip and section.sender not in SENDERS:
+        out.append(f"{where}: live.sender = {section.sender!r}; allowed: {', '.join(SENDERS)}")
     if "live.host" not in skip and "live.allow_remote" not in skip:
         why = host_problem(section.host, section.allow_remote)
         if why is not None:

@@ -166,11 +166,15 @@ class LiveSink:
         self._last_status = 0.0
         self._reported_drops = 0
         self.error: BaseException | None = None
+        self.upstream_dropped = 0
+        """Messages dropped before they reached this sink (the daemon's queue, when this sink
+        runs in the child of :class:`.process.LiveProcessSink`): told to clients with ours."""
         self._wake = threading.Event()
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
         self._server: LiveServer | None = None
         self._channels: dict[str, Any] = {}
+        self._topics: frozenset[str] = frozenset()  # taken by log_many once started
         self._scene_channel: Any = None
         self._scene_mod: Any = None
         self._stopped = False
@@ -197,7 +201,8 @@ class LiveSink:
             self._topic_of,
         )
         self._scene_channel = self._server.scene
-        self._channels = self._server.channels  # producers start taking messages now
+        self._channels = self._server.channels
+        self._topics = frozenset(STREAMED_TOPICS)  # producers start taking messages now
         self._thread = threading.Thread(target=self._run, name="live-sender", daemon=True)
         self._thread.start()
         return self
@@ -257,7 +262,7 @@ class LiveSink:
         sequence and its payloads must not be changed afterwards. Returns ``len(payloads)``
         (0 once stopped); topics the view does not stream are ignored."""
         n = len(payloads)
-        if not n or topic not in self._channels:
+        if not n or topic not in self._topics:
             return n
         if log_time_ns is None:
             log_time_ns = time.time_ns()
@@ -323,6 +328,11 @@ class LiveSink:
                     wanted.add(CORRECTED if t == SCENE_TOPIC else t)
             self._wanted = frozenset(wanted)
         self._wake.set()
+
+    @property
+    def wanted_topics(self) -> frozenset[str]:
+        """The session-log topics some client needs now (``/cmm/corrected`` for the scene too)."""
+        return self._wanted
 
     def _sub_counts(self) -> tuple[int, int]:
         with self._sub_lock:
@@ -492,7 +502,7 @@ class LiveSink:
         self._scene_points += len(picked)
 
     def _status_tick(self, now: float) -> None:
-        dropped = self._dropped
+        dropped = self._dropped + self.upstream_dropped
         if self._server is None or dropped == self._reported_drops:
             return
         if now - self._last_status < STATUS_PERIOD_S:

@@ -1,0 +1,115 @@
+"""The child process of :class:`.process.LiveProcessSink`: the WebSocket server, the JSON
+encoding and the scene of the live view, in an interpreter of their own.
+
+Started as ``python -c`` (a fresh interpreter, never ``fork``: the daemon has threads) with one
+end of a duplex pipe. Messages on it are pickled:
+
+* parent → child: first ``(LiveSection, server name, priority)``, then
+  ``([(topic, payloads, log_time_ns), …], dropped in the daemon so far)``, and finally
+  :data:`STOP`;
+* child → parent: ``("ready", port)`` or ``("start_error", text)`` once, then
+  ``("wanted", [topics])`` whenever the subscriptions change, ``("stats", LiveStats)`` every
+  0.1 s, ``("error", text)`` per problem, and ``("stopped", None)`` last.
+
+The child lowers its CPU priority (``SCHED_IDLE``, else nice 19) before it starts any thread,
+so the sender thread and the SDK's server threads run only on CPU time nothing else wants; it
+ignores SIGINT/SIGTERM (the daemon's handler stops it through the pipe) and ends when the pipe
+closes (the daemon died).
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import pickle
+import signal
+import time
+from multiprocessing.connection import Connection
+from typing import Any
+
+from ..osthread import name_os_thread
+from .server import LiveStartError
+from .sink import LiveSink
+
+STOP = b"stop"
+"""The parent's last message."""
+STATS_PERIOD_S = 0.1
+POLL_S = 0.02
+
+
+def lower_priority(priority: str) -> str:
+    """Put the calling thread (and every thread it starts later) at ``SCHED_IDLE`` for
+    ``"idle"`` (nice 19 where that is missing); ``"normal"`` leaves it. Returns what applies."""
+    if priority != "idle":
+        return "normal"
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        return "idle"
+    except (AttributeError, OSError):
+        try:
+            os.nice(19)
+            return "nice19"
+        except OSError:
+            return "normal"
+
+
+def child_entry(fd: int) -> None:
+    """Child process entry (``python -c``); ``fd`` is its end of the pipe."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    name_os_thread("live-child")
+    conn = Connection(fd)
+    try:
+        settings, name, priority = pickle.loads(conn.recv_bytes())
+    except (EOFError, OSError):
+        conn.close()
+        return
+    lower_priority(priority)
+    try:
+        child_main(conn, settings, name)
+    finally:
+        conn.close()
+
+
+def _send(conn: Connection, kind: str, body: Any) -> None:
+    conn.send_bytes(pickle.dumps((kind, body), protocol=pickle.HIGHEST_PROTOCOL))
+
+
+def child_main(conn: Connection, settings: Any, name: str) -> None:
+    """Run a :class:`LiveSink` fed from ``conn`` until :data:`STOP` or the pipe closes."""
+    errors: collections.deque[BaseException] = collections.deque()
+    try:
+        sink = LiveSink(settings, on_error=errors.append, name=name).start()
+    except LiveStartError as exc:
+        _send(conn, "start_error", str(exc))
+        return
+    _send(conn, "ready", sink.port)
+    wanted: frozenset[str] | None = None
+    next_stats = 0.0
+    try:
+        while True:
+            if sink.wanted_topics != wanted:
+                wanted = sink.wanted_topics
+                _send(conn, "wanted", sorted(wanted))
+            while errors:
+                _send(conn, "error", str(errors.popleft()))
+            now = time.monotonic()
+            if now >= next_stats:
+                next_stats = now + STATS_PERIOD_S
+                _send(conn, "stats", sink.stats())
+            if not conn.poll(POLL_S):
+                continue
+            data = conn.recv_bytes()
+            if data == STOP:
+                break
+            batches, sink.upstream_dropped = pickle.loads(data)
+            for topic, payloads, t_ns in batches:
+                sink.log_many(topic, payloads, t_ns)
+    except (EOFError, OSError):
+        return  # the daemon is gone: nobody to report to
+    finally:
+        sink.stop(5.0)
+    while errors:
+        _send(conn, "error", str(errors.popleft()))
+    _send(conn, "stats", sink.stats())
+    _send(conn, "stopped", None)

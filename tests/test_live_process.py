@@ -1,0 +1,163 @@
+""":class:`LiveProcessSink`: the live view's server and encoding in a child process. The same
+spec-written client checks what arrives; the daemon-side counters stay exact when the child is
+stopped (SIGSTOP: the pipe fills, the daemon's queue drops its oldest), killed (reported, the
+daemon goes on) or cannot listen (one line, nothing left running)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from foxglove_ws_client import protobuf_class
+from test_live import T0_NS, connect, corr_rec, raw_rec, stamp, wait_until
+
+from cmm_comp.daemon.live import (
+    SCENE_TOPIC,
+    LiveChildError,
+    LiveProcessSink,
+    LiveSection,
+    LiveSink,
+    LiveStartError,
+    live_section_from_table,
+    live_sink,
+)
+
+
+@pytest.fixture(autouse=True)
+def _quiet_sdk_log() -> Iterator[None]:
+    """See tests/test_live.py (the child's SDK logs to its own stderr, not here)."""
+    logger = logging.getLogger("foxglove")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    yield
+    logger.setLevel(level)
+
+
+def settings(**kw: Any) -> LiveSection:
+    return LiveSection(**{"enabled": True, "port": 0, "scene_rate_hz": 1000.0, **kw})
+
+
+def test_the_setting_picks_the_sink() -> None:
+    assert live_section_from_table({}).sender == "process"
+    assert type(live_sink(settings())) is LiveProcessSink
+    assert type(live_sink(settings(sender="thread"))) is LiveSink
+
+
+def test_messages_and_scene_arrive_through_the_child() -> None:
+    errors: list[BaseException] = []
+    with LiveProcessSink(settings(), on_error=errors.append).start() as sink:
+        assert sink.child_pid is not None and sink.child_pid != os.getpid()
+        with connect(sink, ["/cmm/raw", "/cmm/corrected", SCENE_TOPIC]) as client:
+            wait_until(lambda: "/cmm/corrected" in sink.wanted_topics, "the child's wanted set")
+            sink.log_many("/cmm/raw", [raw_rec(1, 10.5, 20.25, 30.0)], T0_NS)
+            sink.log_many(
+                "/cmm/corrected", [corr_rec(1, (10_503_000, 20_250_000, 30_000_000), "ok", (3.0, 0.0, 0.0))], T0_NS
+            )  # fmt: skip
+            sink.log("/cmm/temperature", {"sensor": "0", "role": "T_x", "temp_C": 20.0}, T0_NS)
+            got = {m.topic: m for m in client.receive(3)}
+            update = protobuf_class(client.channels[SCENE_TOPIC]).FromString(
+                got[SCENE_TOPIC].payload
+            )
+    raw = got["/cmm/raw"].json()
+    assert (raw["seq"], raw["x_mm"], raw["stamp"]) == (1, 10.5, stamp(T0_NS))
+    assert got["/cmm/corrected"].json()["dx_um"] == 3.0
+    arrow = next(e for e in update.entities if e.arrows).arrows[0]
+    assert arrow.pose.position.x == pytest.approx(0.0105, abs=1e-12)  # (10.503 − 0.003) mm
+    s = sink.stats()
+    # nobody watched /cmm/temperature: dropped in the daemon, never sent to the child
+    assert (s.offered, s.sent, s.not_encoded, s.dropped, s.queue_len) == (3, 2, 1, 0, 0)
+    assert s.scene_updates == 1 and errors == []
+
+
+def test_nothing_leaves_the_daemon_without_a_subscriber() -> None:
+    with LiveProcessSink(settings()).start() as sink:
+        sink.log_many("/cmm/raw", [raw_rec(i, 0.0, 0.0, 0.0) for i in range(1000)], T0_NS)
+        time.sleep(0.05)  # the forwarder's poll runs a few times
+        assert sink._forwarded == 0  # nothing pickled, nothing sent to the child
+    s = sink.stats()
+    assert (s.offered, s.not_encoded, s.sent) == (1000, 1000, 0)
+
+
+def test_a_stopped_child_makes_the_daemon_drop_its_oldest_counted() -> None:
+    """SIGSTOP the child: its pipe fills, the forwarder waits, the daemon's queue (10) drops
+    its oldest. Counters stay exact; after SIGCONT the newest message still arrives."""
+    with LiveProcessSink(settings(queue=10)).start() as sink:
+        pid = sink.child_pid
+        assert pid is not None
+        with connect(sink, ["/cmm/raw"]) as client:
+            wait_until(lambda: "/cmm/raw" in sink.wanted_topics, "the child's wanted set")
+            os.kill(pid, signal.SIGSTOP)
+            try:
+                seq = 0
+                while sink.stats().dropped == 0 or seq < 5000:  # until the daemon drops
+                    batch = [raw_rec(seq + i, 1.0, 2.0, 3.0) for i in range(50)]
+                    sink.log_many("/cmm/raw", batch, T0_NS + seq)
+                    seq += 50
+                    time.sleep(0.0005)
+                    assert seq < 2_000_000, "the daemon never dropped"
+            finally:
+                os.kill(pid, signal.SIGCONT)
+            last = seq - 1
+            seen: set[int] = set()
+            while last not in seen:  # the newest arrives once the child runs again
+                seen.update(m.json()["seq"] for m in client.receive(1, timeout_s=20.0))
+            deadline = time.monotonic() + 5.0
+            while not client.statuses and time.monotonic() < deadline:
+                client.drain_text(0.05)
+    s = sink.stats()
+    assert s.dropped > 0 and s.queue_len == 0
+    assert s.offered == seq == s.not_encoded + s.dropped + s.sent + s.encode_errors
+    assert len(seen) <= s.sent  # the SDK may drop more for a slow client, never invent
+    assert any("messages dropped" in st["message"] for st in client.statuses)
+
+
+def test_a_killed_child_is_reported_and_the_daemon_goes_on() -> None:
+    errors: list[BaseException] = []
+    sink = LiveProcessSink(settings(), on_error=errors.append).start()
+    try:
+        pid = sink.child_pid
+        assert pid is not None
+        client = connect(sink, ["/cmm/raw"])
+        client.close()
+        os.kill(pid, signal.SIGKILL)
+        wait_until(lambda: bool(errors), "the death reported")
+        assert isinstance(errors[0], LiveChildError) and "process ended" in str(errors[0])
+        assert sink.log_many("/cmm/raw", [raw_rec(1, 0.0, 0.0, 0.0)], T0_NS) == 1
+    finally:
+        t0 = time.monotonic()
+        sink.stop(2.0)
+        assert time.monotonic() - t0 < 3.0
+    s = sink.stats()
+    assert s.offered == s.not_encoded + s.dropped + s.sent + s.encode_errors + s.queue_len
+
+
+def test_a_busy_port_is_one_clear_error_from_the_child() -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        sink = LiveProcessSink(settings(port=port))
+        with pytest.raises(LiveStartError, match=rf"cannot listen on 127\.0\.0\.1:{port}") as err:
+            sink.start()
+        assert "\n" not in str(err.value)
+        assert sink._proc is not None and sink._proc.poll() is not None  # reaped
+
+
+def test_unpicklable_payloads_are_counted_not_sent() -> None:
+    errors: list[BaseException] = []
+    with (
+        LiveProcessSink(settings(), on_error=errors.append).start() as sink,
+        connect(sink, ["/cmm/counters"]) as client,
+    ):
+        wait_until(lambda: "/cmm/counters" in sink.wanted_topics, "the child's wanted set")
+        sink.log("/cmm/counters", {"counters": {"a": 1}, "f": lambda: 0}, T0_NS)
+        sink.log("/cmm/counters", {"counters": {"a": 2}}, T0_NS + 1)
+        (m,) = client.receive(1)
+    assert m.json()["counters"] == {"a": 2}
+    assert sink.stats().encode_errors == 1 and "/cmm/counters" in str(errors[0])
