@@ -141,6 +141,10 @@ def test_sighup_reload_is_built_in_a_worker_process(tmp_path: Path) -> None:
         new = d.grids.current
         assert new.sha256 != old and new.sha256 == CorrectionGrid.load(grid).sha256
         assert new.loaded_by_pid not in (0, os.getpid())
+        if hasattr(os, "SCHED_IDLE"):  # the worker never competes with the reply path
+            with open(f"/proc/{new.loaded_by_pid}/stat") as f:
+                policy = int(f.read().rsplit(")", 1)[1].split()[38])  # field 41
+            assert policy == os.SCHED_IDLE
         send_temps(ctl)  # fresh temperatures: a slow reload on a busy machine outlasts stale_s
         assert ctl.exchange(RawReading(1, CENTRE_MM)).status == "ok"
         CorrectionGrid.build(npl_machine(), steps=(5, 5, 4)).save(grid)  # unsigned

@@ -23,7 +23,7 @@ from typing import cast
 
 from cmm_comp.compensation.errors import CmmCompError
 
-from ..osthread import name_os_thread
+from ..osthread import expected_priority, lower_priority, name_os_thread
 from .logger import LogSettings, QueuedMessage
 from .thread_writer import McapLogger
 
@@ -52,32 +52,6 @@ HELP_HIGH = 8192
 """Backlog (messages) at which the child's main thread starts writing itself…"""
 HELP_LOW = 1024
 """…until this many are left."""
-
-
-def expected_priority(priority: str) -> str:
-    """What :func:`lower_priority` will achieve here: ``idle``, ``nice 19`` or ``normal``."""
-    if priority == "normal":
-        return "normal"
-    return "idle" if hasattr(os, "SCHED_IDLE") else "nice 19"
-
-
-def lower_priority(priority: str) -> str:
-    """Lower the calling thread's CPU priority (Linux: policy and nice are per thread);
-    returns what took effect. ``idle``: Linux ``SCHED_IDLE`` (a woken normal task always
-    preempts it, so the writer never delays the daemon's reply path), else nice 19 where
-    SCHED_IDLE is missing; ``normal``: unchanged."""
-    if priority == "normal":
-        return "normal"
-    try:
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-        return "idle"
-    except (AttributeError, OSError):
-        pass
-    try:
-        os.nice(19 - os.nice(0))
-        return "nice 19"
-    except (AttributeError, OSError):
-        return "normal"
 
 
 M_MMAP_THRESHOLD, M_ARENA_MAX = -3, -8  # glibc mallopt() parameters (malloc.h)
