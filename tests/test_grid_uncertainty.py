@@ -242,3 +242,30 @@ def test_bad_uncertainty_data_is_refused(with_u: CorrectionGrid, tmp_path: Path)
     write_grid_members(path, header_bytes, c.arrays, payload_sha256(c.arrays, header_bytes), None)
     with pytest.raises(GridFileError, match=r"invalid grid content.*covariance_components"):
         CorrectionGrid.load(path)
+
+
+def test_compiled_U_equals_the_numpy_formulas(with_u: CorrectionGrid) -> None:
+    """The compiled batch and single-reading paths against the same rule written in numpy
+    (``variance_from_covariance``, ``ThermalUncertainty.variance_um2``): per point styli and
+    temperatures."""
+    from cmm_comp.compensation.grid.uncertainty import eval_spline, variance_from_covariance
+
+    gu = with_u.uncertainty
+    assert gu is not None
+    rng = np.random.default_rng(4)
+    n = 300
+    pts = rng.uniform(with_u.lower_mm, with_u.upper_mm, (n, 3))
+    sty = rng.normal(0.0, 80.0, (n, 3))
+    temps = {"T_x": rng.uniform(17, 25, n), "T_y": 21.0, "T_wp": rng.uniform(18, 24, n)}
+    _, status, u = with_u.correct(pts, sty, temps, with_uncertainty=True)
+    assert np.all(status == "ok")
+    cov = np.empty((n, 15))
+    tables = with_u._u_tables()
+    eval_spline(pts, *tables, gu.coefficients(with_u.axes), cov)
+    full = {k: np.broadcast_to(np.asarray(v, float), (n,)) for k, v in temps.items()}
+    var = variance_from_covariance(cov, sty) + gu.thermal.variance_um2(pts, full) + gu.probe_um**2
+    assert np.allclose(u, 2.0 * np.sqrt(var), rtol=1e-12, atol=1e-12)
+    for i in range(0, n, 37):
+        one = {k: float(np.broadcast_to(v, (n,))[i]) for k, v in temps.items()}
+        single, st = with_u.uncertainty_point(pts[i], sty[i], None, one)  # temperatures as inputs
+        assert st == "ok" and np.allclose(single, u[i], rtol=1e-12)

@@ -232,9 +232,10 @@ class CorrectionGrid:
         self._ncomp_all = 3 + 6 * len(self.signals)
         self._lock = threading.Lock()
         self._dummy_q = np.zeros((1, 4))
-        self._u_point = np.zeros((1, 3))
+        self._u_tab = (self._lo, self._inv_d, self._shape, *self._knots, *self._spans)
+        self._u_buf = np.zeros((3, 4))
         self._u_cov = np.zeros((1, 15))
-        self._u_out = np.zeros(3)
+        self._u_out = np.zeros((1, 3))
         self._dummy_t = np.zeros((1, 3))
         if not _WARM["done"]:  # compile or load the cached kernels now, not on first use
             p = np.array([0.5 * (self.lower_mm + self.upper_mm)])
@@ -525,7 +526,7 @@ class CorrectionGrid:
         return out
 
     def _u_tables(self) -> tuple[Any, ...]:
-        return (self._lo, self._inv_d, self._shape, *self._knots, *self._spans)
+        return self._u_tab
 
     def _correct_with_uncertainty(
         self,
@@ -601,10 +602,6 @@ class CorrectionGrid:
             return out, status, _NAN3
         x, y, z = map(float, point_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
         px, py, pz = map(float, stylus_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
-        temps: dict[str, Any] = {}
-        for m in (inputs, temps_C):  # temperatures from temps_C win, as for the correction
-            if m:
-                temps.update({k: v for k, v in m.items() if k.startswith("T_") and v is not None})
         with self._lock:
             u = expanded_uncertainty_point(
                 gu,
@@ -612,8 +609,9 @@ class CorrectionGrid:
                 self._u_tables(),
                 (x, y, z),
                 (px, py, pz),
-                temps,
-                self._u_point,
+                temps_C,
+                inputs,
+                self._u_buf,
                 self._u_cov,
                 self._u_out,
             )

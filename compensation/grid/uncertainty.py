@@ -332,7 +332,9 @@ def expanded_uncertainty_um(
 
     ``coef`` the spline coefficients (:meth:`GridUncertainty.coefficients`), ``tables`` the
     grid's ``(lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz)``; ``stylus_mm`` (1 or N, 3);
-    ``temps_C`` temperatures by role (scalars or (N,) arrays)."""
+    ``temps_C`` temperatures by role (scalars or (N,) arrays). One compiled, parallel pass
+    (:func:`_u_rows`); :func:`variance_from_covariance` and :meth:`ThermalUncertainty.variance_um2`
+    are the same mathematics in numpy."""
     n = points_mm.shape[0]
     out = np.full((n, 3), np.nan)
     idx = np.flatnonzero(ok)
@@ -340,18 +342,21 @@ def expanded_uncertainty_um(
         return out
     lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
     pts = np.ascontiguousarray(points_mm[idx])
-    cov = np.empty((idx.size, coef.shape[3]))
-    eval_spline(pts, lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef, cov)
-    sty = stylus_mm if stylus_mm.shape[0] == 1 else stylus_mm[idx]
-    var = variance_from_covariance(cov, sty)
-    temps: dict[str, FloatArray] = {}
-    for name, value in (temps_C or {}).items():
+    sty = np.ascontiguousarray(stylus_mm if stylus_mm.shape[0] == 1 else stylus_mm[idx])
+    ref_c = float(gu.thermal_vector[0])
+    cols = []
+    for name in ("T_x", "T_y", "T_z", "T_wp"):
+        value = (temps_C or {}).get(name)
         if value is None:
+            cols.append(np.zeros(1))
             continue
-        arr = np.asarray(value, dtype=float)
-        temps[name] = np.full(idx.size, float(arr)) if arr.ndim == 0 else arr[idx]
-    var += gu.thermal.variance_um2(pts, temps) + gu.probe_um**2
-    out[idx] = gu.coverage_factor * np.sqrt(var)
+        arr = np.asarray(value, dtype=np.float64)
+        cols.append(np.array([float(arr) - ref_c]) if arr.ndim == 0 else arr[idx] - ref_c)
+    rows = max(len(c) for c in cols)
+    d_t = np.ascontiguousarray(np.stack([np.broadcast_to(c, (rows,)) for c in cols], axis=1))
+    u = np.empty((idx.size, 3))
+    _u_rows(pts, sty, d_t, lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef, gu.thermal_vector, u)
+    out[idx] = u
     return out
 
 
@@ -361,66 +366,103 @@ def expanded_uncertainty_point(
     tables: tuple[Any, ...],
     point: tuple[float, float, float],
     stylus: tuple[float, float, float],
-    temps_C: Mapping[str, Any],
-    buf_point: FloatArray,
+    temps_C: Mapping[str, Any] | None,
+    inputs: Mapping[str, Any] | None,
+    buf: FloatArray,
     buf_cov: FloatArray,
     buf_out: FloatArray,
 ) -> tuple[float, float, float]:
     """U (µm, k = ``gu.coverage_factor``) of one point whose status is ok, the single-reading
-    path: one compiled call (:func:`_point_kernel`); ``buf_*`` are scratch arrays the caller
-    owns and locks ((1, 3), (1, 15), (3,)). Same mathematics as :func:`expanded_uncertainty_um`."""
-    th = gu.thermal_vector
-    ref_c = th[0]
-    d_t = [0.0, 0.0, 0.0, 0.0]
+    path: one compiled call; ``buf`` (3, 4), ``buf_cov`` (1, 15) and ``buf_out`` (1, 3) are
+    scratch arrays the caller owns and locks. A temperature is read from ``temps_C``, else from
+    ``inputs``, as the correction reads it. Same mathematics as :func:`expanded_uncertainty_um`."""
+    ref_c = gu.thermal_vector[0]
+    buf[0, 0], buf[0, 1], buf[0, 2] = point
+    buf[1, 0], buf[1, 1], buf[1, 2] = stylus
     for i, name in enumerate(("T_x", "T_y", "T_z", "T_wp")):
-        value = temps_C.get(name)
-        if value is not None:
-            d_t[i] = float(value) - ref_c
+        value = None if temps_C is None else temps_C.get(name)
+        if value is None and inputs is not None:
+            value = inputs.get(name)
+        buf[2, i] = 0.0 if value is None else float(value) - ref_c
     lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
-    buf_point[0, 0], buf_point[0, 1], buf_point[0, 2] = point
     _point_kernel(
-        buf_point, stylus[0], stylus[1], stylus[2], d_t[0], d_t[1], d_t[2], d_t[3],
-        lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef, th, buf_cov, buf_out,
+        buf[0:1], buf[1:2], buf[2:3], lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef,
+        gu.thermal_vector, buf_cov, buf_out,
     )  # fmt: skip
-    return float(buf_out[0]), float(buf_out[1]), float(buf_out[2])
+    return float(buf_out[0, 0]), float(buf_out[0, 1]), float(buf_out[0, 2])
 
 
 @njit(cache=True)
-def _point_kernel(  # type: ignore[no-untyped-def]
-    point, px, py, pz, dtx, dty, dtz, dtw,
-    lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out,
-):  # fmt: skip
-    """U of one point: spline of the covariance entries, the stylus rule, the thermal terms
-    (``th`` = :attr:`GridUncertainty.thermal_vector`), the probing σ², the coverage factor."""
-    _spline_row(0, point, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, cov)
-    c = cov[0]
-    out[0] = (
+def _u_row(
+    n, points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
+):  # type: ignore[no-untyped-def]
+    """U of point n: spline of the covariance entries into ``cov[n]``, the stylus rule, the
+    thermal terms (``th`` = :attr:`GridUncertainty.thermal_vector`; ``d_t`` rows of
+    ΔT_x, ΔT_y, ΔT_z, ΔT_wp, one row or one per point), probing σ², coverage factor."""
+    _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, cov)
+    c = cov[n]
+    row = np.int64(n)  # a prange index is unsigned: int64 | uint64 would unify to float64
+    zero = np.int64(0)
+    si = row if stylus.shape[0] > 1 else zero
+    px, py, pz = stylus[si, 0], stylus[si, 1], stylus[si, 2]
+    v0 = (
         c[0]
         + 2e-3 * (pz * c[3] - py * c[4])
         + 1e-6 * (pz * pz * c[10] + py * py * c[11] - 2 * py * pz * c[14])
     )
-    out[1] = (
+    v1 = (
         c[1]
         + 2e-3 * (px * c[6] - pz * c[5])
         + 1e-6 * (px * px * c[11] + pz * pz * c[9] - 2 * px * pz * c[13])
     )
-    out[2] = (
-        c[2] + 2e-3 * (py * c[7] - px * c[8])
+    v2 = (
+        c[2]
+        + 2e-3 * (py * c[7] - px * c[8])
         + 1e-6 * (py * py * c[9] + px * px * c[10] - 2 * px * py * c[12])
-    )  # fmt: skip
-    for k in range(3):
-        if out[k] < 0.0:
-            out[k] = 0.0
-    dts = (dtx, dty, dtz)
-    for k in range(3):
-        a, ua, ut = th[4 + k], th[7 + k], th[10 + k]
-        lever = (point[0, k] - th[1 + k]) / 1000.0
-        dt = dts[k]
-        out[k] += (a * a * ut * ut + dt * dt * ua * ua + ua * ua * ut * ut) * lever * lever
+    )
+    var = (max(v0, 0.0), max(v1, 0.0), max(v2, 0.0))
+    r = row if d_t.shape[0] > 1 else zero
     a, ua, ut = th[13], th[14], th[15]
+    dtw = d_t[r, 3]
     f = a * a * ut * ut + dtw * dtw * ua * ua + ua * ua * ut * ut
     for k in range(3):
-        lever = (point[0, k] - th[16 + k]) / 1000.0
-        out[k] += f * lever * lever
-    for k in range(3):
-        out[k] = th[20] * math.sqrt(out[k] + th[19])
+        a, ua, ut = th[4 + k], th[7 + k], th[10 + k]
+        dt = d_t[r, k]
+        lever = (points[n, k] - th[1 + k]) / 1000.0
+        lever_wp = (points[n, k] - th[16 + k]) / 1000.0
+        vk = var[k] + (a * a * ut * ut + dt * dt * ua * ua + ua * ua * ut * ut) * lever * lever
+        out[n, k] = th[20] * math.sqrt(vk + f * lever_wp * lever_wp + th[19])
+
+
+@njit(cache=True, parallel=True)
+def _u_rows(points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, out):  # type: ignore[no-untyped-def]
+    cov = np.empty((points.shape[0], coef.shape[3]))
+    for n in prange(points.shape[0]):
+        _u_row(
+            n,
+            points,
+            stylus,
+            d_t,
+            lo,
+            inv_d,
+            shape,
+            tx,
+            ty,
+            tz,
+            spanx,
+            spany,
+            spanz,
+            coef,
+            th,
+            cov,
+            out,
+        )
+
+
+@njit(cache=True)
+def _point_kernel(
+    point, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
+):  # type: ignore[no-untyped-def]
+    _u_row(
+        0, point, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
+    )
