@@ -23,8 +23,12 @@ differences against ``off`` of the same run.
 ``--daemon`` (once ``[live]`` is wired into the daemon's configuration): the daemon's reply
 latency, as ``benchmarks/bench_daemon.py`` measures it (a simulated controller on a ``virtual``
 CAN bus in the same process, 1 kHz, last raw frame → status frame, MCAP on with the default
-writer), with ``[live]`` off, on without a client, and on with the subscribed client in another
-process; the three cases in interleaved rounds, a new daemon per round.
+writer), with ``[live]`` off, on with the default child-process sender (no client; the
+subscribed client in another process) and on with the sender thread (subscribed): the cases
+in interleaved rounds, a new daemon per round.
+
+The feeder cases above use :class:`LiveSink` (the sender thread) directly: they show what the
+thread costs the process that feeds it.
 """
 
 from __future__ import annotations
@@ -259,6 +263,14 @@ def main(argv: list[str]) -> int:
     return 0
 
 
+DAEMON_CASES: dict[str, tuple[bool, str, bool]] = {  # name: live enabled, sender, client
+    "live off": (False, "process", False),
+    "live on (process), no client": (True, "process", False),
+    "live on (process), subscribed": (True, "process", True),
+    "live on (thread), subscribed": (True, "thread", True),
+}
+
+
 def start_client(url: str) -> subprocess.Popen[str]:
     """The subscribed client in its own process; returns once it has subscribed."""
     client = subprocess.Popen(
@@ -303,15 +315,18 @@ def bench_live_daemon(n: int, rounds: int, rate_hz: float) -> dict[str, Any] | N
     machine = Machine.from_toml(ROOT / "examples" / "machines" / "npl-bridge.toml")
     rs = readings(n + 200, np.random.default_rng(1))
     received: dict[str, int] = {}
+    live_stats: dict[str, dict[str, int]] = {}
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)
         grid = tmp / "npl.grid"
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
 
         def one_round(name: str) -> tuple[list[float], int]:
+            enabled, sender, subscribed = DAEMON_CASES[name]
             ch = f"bench-live-{uuid.uuid4().hex[:8]}"
             cfg = config(grid, "virtual", ch, str(tmp / f"{ch}.mcap"))
-            cfg.live.enabled = name != "live off"
+            cfg.live.enabled = enabled
+            cfg.live.sender = sender
             cfg.live.port = 0
             with (
                 DaemonService(cfg, events_stream=None) as d,
@@ -319,7 +334,7 @@ def bench_live_daemon(n: int, rounds: int, rate_hz: float) -> dict[str, Any] | N
                 CanController(bus) as ctl,
             ):
                 client = None
-                if name == "live on, subscribed":
+                if subscribed:
                     assert d.live is not None
                     client = start_client(d.live.url)
                     deadline = time.monotonic() + 5.0
@@ -327,28 +342,34 @@ def bench_live_daemon(n: int, rounds: int, rate_hz: float) -> dict[str, Any] | N
                         time.sleep(0.01)
                 try:
                     out = measure(ctl, rs, rate_hz)
+                    time.sleep(0.1)  # the last answers reach the client
+                    if d.live is not None:
+                        st = d.live.stats()
+                        acc = live_stats.setdefault(name, {"sent": 0, "dropped": 0})
+                        acc["sent"] += st.sent
+                        acc["dropped"] += st.dropped
                 finally:
                     if client is not None:
                         for topic, k in stop_client(client).items():
-                            received[topic] = received.get(topic, 0) + k
+                            key = f"{name}: {topic}"
+                            received[key] = received.get(key, 0) + k
             return out
 
         print("daemon rounds …", file=sys.stderr)
-        res = interleaved(
-            ["live off", "live on, no client", "live on, subscribed"], rounds, one_round
-        )
+        res = interleaved(list(DAEMON_CASES), rounds, one_round)
     off = res["live off"]
     print(f"\ndaemon reply latency (virtual CAN, {rate_hz:g} Hz, MCAP on), µs, {rounds} rounds")
     print("| case | p50 | p99 | p50 − off | p99 − off | lost |")
     print("|---|---|---|---|---|---|")
-    for name in ("live off", "live on, no client", "live on, subscribed"):
+    for name in DAEMON_CASES:
         r = res[name]
         print(
             f"| {name} | {r['p50']:.0f} | {r['p99']:.0f} | {r['p50'] - off['p50']:+.0f} | "
             f"{r['p99'] - off['p99']:+.0f} | {res[f'{name}_lost']} |"
         )
     print(f"client received (all rounds): {received}")
-    return {**res, "client_received": received}
+    print(f"live view counters at the end of each case (all rounds): {live_stats}")
+    return {**res, "client_received": received, "live_stats": live_stats}
 
 
 if __name__ == "__main__":
