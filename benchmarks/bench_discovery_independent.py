@@ -36,15 +36,29 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
+from independent_generator.chains import MODELS  # noqa: E402
 from independent_generator.scoring import PAIRS, SINGLE_CAUSES, run_case  # noqa: E402
+from independent_generator.sessions import Design  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results" / "discovery_independent.json"
 
 
-def _run(case: tuple[str, float, int]) -> dict[str, Any]:
+def parse_design(text: str) -> Design:
+    """``LAYOUT/POINTS/STYLI/HOURS/NOISE_UM``, e.g. ``random/700/1/4/0.25`` (the outside
+    check's design: a moving bridge, ~700 points over 4 h, one stylus straight down, 0.25 µm)."""
+    try:
+        layout, n, styli, hours, noise = text.split("/")
+        return Design(layout, int(n), int(styli), float(hours) * 3600.0, float(noise))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"design {text!r}: expected LAYOUT/POINTS/STYLI/HOURS/NOISE_UM, e.g. random/700/1/4/0.25"
+        ) from None
+
+
+def _run(case: tuple[str, float, int], fixed: dict[str, Any] | None = None) -> dict[str, Any]:
     label, size, seed = case
     try:
-        return run_case(label, size, seed)
+        return run_case(label, size, seed, **(fixed or {}))
     except Exception as exc:  # a crash is a result too: keep going, report it
         return {
             "case": label,
@@ -306,6 +320,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--causes", nargs="+", choices=SINGLE_CAUSES, help="only these causes")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--model", choices=sorted(MODELS), help="every case on this kinematic model")
+    ap.add_argument(
+        "--design",
+        type=parse_design,
+        help="every case with this session design, LAYOUT/POINTS/STYLI/HOURS/NOISE_UM "
+        "(e.g. random/700/1/4/0.25)",
+    )
     args = ap.parse_args(argv)
     if args.quick:
         args.seeds, args.sizes, args.pair_seeds, args.clean = 1, [1.0], 1, 3
@@ -315,7 +336,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = {pool.submit(_run, c): c for c in cases}
+        fixed = {k: v for k, v in (("model", args.model), ("design", args.design)) if v}
+        futures = {pool.submit(_run, c, fixed): c for c in cases}
         for i, fut in enumerate(as_completed(futures), 1):
             r = fut.result()
             results.append(r)

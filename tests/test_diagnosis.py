@@ -36,20 +36,19 @@ def test_candidate_designs_equal_the_extended_machine(npl) -> None:
     by that effect adds (exact chain vs first order: second-order small)."""
     _, data = simulate(npl, [], [], seed=3, n_points=120)
     res = compute_residuals(npl, data)
-    for cand in all_candidates(res):
+    shapes = [c for root in all_candidates(res) for c in (root, root.rich) if c is not None]
+    for cand in shapes:
         theta = cand.thetas[len(cand.thetas) // 2]
         amps = [0.7 + 0.1 * j for j in range(cand.n_params)]
-        if cand.cause == "thermal_lag" or (
-            cand.cause == "squareness_drift" and cand.static_columns
-        ):
-            # the start-up transient columns describe the session, not the machine
-            amps[: cand.static_columns] = [0.0] * cand.static_columns
+        for j in cand.transient_columns:
+            amps[j] = 0.0  # the start-up transient describes the session, not the machine
         eff = cand.build(amps, theta)
         via_machine = true_error_um(npl.with_effects([eff]), data) - true_error_um(npl, data)
         via_design = cand.design(res, theta) @ np.asarray(amps)
         scale = max(1.0, float(np.max(np.abs(via_machine))))
         np.testing.assert_allclose(via_design, via_machine, atol=2e-3 * scale, err_msg=cand.label)
         if cand.cause != "thermal_lag":  # the lag acts on the machine's own thermal terms
+            # (the rich shapes with a static image: the effect evaluated directly too)
             np.testing.assert_allclose(
                 effect_displacement_um(res, eff), via_design, atol=1e-3 * scale
             )

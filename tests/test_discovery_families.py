@@ -27,11 +27,16 @@ from cmm_comp.compensation.effects import (
     DriftEffect,
     ParametricEffect,
     PeriodicEffect,
+    StaticImageEffect,
     effect_from_table,
 )
 from cmm_comp.compensation.formats.measurements import write_measurements
 from cmm_comp.compensation.machine import Machine
-from cmm_comp.compensation.thermal import ThermalGradientEffect
+from cmm_comp.compensation.thermal import (
+    ScaleExpansionEffect,
+    ThermalGradientEffect,
+    WorkpieceExpansionEffect,
+)
 from cmm_comp.sim_controller.sessions import measure_session, plan_session
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -158,6 +163,13 @@ def _term(npl: Machine, effect, q, signals):
         PeriodicEffect("x", 37.5, 1.0, -0.5, [[0.3, 0.1], [0.0, -0.2]]),
         DriftEffect("y", (0.0, 3600.0), [1.0, 2.0], [0.5, -1.0, 0.25]),
         ThermalGradientEffect("y", 4.0, -2.0, 0.7, 0.3, 1.1, offset_um_per_C=-0.6),
+        ScaleExpansionEffect("x", 2.5, 130.0),
+        WorkpieceExpansionEffect(-3.0, [100.0, 250.0, 40.0]),
+        StaticImageEffect(
+            ThermalGradientEffect("y", 4.0, -2.0, 0.7, 0.3, 1.1, offset_um_per_C=-0.6),
+            ThermalGradientEffect("y", -1.0, 0.5, 0.2, -0.4, 0.3, offset_um_per_C=0.8),
+            {"T_top": 21.3, "T_bottom": 20.4},
+        ),
     ],
 )
 def test_new_effect_shapes_round_trip_through_their_tables(npl: Machine, effect) -> None:
@@ -171,6 +183,8 @@ def test_new_effect_shapes_round_trip_through_their_tables(npl: Machine, effect)
         "t": rng.uniform(0, 3600, 50),
         "T_top": rng.uniform(20.5, 21.5, 50),
         "T_bottom": np.full(50, 20.0),
+        "T_x": rng.uniform(20.5, 22.0, 50),
+        "T_wp": rng.uniform(18.5, 21.0, 50),
     }
     a = _term(npl, effect, q, signals)
     b = _term(npl, again, q, signals)
@@ -235,3 +249,38 @@ def test_a_local_dent_is_unexplained_where_it_sits_never_a_cause(npl: Machine, s
     # the located centre lies inside the dent, independent of the basis' grid
     assert np.linalg.norm((where - centre) / (hi - lo)) < 0.3, (where, centre)
     assert d.extended_machine().effects == npl.effects  # nothing to compensate
+
+
+def test_static_image_is_the_effect_at_the_calibration_state(npl: Machine) -> None:
+    """Physics of an on-site calibration: the tables hold what the effect did at the frozen
+    state, so the term is E(T; c) + E(T_cal; b), each evaluated on its own (oracle: two plain
+    effects, the second fed constant temperatures)."""
+    dyn = ThermalGradientEffect("x", 3.0, -1.5, 0.4, 0.2, 0.9, offset_um_per_C=0.3)
+    stat = ThermalGradientEffect("x", -2.0, 0.7, 0.1, -0.3, 0.5, offset_um_per_C=-0.4)
+    frozen = {"T_top": 21.6, "T_bottom": 20.3}
+    rng = np.random.default_rng(3)
+    lo, hi = npl.volume.lower_mm, npl.volume.upper_mm
+    q = lo + rng.random((40, 3)) * (hi - lo)
+    signals = {"T_top": rng.uniform(20.5, 22.0, 40), "T_bottom": rng.uniform(19.8, 20.6, 40)}
+    both = _term(npl, StaticImageEffect(dyn, stat, frozen), q, signals)
+    held = {k: np.full(40, v) for k, v in frozen.items()}
+    expect = _term(npl, dyn, q, signals) + _term(npl, stat, q, held)
+    assert np.max(np.abs(expect)) > 1e-3
+    np.testing.assert_allclose(both, expect, atol=1e-12)
+    # the signals seen by other effects are untouched
+    with pytest.raises(ValueError, match="same kind"):
+        StaticImageEffect(dyn, ScaleExpansionEffect("x", 1.0), frozen)
+    with pytest.raises(ValueError, match="finite"):
+        StaticImageEffect(dyn, stat, {"T_top": float("nan")})
+    with pytest.raises(ValueError, match="signals"):
+        effect_from_table({**dyn.to_table(), "static_image": {"curvature_urad_per_m_C": 1.0}})
+
+
+def test_scale_fixed_elsewhere_expands_about_its_fixing_point(npl: Machine) -> None:
+    """A scale fixed at x = 130 mm: no error there whatever the temperature (hand value)."""
+    eff = ScaleExpansionEffect("x", 2.0, 130.0)
+    q = np.array([[130.0, 200.0, 100.0], [630.0, 200.0, 100.0]])
+    out = _term(npl, eff, q, {"T_x": np.array([23.0, 23.0])})
+    direct = out[-6:].reshape(2, 3)
+    assert direct[0, 0] == pytest.approx(0.0, abs=1e-12)
+    assert direct[1, 0] == pytest.approx(2.0 * 3.0 * 500.0 / 1000.0)

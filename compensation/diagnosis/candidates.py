@@ -27,6 +27,7 @@ from ..effects import (
     PeriodicEffect,
     ProbeLobingEffect,
     ReversalEffect,
+    StaticImageEffect,
     default_orders,
 )
 from ..parametric_errors import ANGULAR, AXES, AXIS_INDEX, SQUARENESS, TABLE_COMPONENTS
@@ -44,6 +45,11 @@ LAG_TIME_CONSTANTS_S: tuple[float, ...] = tuple(
     float(v) for v in np.geomspace(120.0, 4 * 3600.0, 28)
 )
 LOBES: tuple[int, ...] = (2, 3, 4, 5, 6)
+#: Plausible size (1σ) of a structure's start-up offset from its sensor (°C): a machine that has
+#: stood in its room for hours is within a degree or two of what its sensors read.
+START_STATE_SD_C = 2.0
+#: Plausible size (1σ) of a squareness' temperature coefficient (µrad/°C).
+SQUARENESS_DRIFT_SD_URAD_PER_C = 5.0
 
 #: ``(amplitudes, theta) → Effect``: builds a candidate's effect for fitted amplitudes.
 EffectBuilder = Callable[[list[float], Any], Effect]
@@ -103,13 +109,30 @@ class Candidate:
     #: in fits and cross-validation: a generic local basis must not extrapolate into regions
     #: the training points do not cover. 0 for the causes (plain least squares).
     ridge: float = 0.0
+    #: A prior on some coefficients (their plausible size, in the coefficient's own unit; None:
+    #: no prior), applied in fits and cross-validation like ``ridge`` with the weight σ²/prior²
+    #: (σ² the training residual's mean square): a session's unknown start-up state (°C) is a
+    #: few degrees at most, and a held-out block that holds the session's start must not be
+    #: predicted by a transient the training blocks barely see.
+    prior_sd: tuple[float | None, ...] | None = None
     #: A cause that is a function of time alone (a drift) is not extrapolated in time: where a
     #: held-out fold lies before or after every training point (folds are often blocks of time),
     #: it is predicted with the time held at the nearest end of the training span — a drift
     #: describes the session, and no polynomial in time says what happened beyond its data.
     hold_time: bool = False
+    #: Columns that carry the session's unknown start-up state (a transient decaying from the
+    #: first sample: a structure that was not in equilibrium with its sensors). Blocks of time
+    #: that hold the session's start cannot be predicted from the others: the transient is not
+    #: extrapolated back before a training span, and the term's held-out gain may also be shown
+    #: on short time blocks dealt out in turn (as a drift's).
+    transient_columns: tuple[int, ...] = ()
     _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
     _statics: dict[tuple[int, Any], Candidate | None] = field(default_factory=dict, repr=False)
+
+    @property
+    def start_state(self) -> bool:
+        """Whether the term carries the session's start-up state (``transient_columns``)."""
+        return bool(self.transient_columns)
 
     @property
     def identity(self) -> tuple[Any, ...]:
@@ -150,24 +173,11 @@ class Candidate:
         if self.static_columns:
             x = self.design(res, at)[:, :, : self.static_columns]
             if self.drivers:  # a lagged, signal-driven cause: its transient and its mean
-                frozen = replace(
-                    res,
-                    signals={
-                        k: np.full_like(v, float(np.mean(v))) if k in self.drivers else v
-                        for k, v in res.signals.items()
-                    },
-                )
-                rest = self.design_uncached(frozen, at)[:, :, self.static_columns :]
+                rest = self.design_uncached(_frozen(res, self.drivers), at)
+                rest = rest[:, :, self.static_columns :]
                 x = np.concatenate([x, rest], axis=2)
         elif self.drivers:
-            frozen = replace(
-                res,
-                signals={
-                    k: np.full_like(v, float(np.mean(v))) if k in self.drivers else v
-                    for k, v in res.signals.items()
-                },
-            )
-            x = self.design_uncached(frozen, self.thetas[0])
+            x = self.design_uncached(_frozen(res, self.drivers), self.thetas[0])
         static = None
         if x is not None and is_finite_design(x):
             fixed = x
@@ -387,6 +397,107 @@ def _periodic_builder(a: str) -> EffectBuilder:
     )
 
 
+def _imaged(cand: Candidate, res: Residuals) -> Candidate:
+    """``cand`` whose rich shape (its own, or itself) also carries its static image."""
+    cand.rich = with_static_image(cand.rich or cand, res)
+    return cand
+
+
+def _frozen(res: Residuals, drivers: Sequence[str]) -> Residuals:
+    """``res`` with the ``drivers`` signals held at their session mean."""
+    return replace(
+        res,
+        signals={
+            k: np.full_like(v, float(np.mean(v))) if k in drivers else v
+            for k, v in res.signals.items()
+        },
+    )
+
+
+def with_static_image(cand: Candidate, res: Residuals) -> Candidate:
+    """``cand`` plus the static image it left in the tables (a calibration made in another
+    thermal state): its columns with the driving signals frozen at their session mean, with
+    coefficients of their own, first; built as a :class:`StaticImageEffect`. A copy: ``cand``
+    itself is unchanged. See :mod:`cmm_comp.compensation.effects.static_image`."""
+    p = cand.n_params
+    drivers = cand.drivers
+    frozen_at = {d: float(np.mean(res.signals[d])) for d in drivers if d in res.signals}
+
+    def design(r: Residuals, theta: Any) -> FloatArray:
+        return np.concatenate(
+            [cand.design_uncached(_frozen(r, drivers), theta), cand.design_uncached(r, theta)],
+            axis=2,
+        )
+
+    def build(a: list[float], theta: Any) -> Effect:
+        return StaticImageEffect(cand.build(a[p:], theta), cand.build(a[:p], theta), frozen_at)
+
+    # the frozen copy of a start-up transient is that transient again (same prior, same role)
+    prior = tuple(cand.prior_sd or (None,) * p) * 2
+    return replace(
+        cand,
+        n_params=2 * p,
+        build=build,
+        design_fn=design,
+        design_many=None,
+        design_component=None,
+        rich=None,
+        static_columns=p,
+        prior_sd=prior,
+        transient_columns=(*cand.transient_columns, *(p + j for j in cand.transient_columns)),
+        _cache={},
+        _statics={},
+    )
+
+
+def _scale_origin_candidate(res: Residuals, axis: str, reference_C: float) -> Candidate:
+    """Scale expansion about a fixing point other than the reference (a scale fixed at one end):
+    ``Δ·dT·u/1000 + c·dT`` on the axis' component, ``fixed_at = ref − 1000·c/Δ``."""
+    k = AXIS_INDEX[axis]
+    ref = float(res.machine.volume.reference_mm[k])
+    role = f"T_{axis}"
+
+    def design(r: Residuals, _theta: Any) -> FloatArray:
+        dt = r.signals[role] - reference_C
+        x = np.zeros((r.n, 3, 2))
+        x[:, k, 0] = dt * r.u_mm[:, k] / 1000.0
+        x[:, k, 1] = dt
+        return x
+
+    def build(a: list[float], _theta: Any) -> Effect:
+        fixed = ref - 1000.0 * a[1] / a[0] if abs(a[0]) > 1e-9 else None
+        eff = ScaleExpansionEffect(axis, a[0], fixed)
+        eff.reference_C = reference_C
+        return eff
+
+    return Candidate("scale_expansion", {"axis": axis}, 2, build, design_fn=design, drivers=(role,))
+
+
+def _workpiece_fixture_candidate(
+    res: Residuals, fixture_mm: Sequence[float], reference_C: float
+) -> Candidate:
+    """Workpiece expansion about a fixture point other than the one described (the part clamped
+    elsewhere): ``−Δα·dT·(q − f₀)/1000 − c·dT``, ``f = f₀ − 1000·c/Δα``."""
+    f0 = np.asarray(fixture_mm, dtype=float)
+
+    def design(r: Residuals, _theta: Any) -> FloatArray:
+        dt = r.signals["T_wp"] - reference_C
+        x = np.zeros((r.n, 3, 4))
+        x[:, :, 0] = -dt[:, None] * (r.q_mm - f0) / 1000.0
+        for j in range(3):
+            x[:, j, 1 + j] = -dt
+        return x
+
+    def build(a: list[float], _theta: Any) -> Effect:
+        delta = a[0]
+        fixture = f0 - 1000.0 * np.asarray(a[1:4]) / delta if abs(delta) > 1e-9 else f0
+        eff = WorkpieceExpansionEffect(delta, [float(v) for v in fixture])
+        eff.reference_C = reference_C
+        return eff
+
+    return Candidate("workpiece_expansion", {}, 4, build, design_fn=design, drivers=("T_wp",))
+
+
 def all_candidates(res: Residuals) -> list[Candidate]:
     """Every cause of docs/formats.md §4 that the measurements can show (signals present, axis moved)."""
     m = res.machine
@@ -449,24 +560,24 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             continue
         if res.has("T_top", "T_bottom"):
             out.append(
-                Candidate(
-                    "thermal_gradient",
-                    {"axis": a},
-                    5,
-                    gradient_builder(a),
-                    drivers=("T_top", "T_bottom"),
-                ).with_rich(n_params=6)
-            )
-        if res.has(f"T_{a}"):
-            out.append(
-                Candidate(
-                    "scale_expansion",
-                    {"axis": a},
-                    1,
-                    scale_builder(a),
-                    drivers=(f"T_{a}",),
+                _imaged(
+                    Candidate(
+                        "thermal_gradient",
+                        {"axis": a},
+                        5,
+                        gradient_builder(a),
+                        drivers=("T_top", "T_bottom"),
+                    ).with_rich(n_params=6),
+                    res,
                 )
             )
+        if res.has(f"T_{a}"):
+            # rich: the scale fixed elsewhere than the reference, and its static image
+            scale = Candidate(
+                "scale_expansion", {"axis": a}, 1, scale_builder(a), drivers=(f"T_{a}",)
+            )
+            scale.rich = with_static_image(_scale_origin_candidate(res, a, ref_c), res)
+            out.append(scale)
         if res.has(f"dir_{a}"):
             span = _span(res, a)
             out.append(Candidate("reversal", {"axis": a}, 2, _reversal_builder(a, span)))
@@ -522,40 +633,49 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             else m.volume.reference_mm
         )
         fx = [float(v) for v in fixture]
-        out.append(
-            Candidate(
-                "workpiece_expansion",
-                {},
-                1,
-                lambda p, _t: thermal(WorkpieceExpansionEffect(p[0], fx)),
-                drivers=("T_wp",),
-            )
+        workpiece = Candidate(
+            "workpiece_expansion",
+            {},
+            1,
+            lambda p, _t: thermal(WorkpieceExpansionEffect(p[0], fx)),
+            drivers=("T_wp",),
         )
+        # rich: clamped elsewhere than the fixture described, and its static image
+        workpiece.rich = with_static_image(_workpiece_fixture_candidate(res, fx, ref_c), res)
+        out.append(workpiece)
     if res.has("T_air"):
         for comp in SQUARENESS:
             out.append(
-                Candidate(
-                    "squareness_drift",
-                    {"component": comp},
-                    1,
-                    squareness_drift_builder(comp),
-                    drivers=("T_air",),
+                _imaged(
+                    Candidate(
+                        "squareness_drift",
+                        {"component": comp},
+                        1,
+                        squareness_drift_builder(comp),
+                        drivers=("T_air",),
+                    ),
+                    res,
                 )
             )
         if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
             # the structure follows the air through a lag (10 min … hours): the same cause
             for comp in SQUARENESS:
                 out.append(
-                    Candidate(
-                        "squareness_drift",
-                        {"component": comp},
-                        2,
-                        _lagged_squareness_builder(comp, ref_c),
-                        thetas=LAG_TIME_CONSTANTS_S,
-                        look_elsewhere=4.0,
-                        design_fn=_lagged_squareness_design(comp, ref_c),
-                        drivers=("T_air",),
-                        static_columns=1,
+                    _imaged(
+                        Candidate(
+                            "squareness_drift",
+                            {"component": comp},
+                            2,
+                            _lagged_squareness_builder(comp, ref_c),
+                            thetas=LAG_TIME_CONSTANTS_S,
+                            look_elsewhere=4.0,
+                            design_fn=_lagged_squareness_design(comp, ref_c),
+                            drivers=("T_air",),
+                            static_columns=1,
+                            prior_sd=(START_STATE_SD_C * SQUARENESS_DRIFT_SD_URAD_PER_C, None),
+                            transient_columns=(0,),
+                        ),
+                        res,
                     )
                 )
     if (
@@ -574,6 +694,8 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 design_fn=_lag_design,
                 # the lag must be seen beyond a decaying start-up transient of the scales
                 static_columns=3,
+                prior_sd=(START_STATE_SD_C, START_STATE_SD_C, START_STATE_SD_C, None),
+                transient_columns=(0, 1, 2),
             )
         )
     if res.has("nx", "ny", "nz"):

@@ -151,18 +151,28 @@ def fit(
     significance tests use plain least squares throughout."""
     r = _rows_index(rows)
     x, y = problem.stacked(terms, r), problem.y[r].reshape(-1)
-    if not ridge or not any(t.candidate.ridge for t in terms):
+    if not ridge or not any(t.candidate.ridge or t.candidate.prior_sd for t in terms):
         return lstsq(x, y)
     # a ridge prior (coefficients shrink to 0 where the term's columns see no data): penalty
     # rows appended; the returned RSS is that of the data rows only
+    s2 = float(np.mean(y**2)) if y.size else 0.0
     weights = np.concatenate(
-        [np.zeros(problem.n_nuisance)]
-        + [np.full(t.candidate.n_params, np.sqrt(t.candidate.ridge)) for t in terms]
+        [np.zeros(problem.n_nuisance)] + [_penalty(t.candidate, s2) for t in terms]
     )
     keep = weights > 0
     pen = np.diag(weights)[keep]
     beta, _, rank = lstsq(np.vstack([x, pen]), np.concatenate([y, np.zeros(pen.shape[0])]))
     return beta, float(np.sum((y - x @ beta) ** 2)), rank
+
+
+def _penalty(cand: Candidate, s2: float) -> FloatArray:
+    """Per coefficient of ``cand``, the weight of its penalty row: √ridge, or σ/prior for a
+    coefficient with a prior (``s2`` the mean square of the residual fitted)."""
+    w = np.full(cand.n_params, np.sqrt(cand.ridge))
+    for j, sd in enumerate(cand.prior_sd or ()):
+        if sd is not None and sd > 0 and j < cand.n_params:
+            w[j] = max(w[j], np.sqrt(s2) / sd)
+    return w
 
 
 def _projector(x: FloatArray) -> FloatArray | None:
@@ -365,14 +375,30 @@ def _held_out_design(
     problem: Problem, terms: Sequence[Term], train: NDArray[np.intp], test: NDArray[np.intp]
 ) -> FloatArray:
     """The stacked design of ``test`` rows, with the columns of terms that are not extrapolated
-    in time (``Candidate.hold_time``) evaluated at the time clipped to the training span."""
+    in time (``Candidate.hold_time``) evaluated at the time clipped to the training span, and
+    the start-up transient of a ``start_state`` term left out before the training span."""
     x = problem.stacked(terms, test)
     t = problem.res.signals.get("t")
-    if t is None or not any(term.candidate.hold_time for term in terms):
+    if t is None or not any(
+        term.candidate.hold_time or term.candidate.start_state for term in terms
+    ):
         return x
     lo, hi = float(np.min(t[train])), float(np.max(t[train]))
     t_test = t[test]
     if float(np.min(t_test)) >= lo and float(np.max(t_test)) <= hi:
+        return x
+    before = t_test < lo
+    if np.any(before):
+        # a start-up transient is not extrapolated back before the training span: what the
+        # structure's state was at the session's start is not known from later blocks
+        rows = np.repeat(before, len(problem.axes))
+        col = problem.n_nuisance
+        for term in terms:
+            cols = [col + j for j in term.candidate.transient_columns]
+            if cols:
+                x[np.ix_(rows, np.asarray(cols))] = 0.0
+            col += term.candidate.n_params
+    if not any(term.candidate.hold_time for term in terms):
         return x
     sub = problem.res.subset(test)
     sub = replace(sub, signals={**sub.signals, "t": np.clip(t_test, lo, hi)})

@@ -142,9 +142,9 @@ def _round(
         with_it = [*current, Term(r["candidate"], r["theta"])]
         r["cv_mse"] = cv_mse(problem, with_it)
         r["cv_gain"] = (cv_base - r["cv_mse"]) / cv_base if cv_base > 0 else 0.0
-        timed = _time_gain(problem, current, with_it) if r["candidate"].hold_time else None
+        timed = _time_gain(problem, current, with_it) if _timed(r["candidate"]) else None
         if timed is not None and timed > r["cv_gain"]:
-            # a drift may also be judged between its own neighbours in time (same scale)
+            # a drift or a start-up transient may also be judged between neighbours in time
             r["cv_gain"] = timed
             r["cv_mse"] = cv_base * (1.0 - timed)
     eligible = [r for r in eligible if r["cv_gain"] >= min_cv_gain]
@@ -165,6 +165,12 @@ def _round(
         local_hits.append(pick)
         eligible = [r for r in eligible if r is not pick]
     return None, rows
+
+
+def _timed(cand: Candidate) -> bool:
+    """A cause judged also between its neighbours in time: a drift (no law beyond its session)
+    or a term with the session's start-up state (the start is in one block only)."""
+    return cand.hold_time or cand.start_state
 
 
 def _time_gain(problem: Problem, base: list[Term], with_term: list[Term]) -> float | None:
@@ -253,7 +259,7 @@ def _backward(
             p_adj = min(1.0, p * n_tried * s.root.look_elsewhere)
             cv0 = cv_mse(problem, others)
             gain = (cv0 - cv_full) / cv0 if cv0 > 0 else 0.0
-            timed = _time_gain(problem, others, full) if s.root.hold_time else None
+            timed = _time_gain(problem, others, full) if _timed(s.root) else None
             if timed is not None:
                 gain = max(gain, timed)
             if (p_adj >= alpha or gain < min_cv_gain) and (worst is None or -gain > worst[0]):

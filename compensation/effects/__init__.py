@@ -26,6 +26,7 @@ from .parametric import (
     normalised,
 )
 from .probe import ProbeLobingEffect, lobing_signals
+from .static_image import StaticImageEffect
 
 __all__ = [
     "CouplingEffect",
@@ -36,6 +37,7 @@ __all__ = [
     "PeriodicEffect",
     "ProbeLobingEffect",
     "ReversalEffect",
+    "StaticImageEffect",
     "default_orders",
     "effect_from_table",
     "known_causes",

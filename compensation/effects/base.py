@@ -115,6 +115,10 @@ def effect_from_table(table: Mapping[str, Any]) -> Effect:
     cause = table.get("cause")
     if not isinstance(cause, str) or cause not in _REGISTRY:
         raise ValueError(f"unknown effect cause {cause!r}; known: {', '.join(sorted(_REGISTRY))}")
+    if "static_image" in table:  # a thermal effect and what it left in the tables
+        from .static_image import StaticImageEffect
+
+        return StaticImageEffect.from_table(table, _REGISTRY[cause])
     return _REGISTRY[cause](table)
 
 

@@ -96,13 +96,18 @@ class TemperatureEffect(Effect):
 
 class ScaleExpansionEffect(TemperatureEffect):
     """An axis' effective expansion coefficient is off by ``delta`` µm/(m·°C):
-    ``delta·(T_axis − T_ref)·u/1000`` µm added to that axis' error component."""
+    ``delta·(T_axis − T_ref)·(q − fixed)/1000`` µm added to that axis' error component, the
+    scale expanding about the point where it is fixed to the structure (``fixed_at_mm``, a
+    position along the axis; None: the machine's reference point)."""
 
     cause: ClassVar[str] = "scale_expansion"
 
-    def __init__(self, axis: str, delta_expansion: float) -> None:
+    def __init__(self, axis: str, delta_expansion: float, fixed_at_mm: float | None = None) -> None:
         self.axis = read_axis(axis)
         self.delta = float(delta_expansion)
+        if fixed_at_mm is not None and not np.isfinite(fixed_at_mm):
+            raise ValueError(f"fixed_at_mm must be a finite position (mm), got {fixed_at_mm}")
+        self.fixed_at_mm = None if fixed_at_mm is None else float(fixed_at_mm)
 
     def signals(self) -> dict[str, float]:
         return {scale_role(self.axis): self.reference_C}
@@ -110,21 +115,23 @@ class ScaleExpansionEffect(TemperatureEffect):
     def add_direct(self, ctx: EvalContext) -> None:
         k = AXIS_INDEX[self.axis]
         dt = signal_or(ctx, scale_role(self.axis), ctx.reference_C) - ctx.reference_C
-        ctx.direct_um[:, k] += self.delta * dt * ctx.u_mm[:, k] / 1000.0
+        arm = ctx.u_mm[:, k] if self.fixed_at_mm is None else ctx.q_mm[:, k] - self.fixed_at_mm
+        ctx.direct_um[:, k] += self.delta * dt * arm / 1000.0
 
     def to_table(self) -> dict[str, Any]:
-        return self._table(axis=self.axis, delta_expansion=self.delta)
+        extra = {} if self.fixed_at_mm is None else {"fixed_at_mm": self.fixed_at_mm}
+        return self._table(axis=self.axis, delta_expansion=self.delta, **extra)
 
     def describe(self) -> dict[str, Any]:
-        return {
-            "cause": self.cause,
-            "axis": self.axis,
-            "parameters": {"delta_expansion_um_per_m_C": self.delta},
-        }
+        params: dict[str, Any] = {"delta_expansion_um_per_m_C": self.delta}
+        if self.fixed_at_mm is not None:
+            params["fixed_at_mm"] = self.fixed_at_mm
+        return {"cause": self.cause, "axis": self.axis, "parameters": params}
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> ScaleExpansionEffect:
-        return cls(read_str(t, "axis"), read_number(t, "delta_expansion"))._with_reference(t)
+        fixed = read_number(t, "fixed_at_mm") if "fixed_at_mm" in t else None
+        return cls(read_str(t, "axis"), read_number(t, "delta_expansion"), fixed)._with_reference(t)
 
 
 class WorkpieceExpansionEffect(TemperatureEffect):
