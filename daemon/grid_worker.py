@@ -17,7 +17,9 @@ requests ``(path, GridTrust | None)``, answers ``("ok", LoadedGrid)`` or ``("ref
 from __future__ import annotations
 
 import contextlib
+import os
 import pickle
+import select
 import struct
 import subprocess
 import sys
@@ -50,24 +52,41 @@ def _recv(fh: IO[bytes]) -> Any:
     return pickle.loads(data)
 
 
+IDLE_GRACE_S = 3.0
+"""How long a reload may wait for the ``SCHED_IDLE`` worker before it is redone by a worker at
+nice 19, s (a machine loaded to 100 % gives a SCHED_IDLE process ~0.3 % of a core)."""
+
+
 class ProcessGridLoader:
     """A ``loader(path, trust) -> LoadedGrid`` that does the work in a worker process.
 
+    The worker runs at Linux ``SCHED_IDLE`` (:func:`.osthread.lower_priority`), so it only uses
+    CPU time nothing else wants. A reload it has not answered within ``idle_grace_s`` (a
+    saturated machine starves it, and an unprivileged process cannot leave SCHED_IDLE) is
+    redone by a fresh worker at nice 19, which the next reload replaces by an idle one again.
     Thread-safe (one load at a time); ``stop(timeout_s)`` ends the worker.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, idle_grace_s: float = IDLE_GRACE_S) -> None:
         self._lock = threading.Lock()
         self._proc: subprocess.Popen[bytes] | None = None
+        self._priority = "idle"
         self._stopped = False
+        self.idle_grace_s = idle_grace_s
+        self.escalations = 0
+        """Reloads that had to be redone at nice 19 (the machine was saturated)."""
 
-    def _worker(self) -> subprocess.Popen[bytes]:
-        if self._proc is None or self._proc.poll() is not None:
+    def _worker(self, priority: str) -> subprocess.Popen[bytes]:
+        if self._proc is not None and (self._proc.poll() is not None or self._priority != priority):
+            self._end(self._proc, 1.0)
+            self._proc = None
+        if self._proc is None:
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "cmm_comp.daemon.grid_worker"],
+                [sys.executable, "-m", "cmm_comp.daemon.grid_worker", priority],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
             )
+            self._priority = priority
         return self._proc
 
     def prewarm(self) -> None:
@@ -75,26 +94,43 @@ class ProcessGridLoader:
         does not wait for that)."""
         with self._lock:
             if not self._stopped:
-                self._worker()
+                self._worker("idle")
 
     def __call__(self, path: str | Path, trust: GridTrust | None) -> LoadedGrid:
         with self._lock:
             if self._stopped:
                 raise GridLoadError(f"{path}: the daemon is stopping; reload not done")
-            proc = self._worker()
-            assert proc.stdin is not None and proc.stdout is not None
-            try:
-                _send(proc.stdin, (str(path), trust))
-                kind, value = _recv(proc.stdout)
-            except (OSError, EOFError, pickle.UnpicklingError, ValueError) as exc:
-                self._end(proc, 1.0)
-                self._proc = None
-                raise GridLoadError(
-                    f"{path}: the grid loader process failed ({exc}); old grid kept"
-                ) from None
+            kind, value = self._ask("idle", path, trust, self.idle_grace_s)
+            if kind == "starved":  # redo it where it gets CPU, then back to idle next time
+                self.escalations += 1
+                kind, value = self._ask("nice19", path, trust, None)
+                if not self._stopped:
+                    self._worker("idle")  # the next one: its imports happen while idle
         if kind == "ok" and isinstance(value, LoadedGrid):
             return value
         raise GridLoadError(str(value))
+
+    def _ask(
+        self, priority: str, path: str | Path, trust: GridTrust | None, grace_s: float | None
+    ) -> tuple[str, Any]:
+        """One request to a worker at ``priority``; ``("starved", None)`` when no answer
+        began within ``grace_s`` (s; None: wait as long as it takes)."""
+        proc = self._worker(priority)
+        assert proc.stdin is not None and proc.stdout is not None
+        try:
+            _send(proc.stdin, (str(path), trust))
+            if grace_s is not None:
+                ready, _, _ = select.select([proc.stdout], [], [], grace_s)
+                if not ready:
+                    return "starved", None
+            kind, value = _recv(proc.stdout)
+        except (OSError, EOFError, pickle.UnpicklingError, ValueError) as exc:
+            self._end(proc, 1.0)
+            self._proc = None
+            raise GridLoadError(
+                f"{path}: the grid loader process failed ({exc}); old grid kept"
+            ) from None
+        return str(kind), value
 
     @staticmethod
     def _end(proc: subprocess.Popen[bytes], timeout_s: float) -> bool:
@@ -119,12 +155,17 @@ class ProcessGridLoader:
 
 
 def main() -> int:
-    """Worker process: answer load requests until stdin closes."""
+    """Worker process (argument: ``idle`` or ``nice19``): answer load requests until stdin
+    closes."""
     # Linux SCHED_IDLE (nice 19 where missing), for every thread the build starts too: the
     # reply path comes first. Measured over udp_multicast with SIGHUPs every ~0.2 s (a grid
     # whose load takes ~0.5 s of CPU, so the worker never rests): at nice 19 the daemon's
     # reply p50 rose from 279 to 461 µs, p99 4.8× (bench_daemon.py, same run).
-    lower_priority("idle")
+    if (sys.argv[1] if len(sys.argv) > 1 else "idle") == "idle":
+        lower_priority("idle")
+    else:
+        with contextlib.suppress(OSError):
+            os.nice(19)
     requests, answers = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # a stray print must not corrupt the answer stream
     while True:

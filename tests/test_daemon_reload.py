@@ -153,3 +153,28 @@ def test_sighup_reload_is_built_in_a_worker_process(tmp_path: Path) -> None:
         assert d.grids.current.sha256 == new.sha256
         send_temps(ctl)
         assert ctl.exchange(RawReading(2, CENTRE_MM)).status == "ok"
+
+
+def test_a_starved_idle_worker_is_replaced_by_one_at_nice_19() -> None:
+    """A grace of 0 s: the idle worker (just started, still importing) cannot have answered,
+    so the reload is redone at nice 19 and succeeds; the next reload (ample grace) is served
+    by an idle worker again."""
+    import os
+
+    from cmm_comp.daemon.grid_worker import ProcessGridLoader
+
+    loader = ProcessGridLoader(idle_grace_s=0.0)
+    try:
+        loaded = loader(npl_grid_path(), None)
+        assert loader.escalations == 1
+        assert loaded.sha256 == CorrectionGrid.load(npl_grid_path()).sha256
+        assert loaded.loaded_by_pid not in (0, os.getpid())
+        loader.idle_grace_s = 600.0
+        again = loader(npl_grid_path(), None)
+        assert loader.escalations == 1 and again.sha256 == loaded.sha256
+        assert again.loaded_by_pid != loaded.loaded_by_pid  # a fresh (idle) worker
+        if hasattr(os, "SCHED_IDLE"):
+            with open(f"/proc/{again.loaded_by_pid}/stat") as f:
+                assert int(f.read().rsplit(")", 1)[1].split()[38]) == os.SCHED_IDLE
+    finally:
+        loader.stop(10.0)
