@@ -115,11 +115,22 @@ def effect_from_table(table: Mapping[str, Any]) -> Effect:
     cause = table.get("cause")
     if not isinstance(cause, str) or cause not in _REGISTRY:
         raise ValueError(f"unknown effect cause {cause!r}; known: {', '.join(sorted(_REGISTRY))}")
-    if "static_image" in table:  # a thermal effect and what it left in the tables
-        from .static_image import StaticImageEffect
-
-        return StaticImageEffect.from_table(table, _REGISTRY[cause])
+    for key, wrap in _WRAPPERS.items():  # e.g. a thermal effect and its static image
+        if key in table:
+            return wrap(table, _REGISTRY[cause])
     return _REGISTRY[cause](table)
+
+
+#: Table keys that wrap an effect in another (``static_image``): key → (table, plain factory)
+#: → effect. Registered by the wrapping module (:mod:`.static_image`).
+_WRAPPERS: dict[str, Callable[[Mapping[str, Any], EffectFactory], Effect]] = {}
+
+
+def register_wrapper(
+    key: str, factory: Callable[[Mapping[str, Any], EffectFactory], Effect]
+) -> None:
+    """Make ``[[effects]]`` tables with ``key`` load through ``factory``."""
+    _WRAPPERS[key] = factory
 
 
 #: Modules defining the built-in effects; each registers its causes when imported.
@@ -127,6 +138,7 @@ BUILTIN_EFFECT_MODULES: tuple[str, ...] = (
     "cmm_comp.compensation.effects.parametric",
     "cmm_comp.compensation.effects.drift",
     "cmm_comp.compensation.effects.probe",
+    "cmm_comp.compensation.effects.static_image",
     "cmm_comp.compensation.thermal.distortion",
     "cmm_comp.compensation.thermal.expansion",
     "cmm_comp.compensation.thermal.lag",

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .base import Effect, EvalContext
+from .base import Effect, EvalContext, register_wrapper
 
 __all__ = ["StaticImageEffect"]
 
@@ -120,3 +120,6 @@ class StaticImageEffect(Effect):
         if "reference_C" in table and "reference_C" not in static_table:
             static_table["reference_C"] = table["reference_C"]
         return cls(dynamic, build(static_table), frozen)
+
+
+register_wrapper("static_image", StaticImageEffect.from_table)
