@@ -262,20 +262,26 @@ class LiveSink:
         sequence and its payloads must not be changed afterwards. Returns ``len(payloads)``
         (0 once stopped); topics the view does not stream are ignored."""
         n = len(payloads)
-        if not n or topic not in self._topics:
+        if topic not in self._wanted:  # the common case: nobody watches this topic
+            if n and topic in self._topics:
+                if topic in LATCHED_TOPICS:
+                    self._latest[topic] = (payloads[-1], log_time_ns or time.time_ns())
+                if self._stopped:
+                    return 0
+                with self._lock:
+                    self._offered += n
+                    self._idle += n
             return n
+        if not n:
+            return 0
         if log_time_ns is None:
             log_time_ns = time.time_ns()
         if topic in LATCHED_TOPICS:
             self._latest[topic] = (payloads[-1], log_time_ns)
         if self._stopped:
             return 0
-        wanted = topic in self._wanted
         with self._lock:
             self._offered += n
-            if not wanted:
-                self._idle += n
-                return n
             self._batches.append((topic, payloads, log_time_ns))
             self._queued += n
             if self._queued > self._limit:
