@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -280,3 +281,19 @@ def test_cli_prints_load_warnings(tmp_path: Path) -> None:
     )
     assert r.returncode == 0, r.stderr
     assert "warning" in r.stderr and "errors.dx_x.criterion" in r.stderr
+
+
+def test_the_static_image_example_of_the_formats_doc_loads(tmp_path: Path) -> None:
+    """The `[[effects]]` fragment with a static image (§1.9) loads onto a machine and its
+    static part is the effect evaluated at the calibration state it names."""
+    blocks = re.findall(r"```toml\n(.*?)```", FORMATS_DOC.read_text(encoding="utf-8"), re.S)
+    fragment = next(b for b in blocks if "static_image" in b)
+    m = Machine.from_toml(write(tmp_path, MINIMAL + fragment, "image.toml"))
+    (effect,) = m.effects
+    assert effect.cause == "thermal_gradient"
+    assert effect.to_table()["static_image"]["signals"] == {"T_top": 21.6, "T_bottom": 20.3}
+    pts = np.array([[400.0, 100.0, 100.0]])
+    # at the calibration state the dynamic and static parts are both the effect's value there
+    at_cal = m.volumetric_error(pts, temps_C={"T_top": 21.6, "T_bottom": 20.3})
+    flat = m.volumetric_error(pts, temps_C={"T_top": 20.0, "T_bottom": 20.0})
+    assert np.all(np.isfinite(at_cal)) and np.abs(at_cal - flat).max() > 1e-3

@@ -115,11 +115,26 @@ class StaticImageEffect(Effect):
         except (TypeError, ValueError):
             raise ValueError(f"static_image signals must be numbers, got {dict(signals)}") from None
         dynamic = build({k: v for k, v in table.items() if k != "static_image"})
-        static_table = {k: v for k, v in image.items() if k != "signals"}
+        # what the term acts on comes from the effect (a static image written by hand may give
+        # only its coefficients); everything else is the image's own, defaults included
+        static_table = {k: table[k] for k in _INHERITED if k in table}
+        static_table.update({k: v for k, v in image.items() if k != "signals"})
         static_table["cause"] = table.get("cause")
-        if "reference_C" in table and "reference_C" not in static_table:
-            static_table["reference_C"] = table["reference_C"]
         return cls(dynamic, build(static_table), frozen)
+
+
+#: Keys a static image takes from its effect's table unless it gives them itself.
+_INHERITED = (
+    "axis",
+    "component",
+    "varies_with",
+    "temperature",
+    "reference_C",
+    "span_mm",
+    "fixture_mm",
+    "fixed_at_mm",
+    "time_constant_s",
+)
 
 
 register_wrapper("static_image", StaticImageEffect.from_table)
