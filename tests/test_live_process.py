@@ -161,3 +161,22 @@ def test_unpicklable_payloads_are_counted_not_sent() -> None:
         (m,) = client.receive(1)
     assert m.json()["counters"] == {"a": 2}
     assert sink.stats().encode_errors == 1 and "/cmm/counters" in str(errors[0])
+
+
+def test_the_childs_sdk_log_is_rate_limited(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A vanished client makes the SDK log an error per message: the child passes one line a
+    second and says how many it held back."""
+    from cmm_comp.daemon.live import child
+
+    now = [100.0]
+    monkeypatch.setattr(child.time, "monotonic", lambda: now[0])
+    limit = child.RateLimit(per_s=1.0)
+
+    def record(i: int) -> logging.LogRecord:
+        return logging.LogRecord("foxglove", logging.ERROR, "x", 1, "broken pipe %d", (i,), None)
+
+    passed = [r for r in map(record, range(500)) if limit.filter(r)]
+    assert len(passed) == 1 and passed[0].getMessage() == "broken pipe 0"
+    now[0] += 1.0
+    r = record(500)
+    assert limit.filter(r) and r.getMessage() == "broken pipe 500 (499 similar lines suppressed)"

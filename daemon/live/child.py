@@ -20,9 +20,11 @@ closes (the daemon died).
 from __future__ import annotations
 
 import collections
+import logging
 import os
 import pickle
 import signal
+import sys
 import time
 from multiprocessing.connection import Connection
 from typing import Any
@@ -53,6 +55,48 @@ def lower_priority(priority: str) -> str:
             return "normal"
 
 
+SDK_LOG_LINES_PER_S = 1.0
+"""Lines of the SDK's own log the child writes per second at most (to stderr, the daemon's)."""
+
+
+class RateLimit(logging.Filter):
+    """Pass at most ``per_s`` records a second; the next one passed says how many were not.
+
+    A client that vanishes without closing makes the SDK log one error per message sent to it
+    until it notices ("Error sending message to client …: Broken pipe"): at 1 kHz, thousands of
+    lines for the daemon's journal."""
+
+    def __init__(self, per_s: float) -> None:
+        super().__init__()
+        self._interval_s = 1.0 / per_s
+        self._next = 0.0
+        self._suppressed = 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        now = time.monotonic()
+        if now < self._next:
+            self._suppressed += 1
+            return False
+        self._next = now + self._interval_s
+        if self._suppressed:
+            record.msg = f"{record.getMessage()} ({self._suppressed} similar lines suppressed)"
+            record.args = None
+            self._suppressed = 0
+        return True
+
+
+def limit_sdk_log(per_s: float = SDK_LOG_LINES_PER_S) -> None:
+    """Send the ``foxglove`` logger's warnings to stderr, at most ``per_s`` lines a second
+    (this process only: the child's own logging)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("cmm-comp live view (foxglove-sdk): %(message)s"))
+    handler.addFilter(RateLimit(per_s))
+    logger = logging.getLogger("foxglove")
+    logger.setLevel(logging.WARNING)
+    logger.addHandler(handler)
+    logger.propagate = False
+
+
 def child_entry(fd: int) -> None:
     """Child process entry (``python -c``); ``fd`` is its end of the pipe."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -65,6 +109,7 @@ def child_entry(fd: int) -> None:
         conn.close()
         return
     lower_priority(priority)
+    limit_sdk_log()
     try:
         child_main(conn, settings, name)
     finally:
