@@ -118,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
             if not machine.volume.contains(q):
                 status, d = "outside_volume", (0.0, 0.0, 0.0)
             else:
-                err = machine.volumetric_error(q[None, :], stylus, temps)[0]
+                # geometry only while T_z is out of range: the thermal terms are left out
+                err = machine.volumetric_error(q[None, :], stylus, None if hot else temps)[0]
                 status = "not_thermally_corrected" if hot else "ok"
                 d = tuple(float(v) for v in err)
             corrected_nm = tuple(
