@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import collections
 import logging
-import os
 import pickle
 import signal
 import sys
@@ -29,7 +28,7 @@ import time
 from multiprocessing.connection import Connection
 from typing import Any
 
-from ..osthread import name_os_thread
+from ..osthread import lower_priority, name_os_thread
 from .server import LiveStartError
 from .sink import LiveSink
 
@@ -37,22 +36,6 @@ STOP = b"stop"
 """The parent's last message."""
 STATS_PERIOD_S = 0.1
 POLL_S = 0.02
-
-
-def lower_priority(priority: str) -> str:
-    """Put the calling thread (and every thread it starts later) at ``SCHED_IDLE`` for
-    ``"idle"`` (nice 19 where that is missing); ``"normal"`` leaves it. Returns what applies."""
-    if priority != "idle":
-        return "normal"
-    try:
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-        return "idle"
-    except (AttributeError, OSError):
-        try:
-            os.nice(19)
-            return "nice19"
-        except OSError:
-            return "normal"
 
 
 SDK_LOG_LINES_PER_S = 1.0
@@ -108,7 +91,7 @@ def child_entry(fd: int) -> None:
     except (EOFError, OSError):
         conn.close()
         return
-    lower_priority(priority)
+    lower_priority(priority)  # before any thread: the sender and the SDK's threads inherit it
     limit_sdk_log()
     try:
         child_main(conn, settings, name)
