@@ -17,7 +17,6 @@ requests ``(path, GridTrust | None)``, answers ``("ok", LoadedGrid)`` or ``("ref
 from __future__ import annotations
 
 import contextlib
-import os
 import pickle
 import select
 import struct
@@ -29,7 +28,7 @@ from typing import IO, Any
 
 from .grid_slot import GridLoadError, LoadedGrid, load_grid
 from .grid_trust import GridTrust
-from .osthread import lower_priority
+from .osthread import set_worker_priority
 
 _LENGTH = struct.Struct("<Q")  # frame length, bytes
 
@@ -52,9 +51,17 @@ def _recv(fh: IO[bytes]) -> Any:
     return pickle.loads(data)
 
 
+_WORKER_CODE = (  # the priority first, so the grid code is imported at it too
+    "import sys\n"
+    "from cmm_comp.daemon.osthread import set_worker_priority\n"
+    "set_worker_priority(sys.argv[1])\n"
+    "from cmm_comp.daemon.grid_worker import main\n"
+    "sys.exit(main())"
+)
 IDLE_GRACE_S = 3.0
 """How long a reload may wait for the ``SCHED_IDLE`` worker before it is redone by a worker at
-nice 19, s (a machine loaded to 100 % gives a SCHED_IDLE process ~0.3 % of a core)."""
+normal priority, s (a machine loaded to 100 % gives a SCHED_IDLE process ~0.3 % of a core, and
+nice 19 is little better against many busy tasks: a reload must finish)."""
 
 
 class ProcessGridLoader:
@@ -63,7 +70,8 @@ class ProcessGridLoader:
     The worker runs at Linux ``SCHED_IDLE`` (:func:`.osthread.lower_priority`), so it only uses
     CPU time nothing else wants. A reload it has not answered within ``idle_grace_s`` (a
     saturated machine starves it, and an unprivileged process cannot leave SCHED_IDLE) is
-    redone by a fresh worker at nice 19, which the next reload replaces by an idle one again.
+    redone by a fresh worker at normal priority, which the next reload replaces by an idle one
+    again.
     Thread-safe (one load at a time); ``stop(timeout_s)`` ends the worker.
     """
 
@@ -74,7 +82,7 @@ class ProcessGridLoader:
         self._stopped = False
         self.idle_grace_s = idle_grace_s
         self.escalations = 0
-        """Reloads that had to be redone at nice 19 (the machine was saturated)."""
+        """Reloads that had to be redone at normal priority (the machine was saturated)."""
 
     def _worker(self, priority: str) -> subprocess.Popen[bytes]:
         if self._proc is not None and (self._proc.poll() is not None or self._priority != priority):
@@ -82,7 +90,7 @@ class ProcessGridLoader:
             self._proc = None
         if self._proc is None:
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "cmm_comp.daemon.grid_worker", priority],
+                [sys.executable, "-c", _WORKER_CODE, priority],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
             )
@@ -103,7 +111,7 @@ class ProcessGridLoader:
             kind, value = self._ask("idle", path, trust, self.idle_grace_s)
             if kind == "starved":  # redo it where it gets CPU, then back to idle next time
                 self.escalations += 1
-                kind, value = self._ask("nice19", path, trust, None)
+                kind, value = self._ask("normal", path, trust, None)
                 if not self._stopped:
                     self._worker("idle")  # the next one: its imports happen while idle
         if kind == "ok" and isinstance(value, LoadedGrid):
@@ -155,17 +163,11 @@ class ProcessGridLoader:
 
 
 def main() -> int:
-    """Worker process (argument: ``idle`` or ``nice19``): answer load requests until stdin
+    """Worker process (argument: ``idle`` or ``normal``): answer load requests until stdin
     closes."""
-    # Linux SCHED_IDLE (nice 19 where missing), for every thread the build starts too: the
-    # reply path comes first. Measured over udp_multicast with SIGHUPs every ~0.2 s (a grid
-    # whose load takes ~0.5 s of CPU, so the worker never rests): at nice 19 the daemon's
-    # reply p50 rose from 279 to 461 µs, p99 4.8× (bench_daemon.py, same run).
-    if (sys.argv[1] if len(sys.argv) > 1 else "idle") == "idle":
-        lower_priority("idle")
-    else:
-        with contextlib.suppress(OSError):
-            os.nice(19)
+    # the priority was set before the imports (_WORKER_CODE); run as a module, set it here
+    if __name__ == "__main__":
+        set_worker_priority(sys.argv[1] if len(sys.argv) > 1 else "idle")
     requests, answers = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # a stray print must not corrupt the answer stream
     while True:

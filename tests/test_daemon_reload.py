@@ -122,6 +122,12 @@ def test_state_detail_repeats_are_rate_limited_with_a_count() -> None:
     assert lines[-1][1].startswith("can: bus error") and lines[-1][2] == 0
 
 
+def _policy(pid: int) -> int:
+    """Scheduling policy of process ``pid`` (field 41 of /proc/PID/stat; 5 = SCHED_IDLE)."""
+    with open(f"/proc/{pid}/stat") as f:
+        return int(f.read().rsplit(")", 1)[1].split()[38])
+
+
 def test_sighup_reload_is_built_in_a_worker_process(tmp_path: Path) -> None:
     """The default reload path: the grid is read, verified and built in another process (its
     pid differs from ours), then swapped; an untrusted file is refused there the same way."""
@@ -142,9 +148,11 @@ def test_sighup_reload_is_built_in_a_worker_process(tmp_path: Path) -> None:
         assert new.sha256 != old and new.sha256 == CorrectionGrid.load(grid).sha256
         assert new.loaded_by_pid not in (0, os.getpid())
         if hasattr(os, "SCHED_IDLE"):  # the worker never competes with the reply path
-            with open(f"/proc/{new.loaded_by_pid}/stat") as f:
-                policy = int(f.read().rsplit(")", 1)[1].split()[38])  # field 41
-            assert policy == os.SCHED_IDLE
+            # the worker kept for the next reload (the one that loaded, or after a starved
+            # load redone at nice 19 on a saturated machine, a fresh idle one)
+            loader = d._process_loader
+            assert loader is not None and loader._proc is not None
+            assert _wait(lambda: _policy(loader._proc.pid) == os.SCHED_IDLE, 60)
         send_temps(ctl)  # fresh temperatures: a slow reload on a busy machine outlasts stale_s
         assert ctl.exchange(RawReading(1, CENTRE_MM)).status == "ok"
         CorrectionGrid.build(npl_machine(), steps=(5, 5, 4)).save(grid)  # unsigned
@@ -155,13 +163,13 @@ def test_sighup_reload_is_built_in_a_worker_process(tmp_path: Path) -> None:
         assert ctl.exchange(RawReading(2, CENTRE_MM)).status == "ok"
 
 
-def test_a_starved_idle_worker_is_replaced_by_one_at_nice_19() -> None:
+def test_a_starved_idle_worker_is_replaced_by_one_at_normal_priority() -> None:
     """A grace of 0 s: the idle worker (just started, still importing) cannot have answered,
-    so the reload is redone at nice 19 and succeeds; the next reload (ample grace) is served
-    by an idle worker again."""
+    so the reload is redone at normal priority and succeeds; the worker then kept for the next
+    reload is an idle one again."""
     import os
 
-    from cmm_comp.daemon.grid_worker import ProcessGridLoader
+    from cmm_comp.daemon.grid_worker import IDLE_GRACE_S, ProcessGridLoader
 
     loader = ProcessGridLoader(idle_grace_s=0.0)
     try:
@@ -169,12 +177,12 @@ def test_a_starved_idle_worker_is_replaced_by_one_at_nice_19() -> None:
         assert loader.escalations == 1
         assert loaded.sha256 == CorrectionGrid.load(npl_grid_path()).sha256
         assert loaded.loaded_by_pid not in (0, os.getpid())
-        loader.idle_grace_s = 600.0
-        again = loader(npl_grid_path(), None)
-        assert loader.escalations == 1 and again.sha256 == loaded.sha256
-        assert again.loaded_by_pid != loaded.loaded_by_pid  # a fresh (idle) worker
+        loader.idle_grace_s = IDLE_GRACE_S
+        again = loader(npl_grid_path(), None)  # idle, or redone again on a saturated machine
+        assert again.sha256 == loaded.sha256 and loader.escalations in (1, 2)
+        assert loader._proc is not None and loader._proc.pid != loaded.loaded_by_pid
         if hasattr(os, "SCHED_IDLE"):
-            with open(f"/proc/{again.loaded_by_pid}/stat") as f:
-                assert int(f.read().rsplit(")", 1)[1].split()[38]) == os.SCHED_IDLE
+            pid = loader._proc.pid
+            assert _wait(lambda: _policy(pid) == os.SCHED_IDLE, 60)
     finally:
         loader.stop(10.0)
