@@ -64,9 +64,14 @@ WRITER_NAME = "cmm-comp daemon.sessionlog.process_writer"
 # compensation.errors, mcap): every package __init__ of the project loads its names lazily, so
 # no grid, numpy, scipy, python-can or pymodbus is imported for nothing (~0.1 s start-up).
 _CHILD_CODE = (
-    "import sys\n"
+    "import os, sys\n"
     "from cmm_comp.daemon.sessionlog.writer_child import child_entry\n"
-    "child_entry(int(sys.argv[1]), int(sys.argv[2]))"
+    "child_entry(int(sys.argv[1]), int(sys.argv[2]))\n"
+    # the file is finished and reported: exit at once. Interpreter finalization would have
+    # to take the GIL, which a starved SCHED_IDLE writer thread may hold for seconds on a
+    # saturated machine (seen: the parent had to kill a child that had finished its file)
+    "sys.stderr.flush()\n"
+    "os._exit(0)"
 )
 
 
@@ -284,7 +289,8 @@ class McapProcessLogger(HotPathQueue):
         self._closed = True
         self._wake.set()
         if threading.current_thread() is not self._thread:
-            self._thread.join(max(0.0, self._deadline - time.monotonic()) + 2.0)
+            # + the reaping after "done" (the forwarder waits 5 s for the exit, then kills)
+            self._thread.join(max(0.0, self._deadline - time.monotonic()) + 12.0)
         return self._done and not self._thread.is_alive()
 
     # ------------------------------------------------------------------ forwarder thread
