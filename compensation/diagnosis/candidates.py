@@ -572,12 +572,9 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 )
             )
         if res.has(f"T_{a}"):
-            # rich: the scale fixed elsewhere than the reference, and its static image
-            scale = Candidate(
-                "scale_expansion", {"axis": a}, 1, scale_builder(a), drivers=(f"T_{a}",)
-            )
-            scale.rich = with_static_image(_scale_origin_candidate(res, a, ref_c), res)
-            out.append(scale)
+            # the scale expands about the point where it is fixed (the reference or an end: a
+            # free fixing point); rich: plus its static image
+            out.append(_imaged(_scale_origin_candidate(res, a, ref_c), res))
         if res.has(f"dir_{a}"):
             span = _span(res, a)
             out.append(Candidate("reversal", {"axis": a}, 2, _reversal_builder(a, span)))
@@ -633,16 +630,9 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             else m.volume.reference_mm
         )
         fx = [float(v) for v in fixture]
-        workpiece = Candidate(
-            "workpiece_expansion",
-            {},
-            1,
-            lambda p, _t: thermal(WorkpieceExpansionEffect(p[0], fx)),
-            drivers=("T_wp",),
-        )
-        # rich: clamped elsewhere than the fixture described, and its static image
-        workpiece.rich = with_static_image(_workpiece_fixture_candidate(res, fx, ref_c), res)
-        out.append(workpiece)
+        # the part expands about where it is clamped, which need not be the fixture described
+        # (a free fixture point); rich: plus its static image
+        out.append(_imaged(_workpiece_fixture_candidate(res, fx, ref_c), res))
     if res.has("T_air"):
         for comp in SQUARENESS:
             out.append(

@@ -248,12 +248,15 @@ def _backward(
     dropped: list[_Slot] = []
     n_obs = problem.y.size
     while len(slots) > 1:
-        full = _terms(slots)
-        _, rss1, rank1 = fit(problem, full)
-        cv_full = cv_mse(problem, full)
         worst: tuple[float, int] | None = None
         for i, s in enumerate(slots):
-            others = full[:i] + full[i + 1 :]
+            # the others at their rich shapes, as when a cause is added: a cause taken early
+            # that is only the leftover of a later one's richer shape (a stale squareness that
+            # is a thermal cause's static image) is not needed
+            others = [t.rich_term for t in slots[:i] + slots[i + 1 :]]
+            full = [*others, s.term]
+            _, rss1, rank1 = fit(problem, full)
+            cv_full = cv_mse(problem, full)
             _, rss0, rank0 = fit(problem, others)
             p = f_test_p(rss0, rss1, rank1 - rank0, n_obs, rank1)
             p_adj = min(1.0, p * n_tried * s.root.look_elsewhere)
@@ -321,9 +324,12 @@ def diagnose(
         say(f"  accepted {term.candidate.label}")
         _reprofile(problem, slots)
         _choose_variants(problem, slots, alpha, min_cv_gain)
-        for s in _backward(problem, slots, n_tried, alpha, min_cv_gain):
+        dropped = _backward(problem, slots, n_tried, alpha, min_cv_gain)
+        for s in dropped:
             excluded.add(id(s.root))
             say(f"  dropped {s.root.label}: not needed given the others")
+        if dropped:  # what a dropped cause carried may need the others' rich shapes now
+            _choose_variants(problem, slots, alpha, min_cv_gain)
         cv_history.append(cv_mse(problem, _terms(slots)))
 
     accepted = _terms(slots)
