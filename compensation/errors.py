@@ -12,6 +12,7 @@ from __future__ import annotations
 
 __all__ = [
     "CmmCompError",
+    "ExportError",
     "GridFileError",
     "GridSignatureError",
     "MachineFileError",
@@ -45,6 +46,11 @@ class GridFileError(CmmCompError, ValueError):
 
 class GridSignatureError(GridFileError):
     """A grid is unsigned, its Ed25519 signature does not verify, or a key file is unusable."""
+
+
+class ExportError(CmmCompError, ValueError):
+    """The model cannot be written in a controller's table format as asked (limits, ranges, bad
+    options): the message names the format, the limit and where it comes from."""
 
 
 class RealDataError(CmmCompError, ValueError):

@@ -3,7 +3,7 @@ option does not fit (never a silently limited or wrong table)."""
 
 from __future__ import annotations
 
-from ..errors import CmmCompError
+from ..errors import ExportError
 
 __all__ = ["LINUXCNC_MAX_POINTS", "POINT_LIMITS", "SGN32", "ExportError"]
 
@@ -18,7 +18,3 @@ POINT_LIMITS: dict[str, tuple[int, int | None, str]] = {
     "twincat-cnc": (1001, None, "kw.crosscomp.max_points default 1001 (P-COMP-00060)"),
     "linuxcnc": (LINUXCNC_MAX_POINTS, LINUXCNC_MAX_POINTS, "EMCMOT_COMP_SIZE = 256 triplets"),
 }
-
-
-class ExportError(CmmCompError, ValueError):
-    """The model cannot be written in the format as asked (limits, ranges, bad options)."""

@@ -31,6 +31,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any, Self
 
+from cmm_comp.compensation.errors import CmmCompError
+
 from ..osthread import name_os_thread
 from .child import STOP
 from .server import LiveStartError
@@ -45,7 +47,7 @@ _CHILD_CODE = (
 _EMPTY = LiveStats(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
 
 
-class LiveChildError(RuntimeError):
+class LiveChildError(CmmCompError, RuntimeError):
     """A problem the live view's child process reported (its text), or its death."""
 
 
