@@ -163,6 +163,7 @@ def _term(npl: Machine, effect, q, signals):
         PeriodicEffect("x", 37.5, 1.0, -0.5, [[0.3, 0.1], [0.0, -0.2]]),
         DriftEffect("y", (0.0, 3600.0), [1.0, 2.0], [0.5, -1.0, 0.25]),
         ThermalGradientEffect("y", 4.0, -2.0, 0.7, 0.3, 1.1, offset_um_per_C=-0.6),
+        ThermalGradientEffect("x", 1.0, 0.5, 0.0, 0.0, 0.2, tilt_poly_urad_per_C=[0.7, -0.3]),
         ScaleExpansionEffect("x", 2.5, 130.0),
         WorkpieceExpansionEffect(-3.0, [100.0, 250.0, 40.0]),
         StaticImageEffect(
@@ -196,7 +197,9 @@ def test_gradient_tilt_follows_the_slope_of_the_straightness(npl: Machine) -> No
     """Physics: a carriage on a bowed rail tilts with the rail's local slope. For X (bending in
     x-z) the pitch is ey_x = −d(dz_x)/dx; the straightness' slope by finite differences must
     match the tilt at every point, whatever the supports (h), for the written effect."""
-    eff = ThermalGradientEffect("x", 8.0, 3.0, 0.0, 0.0, 1.5, offset_um_per_C=2.0)
+    eff = ThermalGradientEffect(
+        "x", 8.0, 3.0, 0.0, 0.0, 1.5, offset_um_per_C=2.0, tilt_poly_urad_per_C=[4.0, -6.0]
+    )
     eff.reference_C = 20.0
     from cmm_comp.compensation.effects import EvalContext
 

@@ -542,10 +542,19 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         return eff
 
     def gradient_builder(a: str) -> EffectBuilder:
-        # p: curvature, tilt, positional (2), deflection at the reference[, taper]
+        # p: curvature, tilt, positional (2), deflection at the reference[, taper[, e3, e4]]:
+        # rich, a curvature that varies along the beam up to a cubic (a gradient confined to
+        # part of it)
         return lambda p, _t: thermal(
             ThermalGradientEffect(
-                a, p[0], p[1], p[2], p[3], p[5] if len(p) > 5 else 0.0, offset_um_per_C=p[4]
+                a,
+                p[0],
+                p[1],
+                p[2],
+                p[3],
+                p[5] if len(p) > 5 else 0.0,
+                offset_um_per_C=p[4],
+                tilt_poly_urad_per_C=p[6:],
             )
         )
 
@@ -567,7 +576,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                         5,
                         gradient_builder(a),
                         drivers=("T_top", "T_bottom"),
-                    ).with_rich(n_params=6),
+                    ).with_rich(n_params=8),
                     res,
                 )
             )

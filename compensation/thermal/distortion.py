@@ -5,7 +5,7 @@ drifting with a temperature. Temperatures °C by role (:mod:`.roles`); angles µ
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -14,6 +14,7 @@ from ..effects.base import (
     EvalContext,
     add_to_component,
     read_axis,
+    read_floats,
     read_number,
     read_str,
     register_effect,
@@ -40,7 +41,10 @@ class ThermalGradientEffect(TemperatureEffect):
     of the scale): ``ΔT·(a·u + b)`` µm on the axis' positional error (``a`` µm/(m·°C),
     ``positional_um_per_m_C``; ``b`` µm/°C, ``positional_um_per_C``; both ∝ that height).
     A gradient that is not uniform along the beam adds ``c·u²`` to the tilt and ``∓c·u³/3`` to
-    the straightness (``c`` µrad/(m²·°C), ``taper_urad_per_m2_C``).
+    the straightness (``c`` µrad/(m²·°C), ``taper_urad_per_m2_C``); one confined to part of the
+    beam (a lamp above one end, a local draught) has a curvature that varies further along it:
+    ``Σ_n e_n·u^n`` (n = 3, 4, …) more on the tilt and ``∓Σ e_n·u^{n+1}/(n+1)`` on the
+    straightness (``tilt_poly_urad_per_C`` = [e_3, e_4, …], µrad/(mⁿ·°C)).
     For an axis that moves the workpiece (a table) the same relation holds in the parametric
     components: its pads run over the base rail the opposite way to the axis coordinate, and the
     chain applies a table's errors with the opposite sign — the two cancel.
@@ -66,8 +70,12 @@ class ThermalGradientEffect(TemperatureEffect):
         positional_um_per_C: float = 0.0,
         taper_urad_per_m2_C: float = 0.0,
         offset_um_per_C: float = 0.0,
+        tilt_poly_urad_per_C: Sequence[float] = (),
     ) -> None:
         self.offset = float(offset_um_per_C)
+        self.tilt_poly = [float(v) for v in tilt_poly_urad_per_C]
+        if not all(np.isfinite(v) for v in self.tilt_poly):
+            raise ValueError(f"tilt_poly_urad_per_C must be finite, got {self.tilt_poly}")
         self.taper = float(taper_urad_per_m2_C)
         self.axis = read_axis(axis)
         self.curvature = float(curvature_urad_per_m_C)
@@ -82,13 +90,13 @@ class ThermalGradientEffect(TemperatureEffect):
         dt = signal_or(ctx, TOP, ctx.reference_C) - signal_or(ctx, BOTTOM, ctx.reference_C)
         u_m = ctx.u_mm[:, k] / 1000.0
         ang, lin, sign = self._PLANE[self.axis]
-        ctx.errors[:, k, ang] += dt * (self.curvature * u_m + self.tilt + self.taper * u_m**2)
-        ctx.errors[:, k, lin] += (
-            sign
-            * dt
-            * (self.curvature * u_m**2 / 2.0 + self.tilt * u_m + self.taper * u_m**3 / 3.0)
-            + dt * self.offset
-        )
+        tilt = self.curvature * u_m + self.tilt + self.taper * u_m**2
+        bend = self.curvature * u_m**2 / 2.0 + self.tilt * u_m + self.taper * u_m**3 / 3.0
+        for n, e in enumerate(self.tilt_poly, start=3):
+            tilt = tilt + e * u_m**n
+            bend = bend + e * u_m ** (n + 1) / (n + 1)
+        ctx.errors[:, k, ang] += dt * tilt
+        ctx.errors[:, k, lin] += sign * dt * bend + dt * self.offset
         ctx.errors[:, k, k] += dt * (self.positional[0] * u_m + self.positional[1])
 
     def to_table(self) -> dict[str, Any]:
@@ -100,21 +108,21 @@ class ThermalGradientEffect(TemperatureEffect):
             positional_um_per_C=self.positional[1],
             taper_urad_per_m2_C=self.taper,
             offset_um_per_C=self.offset,
+            **({"tilt_poly_urad_per_C": list(self.tilt_poly)} if self.tilt_poly else {}),
         )
 
     def describe(self) -> dict[str, Any]:
-        return {
-            "cause": self.cause,
-            "axis": self.axis,
-            "parameters": {
-                "curvature_urad_per_m_C": self.curvature,
-                "tilt_urad_per_C": self.tilt,
-                "positional_um_per_m_C": self.positional[0],
-                "positional_um_per_C": self.positional[1],
-                "taper_urad_per_m2_C": self.taper,
-                "offset_um_per_C": self.offset,
-            },
+        params: dict[str, Any] = {
+            "curvature_urad_per_m_C": self.curvature,
+            "tilt_urad_per_C": self.tilt,
+            "positional_um_per_m_C": self.positional[0],
+            "positional_um_per_C": self.positional[1],
+            "taper_urad_per_m2_C": self.taper,
+            "offset_um_per_C": self.offset,
         }
+        if self.tilt_poly:
+            params["tilt_poly_urad_per_C"] = list(self.tilt_poly)
+        return {"cause": self.cause, "axis": self.axis, "parameters": params}
 
     @classmethod
     def from_table(cls, t: Mapping[str, Any]) -> ThermalGradientEffect:
@@ -126,6 +134,7 @@ class ThermalGradientEffect(TemperatureEffect):
             read_number(t, "positional_um_per_C", 0.0),
             read_number(t, "taper_urad_per_m2_C", 0.0),
             read_number(t, "offset_um_per_C", 0.0),
+            read_floats(t.get("tilt_poly_urad_per_C", []), "tilt_poly_urad_per_C"),
         )._with_reference(t)
 
 
