@@ -60,6 +60,14 @@ def cmd_grid_build(args: argparse.Namespace) -> int:
         f"wrote {args.output}: {machine.name} ({machine.model}), steps {list(grid.steps)}, "
         f"signals {[s.name for s in grid.signals]}, sha256 {sha[:16]}…"
     )
+    for u in grid.metadata.get("unresolved_effects", []):
+        print(
+            f"warning: the {u['cause']} effect along {u['axis']} has a wavelength of "
+            f"{u['wavelength_mm']:g} mm; these steps give it {u['nodes_per_wavelength']:.1f} "
+            "nodes per wavelength (8 needed): the grid only partly corrects it — use more "
+            "--steps along that axis or a smaller volume",
+            file=sys.stderr,
+        )
     return 0
 
 
