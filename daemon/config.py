@@ -22,6 +22,7 @@ from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
 from cmm_comp.protocol.can_ids import NODE_STRIDE, STANDARD_ID_MAX
 
 from .config_checks import range_errors
+from .live.settings import LIVE_RULES, LiveSection, live_problems
 
 MCAP_WRITERS = ("thread", "process")
 MCAP_WRITER_PRIORITIES = ("idle", "normal")
@@ -204,6 +205,7 @@ class DaemonConfig:
     mcap: McapSection = field(default_factory=McapSection)
     metrics: MetricsSection = field(default_factory=MetricsSection)
     log: LogSection = field(default_factory=LogSection)
+    live: LiveSection = field(default_factory=LiveSection)
     source: str = "<defaults>"
 
     def check(self) -> DaemonConfig:
@@ -229,7 +231,8 @@ class DaemonConfig:
         """Every rule violated, one line each; keys in ``skip`` (already reported) are left out."""
         where = self.source
         skip = set(skip or ())
-        ranges = range_errors(where, self.numeric_values(), skip)
+        live_keys = {f"live.{k}" for k in LIVE_RULES}  # ranged by live_problems below
+        ranges = range_errors(where, self.numeric_values(), skip | live_keys)
         out = list(ranges.values())
         bad = skip | set(ranges)
         t = self.temperatures
@@ -291,6 +294,7 @@ class DaemonConfig:
                 f"{where}: mcap.compression = {self.mcap.compression!r}; allowed: "
                 f"{', '.join(MCAP_COMPRESSIONS)}"
             )
+        out += live_problems(self.live, where, skip)
         return out
 
     def sensor_roles(self) -> dict[int, str]:

@@ -34,6 +34,7 @@ from .events import EventLog
 from .grid_slot import GridLoadError, GridReloader, GridSlot, LoadedGrid, load_grid
 from .grid_trust import GridTrust
 from .grid_worker import ProcessGridLoader
+from .live import LiveFanOut, LiveSink, LiveStartError, live_sink
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
 from .osthread import name_os_thread
@@ -78,6 +79,7 @@ class DaemonService:
         )
         self.metrics = Metrics()
         self.logger: SessionLogger | None = None
+        self.live: LiveSink | None = None
         self.grids = GridSlot()
         self.grid_trust = GridTrust.from_section(config.grid)
         self._grid_loader = grid_loader or load_grid
@@ -128,11 +130,14 @@ class DaemonService:
                         self.events.emit(
                             "mcap_rotated", "warning", requested=cfg.mcap.path, path=str(first)
                         )
+            live_error = self._start_live() if cfg.live.enabled else None
             self.engine = CorrectionEngine(
                 cfg, self.grids, self.temperatures, self.metrics, self.events, self.logger
             )
             self.events.emit("starting", config=cfg.source)
             self._status_log(DaemonState.STARTING, "starting")
+            if live_error is not None:
+                self._status_log(DaemonState.STARTING, f"live view off: {live_error}")
             if cfg.grid.path:
                 self._load_grid(cfg.grid.path)
             self.state.set_grid(self.grids.current is not None)
@@ -228,6 +233,24 @@ class DaemonService:
                 self.request_reload()
         self.stop(SIGTERM_STOP_S)
         return 0
+
+    def _start_live(self) -> str | None:
+        """Start the live view (docs/live.md) and put it beside the MCAP log; returns why it
+        could not start (the daemon runs on without it), or None."""
+        try:
+            live = live_sink(self.config.live, on_error=self._on_live_error).start()
+        except LiveStartError as exc:
+            self.metrics.count("live_errors")
+            self.events.emit("live_error", "error", error=str(exc))
+            return str(exc)
+        self.live = live
+        self.logger = LiveFanOut(self.logger, live)
+        self.events.emit("live_listening", url=live.url)
+        return None
+
+    def _on_live_error(self, exc: BaseException) -> None:
+        self.metrics.count("live_errors")
+        self.events.emit("live_error", "warning", error=str(exc))
 
     # ------------------------------------------------------------------ grid
     def _load_grid(
@@ -331,6 +354,9 @@ class DaemonService:
             # exact per-topic drops and encode errors of the session log (docs/mcap.md)
             for k, v in self.logger.stats().counters().items():
                 extra[f"cmm_comp_{k}"] = float(v)
+        if self.live is not None:  # live_sent, live_dropped (exact), live_clients …
+            for k, v in self.live.counters().items():
+                extra[f"cmm_comp_{k}"] = float(v)
         return self.metrics.prometheus(extra)
 
     def _publish_counters(self) -> None:
@@ -339,6 +365,8 @@ class DaemonService:
         snap = self.metrics.snapshot(reset_period=True)
         snap["period_s"] = self.config.metrics.period_s
         snap["counters"]["mcap_dropped"] = self.logger.stats().dropped
+        if self.live is not None:
+            snap["counters"].update(self.live.counters())
         self.logger.log("/cmm/counters", snap)
 
     def _housekeeping(self) -> None:

@@ -182,6 +182,12 @@ NUMERIC_KEYS: dict[str, tuple[str, bool]] = {
     "metrics.period_s": ("float", False),
     "log.max_per_s": ("float", True),
     "log.state_repeat_s": ("float", False),
+    "live.port": ("int", True),  # 0 = any free port
+    "live.queue": ("int", False),
+    "live.scene_rate_hz": ("float", False),
+    "live.scene_keep_arrows": ("int", False),
+    "live.scene_max_new_arrows": ("int", False),
+    "live.arrow_mm_per_um": ("float", False),
 }
 PROBES = {"nan": "nan", "inf": "inf", "-1": "-1", "0": "0", "huge": None, "string": "'fast'"}
 
@@ -217,8 +223,11 @@ def test_every_numeric_setting_has_a_documented_range() -> None:
     """A new numeric key must be added to this table (and so get a range)."""
     from cmm_comp.daemon.config import DaemonConfig
     from cmm_comp.daemon.config_checks import NUMERIC_RULES
+    from cmm_comp.daemon.live import LIVE_RULES
 
-    assert set(DaemonConfig().numeric_values()) == set(NUMERIC_KEYS) == set(NUMERIC_RULES)
+    # the [live] ranges are in daemon/live/settings.py
+    rules = set(NUMERIC_RULES) | {f"live.{k}" for k in LIVE_RULES}
+    assert set(DaemonConfig().numeric_values()) == set(NUMERIC_KEYS) == rules
 
 
 @pytest.mark.parametrize("probe", list(PROBES))
