@@ -30,7 +30,7 @@ from ..effects import (
     StaticImageEffect,
     default_orders,
 )
-from ..parametric_errors import ANGULAR, AXES, AXIS_INDEX, SQUARENESS, TABLE_COMPONENTS
+from ..parametric_errors import ANGULAR, AXES, AXIS_INDEX, LINEAR, SQUARENESS, TABLE_COMPONENTS
 from ..thermal import (
     ScaleExpansionEffect,
     SquarenessDriftEffect,
@@ -362,7 +362,7 @@ def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuild
 #: rich one absorbs what a mis-shaped default leaves behind and is reported when the data need it.
 COUPLING_ORDERS = (((0, 1, 2), (1,)), ((0, 1, 2, 3), (1, 2)))
 #: Orders of the part along a at b's reference position (default, rich).
-COUPLING_ALONG = (1, 3)
+COUPLING_ALONG = (2, 3)
 PERIODIC_HARMONICS = (1, 3)
 DRIFT_ORDERS = (3, 10)
 DRIFT_LINEAR = (1, 10)
@@ -516,7 +516,10 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             r_orders = rich_orders(comp)
             cand.with_rich(n_params=len(r_orders), build=_parametric_builder(comp, span, r_orders))
         out.append(cand)
-    for comp in ANGULAR:
+    # a carriage's tilt or its straightness that changes with another axis' position (a bridge
+    # twist; a ram or beam whose bow depends on where the carriage stands)
+    straightness = tuple(c for c in LINEAR if c[1] != c[-1])
+    for comp in (*ANGULAR, *straightness):
         for other in AXES:
             if other == comp[-1] or not (moved[other] and moved[comp[-1]]):
                 continue
