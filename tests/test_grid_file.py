@@ -110,7 +110,9 @@ def test_wrong_version_and_format(grid: CorrectionGrid, tmp_path: Path) -> None:
         CorrectionGrid.load(v3)
     v2 = tmp_path / "v2.grid"  # version 2 is a grid carrying U: its members must be there
     _rewrite_header(path, v2, format_version=2)
-    with pytest.raises(GridFileError, match=r"v2\.grid: grid format version 2 needs the uncertainty"):
+    with pytest.raises(
+        GridFileError, match=r"v2\.grid: grid format version 2 needs the uncertainty"
+    ):
         CorrectionGrid.load(v2)
     other = tmp_path / "other.grid"
     _rewrite_header(path, other, format="something-else")
