@@ -9,6 +9,11 @@ from .assembler import (
     Triplet,
     TripletAssembler,
 )
+from .can_answer import (
+    encode_corrected_axes,
+    encode_correction_status,
+    encode_correction_uncertainty,
+)
 from .can_codec import (
     BadLength,
     BadValue,
@@ -22,13 +27,12 @@ from .can_codec import (
 from .can_frames import (
     CorrectedAxis,
     CorrectionStatus,
+    CorrectionUncertainty,
     Frame,
     Heartbeat,
     ProbeDirection,
     RawAxis,
     TemperatureSample,
-    encode_corrected_axes,
-    encode_correction_status,
 )
 from .can_ids import CanIds, MessageKind, dbc_text
 from .codes import Applied, Axis, DaemonState, Direction, Status, grid_id_from_sha256, seq_distance
@@ -53,6 +57,7 @@ __all__ = [
     "ControllerClient",
     "CorrectedAxis",
     "CorrectionStatus",
+    "CorrectionUncertainty",
     "DaemonBlock",
     "DaemonState",
     "DecodeResult",
@@ -93,6 +98,7 @@ __all__ = [
     "device_id_response",
     "encode_corrected_axes",
     "encode_correction_status",
+    "encode_correction_uncertainty",
     "encode_message",
     "grid_id_from_sha256",
     "parse_request",

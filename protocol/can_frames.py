@@ -20,19 +20,20 @@ from typing import Any, ClassVar, Self, TypeVar
 from .can_ids import CORRECTED_KIND, RAW_KIND, MessageKind
 from .codes import (
     APPLIED_MASK,
+    UNCERTAINTY_SATURATED,
     Applied,
     Axis,
     DaemonState,
     Direction,
     Status,
     celsius_from_mC,
-    correction_raw_from_um,
     grid_id_from_sha256,
-    latency_raw_from_us,
     mC_from_celsius,
     mm_from_nm,
     raw_from_unit_vector,
     um_from_correction_raw,
+    um_from_uncertainty_raw,
+    uncertainty_raw3_from_um,
     unit_vector_from_raw,
 )
 
@@ -71,9 +72,18 @@ CORRECTION_STATUS_LAYOUT = struct.Struct(
     "<"
     "H"  # bytes 0-1: seq, uint16, the reading this answers
     "B"  # byte 2: status, uint8, Status code
-    "B"  # byte 3: applied, uint8, Applied bit mask (bits 5-7 reserved)
+    "B"  # byte 3: applied, uint8, Applied bit mask (bit 5 = U known; bits 6-7 reserved)
     "H"  # bytes 4-5: latency, uint16, µs from last input frame to answer (saturating)
     "H"  # bytes 6-7: |correction|, uint16, raw unit 0.01 µm (saturating at 655.35 µm)
+)
+
+CORRECTION_UNCERTAINTY_LAYOUT = struct.Struct(
+    "<"
+    "H"  # bytes 0-1: seq, uint16, the reading this answers
+    "H"  # bytes 2-3: Ux, uint16, expanded uncertainty (k = 2) of X, 0.01 µm, rounded up;
+    #      0xFFFF unknown, 0xFFFE more than 655.33 µm
+    "H"  # bytes 4-5: Uy, uint16, likewise
+    "H"  # bytes 6-7: Uz, uint16, likewise
 )
 
 HEARTBEAT_LAYOUT = struct.Struct(
@@ -361,6 +371,56 @@ class CorrectionStatus:
 
 
 @dataclass(frozen=True, slots=True)
+class CorrectionUncertainty:
+    """Expanded uncertainty U (k = 2, per component) of a corrected reading, daemon →
+    controller, sent after the three corrected axis frames and before the correction status
+    (only with ``[can] send_uncertainty``; docs/can.md). Raw 0.01 µm, rounded up; the codes
+    ``0xFFFF`` (unknown) and ``0xFFFE`` (more than 655.33 µm) are not values."""
+
+    kind: ClassVar[MessageKind] = MessageKind.CORRECTION_UNCERTAINTY
+    seq: int
+    ux_10nm: int
+    uy_10nm: int
+    uz_10nm: int
+
+    def __post_init__(self) -> None:
+        _check("seq", self.seq, 0, 0xFFFF)
+        for name in ("ux_10nm", "uy_10nm", "uz_10nm"):
+            _check(name, getattr(self, name), 0, 0xFFFF)
+
+    @classmethod
+    def from_um(cls, seq: int, u_um: tuple[float, float, float] | None) -> Self:
+        """Quantise (Ux, Uy, Uz) µm, rounding up (NaN: unknown; None: all unknown)."""
+        return cls(seq, *uncertainty_raw3_from_um(u_um))
+
+    @property
+    def u_um(self) -> tuple[float, float, float]:
+        """(Ux, Uy, Uz), µm: NaN where unknown, ``inf`` where saturated (never less than U)."""
+        return (
+            um_from_uncertainty_raw(self.ux_10nm),
+            um_from_uncertainty_raw(self.uy_10nm),
+            um_from_uncertainty_raw(self.uz_10nm),
+        )
+
+    @property
+    def known(self) -> bool:
+        """True when every component is a value (neither unknown nor saturated)."""
+        return max(self.ux_10nm, self.uy_10nm, self.uz_10nm) < UNCERTAINTY_SATURATED
+
+    def encode(self) -> bytes:
+        """8-byte payload."""
+        return CORRECTION_UNCERTAINTY_LAYOUT.pack(
+            self.seq, self.ux_10nm, self.uy_10nm, self.uz_10nm
+        )
+
+    @classmethod
+    def decode(cls, data: bytes | bytearray | memoryview) -> Self:
+        """Inverse of :meth:`encode`; ValueError on a bad length."""
+        _check_len(cls.__name__, data)
+        return cls(*CORRECTION_UNCERTAINTY_LAYOUT.unpack(data))
+
+
+@dataclass(frozen=True, slots=True)
 class Heartbeat:
     """Daemon heartbeat, sent periodically (docs/can.md: 10 Hz) and on state change."""
 
@@ -400,7 +460,15 @@ class Heartbeat:
         return cls(st, answered, not_ok, int.from_bytes(grid, "little"))
 
 
-Frame = RawAxis | CorrectedAxis | ProbeDirection | TemperatureSample | CorrectionStatus | Heartbeat
+Frame = (
+    RawAxis
+    | CorrectedAxis
+    | ProbeDirection
+    | TemperatureSample
+    | CorrectionStatus
+    | CorrectionUncertainty
+    | Heartbeat
+)
 """Any frame of the message set."""
 
 FRAME_CLASS: dict[MessageKind, type[Frame]] = {
@@ -413,51 +481,6 @@ FRAME_CLASS: dict[MessageKind, type[Frame]] = {
     MessageKind.CORRECTED_Y: CorrectedAxis,
     MessageKind.CORRECTED_Z: CorrectedAxis,
     MessageKind.CORRECTION_STATUS: CorrectionStatus,
+    MessageKind.CORRECTION_UNCERTAINTY: CorrectionUncertainty,
     MessageKind.HEARTBEAT: Heartbeat,
 }
-
-
-# --------------------------------------------------------------------------- answer fast path
-_AXIS_PACK = AXIS_LAYOUT.pack
-_STATUS_PACK = CORRECTION_STATUS_LAYOUT.pack
-
-
-def encode_corrected_axes(
-    seq: int, status: int, position_nm: tuple[int, int, int]
-) -> tuple[bytes, bytes, bytes]:
-    """Payloads of CORRECTED_X/Y/Z for one answer, byte-equal to :meth:`CorrectedAxis.encode`
-    of each axis (the daemon's reply path: no frame objects, no validation beyond the
-    packing's own: OverflowError/struct.error on an out-of-range position or seq).
-
-    :param seq: reading sequence counter, uint16.
-    :param status: :class:`Status` code (0..63).
-    :param position_nm: corrected X, Y, Z, nm (int40 each).
-    """
-    x, y, z = position_nm
-    flags = status << 2  # axis code in bits 0-1
-    return (
-        _AXIS_PACK(x.to_bytes(5, "little", signed=True), seq, flags),
-        _AXIS_PACK(y.to_bytes(5, "little", signed=True), seq, flags | 1),
-        _AXIS_PACK(z.to_bytes(5, "little", signed=True), seq, flags | 2),
-    )
-
-
-def encode_correction_status(
-    seq: int, status: int, applied: int, latency_us: float, correction_um: float
-) -> bytes:
-    """Payload of CORRECTION_STATUS from physical values, byte-equal to
-    :meth:`CorrectionStatus.encode` of the quantised frame (the daemon's reply path).
-
-    :param seq: reading sequence counter, uint16.
-    :param status: :class:`Status` code.
-    :param applied: :class:`Applied` bit mask.
-    :param latency_us: reply latency, µs (rounded, saturated at 65535).
-    :param correction_um: length of the applied correction, µm (0.01 µm raw, saturated).
-    """
-    return _STATUS_PACK(
-        seq,
-        status,
-        applied,
-        latency_raw_from_us(latency_us),
-        correction_raw_from_um(correction_um),
-    )

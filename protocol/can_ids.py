@@ -33,6 +33,7 @@ class MessageKind(enum.IntEnum):
     CORRECTED_Y = 0x9
     CORRECTED_Z = 0xA
     CORRECTION_STATUS = 0xB
+    CORRECTION_UNCERTAINTY = 0xC
     HEARTBEAT = 0xF
 
     @property
@@ -111,8 +112,13 @@ class CanIds:
         return frozenset(self.id_of(k) for k in kinds)
 
     def daemon_tx_ids(self) -> frozenset[int]:
-        """Ids the daemon sends (corrected axes, correction status, heartbeat)."""
-        kinds = (*CORRECTED_KIND.values(), MessageKind.CORRECTION_STATUS, MessageKind.HEARTBEAT)
+        """Ids the daemon sends (corrected axes, uncertainty, correction status, heartbeat)."""
+        kinds = (
+            *CORRECTED_KIND.values(),
+            MessageKind.CORRECTION_UNCERTAINTY,
+            MessageKind.CORRECTION_STATUS,
+            MessageKind.HEARTBEAT,
+        )
         return frozenset(self.id_of(k) for k in kinds)
 
     def can_filters(self) -> list[dict[str, int | bool]]:

@@ -12,6 +12,7 @@ Raw ↔ physical scalings (physical = raw · factor + offset, offset always 0 he
 | temperature | int32 | 0.001 | °C (raw unit: m°C) |
 | probing direction component | int16 | 2**-14 | 1 (unit vector component) |
 | correction magnitude | uint16 | 0.01 | µm (raw unit: 10 nm), saturating |
+| expanded uncertainty U (k = 2, per component) | uint16 | 0.01 | µm, rounded **up**; 0xFFFF unknown, 0xFFFE more than 655.33 µm |
 | latency | uint16 | 1 | µs, saturating |
 
 Each factor is defined here once, and every raw ↔ physical conversion of the project goes
@@ -22,6 +23,7 @@ endpoints, its log records and the simulated controller never scale by hand.
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Sequence
 
 NM_PER_MM = 1_000_000
@@ -37,6 +39,15 @@ CORRECTION_LSB_PER_UM = 100
 CORRECTION_UM_PER_LSB = 1 / CORRECTION_LSB_PER_UM
 """Raw correction-magnitude unit: 0.01 µm = 10 nm."""
 UINT16_MAX = 0xFFFF
+UNCERTAINTY_LSB_PER_UM = CORRECTION_LSB_PER_UM
+"""Raw uncertainty units (10 nm) per µm: the same 0.01 µm as the correction magnitude."""
+_UNCERTAINTY_UM_PER_LSB = 1 / UNCERTAINTY_LSB_PER_UM
+UNCERTAINTY_UNKNOWN = 0xFFFF
+"""Raw uncertainty code: U unknown (status not ok, or the grid carries no U)."""
+UNCERTAINTY_SATURATED = 0xFFFE
+"""Raw uncertainty code: U larger than the field holds (more than 655.33 µm): "at least"."""
+UNCERTAINTY_RAW_MAX = UNCERTAINTY_SATURATED - 1
+"""Largest raw uncertainty that is a value (655.33 µm)."""
 SEQ_MODULUS = 1 << 16
 """Sequence counters and event counters wrap modulo 2**16."""
 
@@ -150,9 +161,12 @@ class Applied(enum.IntFlag):
     """Direction-dependent (reversal) term, needs travel directions."""
     PROBE_DIRECTION = 0x10
     """Probing-direction-dependent term (lobing), needs the probing direction."""
+    UNCERTAINTY = 0x20
+    """Not a correction term: the answer's expanded uncertainty U is known (the status is
+    ``ok`` and the grid carries U; docs/uncertainty.md)."""
 
 
-APPLIED_MASK = 0x1F
+APPLIED_MASK = 0x3F
 
 
 def grid_id_from_sha256(sha256_hex: str) -> int:
@@ -226,6 +240,54 @@ def um_from_correction_raw(correction_10nm: int) -> float:
 def correction_raw_from_um(correction_um: float) -> int:
     """Raw correction magnitude, 0.01 µm, rounded and saturated to 0..65535."""
     return saturate_u16(round(correction_um * CORRECTION_LSB_PER_UM))
+
+
+def uncertainty_raw_from_um(u_um: float) -> int:
+    """Raw expanded uncertainty, 0.01 µm, of U (µm): rounded **up**, so the wire never states
+    less than U: the smallest raw with ``raw · 0.01 ≥ U`` and ``raw / 100 ≥ U`` in floating
+    point (the two ways a reader scales it). NaN or a negative U (no valid value) gives :data:`UNCERTAINTY_UNKNOWN`;
+    a U above 655.33 µm (``inf`` included) :data:`UNCERTAINTY_SATURATED`.
+
+    >>> uncertainty_raw_from_um(1.234), uncertainty_raw_from_um(0.0), uncertainty_raw_from_um(1e-9)
+    (124, 0, 1)
+    """
+    if not u_um >= 0.0:  # NaN or negative: no value to state
+        return UNCERTAINTY_UNKNOWN
+    if u_um > UNCERTAINTY_RAW_MAX / UNCERTAINTY_LSB_PER_UM:
+        return UNCERTAINTY_SATURATED
+    raw = math.ceil(u_um * UNCERTAINTY_LSB_PER_UM)
+    # the product is within an ulp of U·100: the smallest raw whose decoded value is not
+    # below U is raw − 1, raw or raw + 1
+    if raw and _decodes_not_below(raw - 1, u_um):
+        raw -= 1
+    elif not _decodes_not_below(raw, u_um):
+        raw += 1
+    return raw if raw <= UNCERTAINTY_RAW_MAX else UNCERTAINTY_SATURATED
+
+
+def _decodes_not_below(raw: int, u_um: float) -> bool:
+    """True when ``raw`` read back (``raw / 100`` or ``raw · 0.01``) is at least ``u_um``."""
+    return raw / UNCERTAINTY_LSB_PER_UM >= u_um and raw * _UNCERTAINTY_UM_PER_LSB >= u_um
+
+
+def um_from_uncertainty_raw(u_raw: int) -> float:
+    """U (µm) of a raw uncertainty: NaN for :data:`UNCERTAINTY_UNKNOWN`, ``inf`` for
+    :data:`UNCERTAINTY_SATURATED` (an upper bound is not known), else ``raw / 100``."""
+    if u_raw == UNCERTAINTY_UNKNOWN:
+        return math.nan
+    if u_raw == UNCERTAINTY_SATURATED:
+        return math.inf
+    return u_raw / UNCERTAINTY_LSB_PER_UM
+
+
+def uncertainty_raw3_from_um(
+    u_um: Sequence[float] | None,
+) -> tuple[int, int, int]:
+    """Raw (Ux, Uy, Uz) of :func:`uncertainty_raw_from_um` each; None: all unknown."""
+    if u_um is None:
+        return (UNCERTAINTY_UNKNOWN, UNCERTAINTY_UNKNOWN, UNCERTAINTY_UNKNOWN)
+    x, y, z = u_um
+    return (uncertainty_raw_from_um(x), uncertainty_raw_from_um(y), uncertainty_raw_from_um(z))
 
 
 def latency_raw_from_us(latency_us: float) -> int:

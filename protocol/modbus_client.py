@@ -92,11 +92,13 @@ class ControllerClient:
             raise ModbusExceptionError(f"write {address}+{len(values)}", rr.exception_code)
 
     async def check_server(self) -> None:
-        """Read INFO and check the magic and map version; ValueError if they differ."""
+        """Read INFO and check the magic and the map version (at least this client's: versions
+        only add registers); ValueError otherwise."""
         version, magic, _slots = await self.read_registers(mm.INFO_START, mm.INFO_SIZE)
-        if magic != mm.MAGIC or version != mm.MAP_VERSION:
+        if magic != mm.MAGIC or version < mm.MAP_VERSION:
             raise ValueError(
-                f"not a cmm-comp map v{mm.MAP_VERSION}: magic {magic:#06x}, version {version}"
+                f"not a cmm-comp map v{mm.MAP_VERSION} or later: magic {magic:#06x}, "
+                f"version {version}"
             )
 
     async def write_reading(self, reading: ReadingBlock) -> None:
@@ -108,7 +110,7 @@ class ControllerClient:
         await self.write_registers(slot.address, slot.to_registers())
 
     async def read_output(self) -> tuple[AnswerBlock, DaemonBlock]:
-        """Read ANSWER and DAEMON (300..323) in one request."""
+        """Read ANSWER, DAEMON and UNCERTAINTY (300..326) in one request."""
         return decode_output(await self.read_registers(mm.OUTPUT_START, mm.OUTPUT_SIZE))
 
     async def wait_answer(

@@ -13,6 +13,8 @@ from typing import Self
 from . import modbus_map as mm
 from .codes import (
     APPLIED_MASK,
+    UNCERTAINTY_SATURATED,
+    UNCERTAINTY_UNKNOWN,
     Applied,
     DaemonState,
     Direction,
@@ -23,6 +25,8 @@ from .codes import (
     mm3_from_nm,
     nm3_from_mm,
     raw_from_unit_vector,
+    um_from_uncertainty_raw,
+    uncertainty_raw3_from_um,
     unit_vector_from_raw,
 )
 
@@ -166,9 +170,13 @@ class TemperatureSlot:
         return cls(sensor, int_from_registers(regs[0:2]), bool(_word(regs[2]) & 1), _word(regs[3]))
 
 
+_U_UNKNOWN3: Vec3i = (UNCERTAINTY_UNKNOWN, UNCERTAINTY_UNKNOWN, UNCERTAINTY_UNKNOWN)
+
+
 @dataclass(frozen=True, slots=True)
 class AnswerBlock:
-    """ANSWER block (300..316): the daemon's answer to the last committed reading."""
+    """The daemon's answer to the last committed reading: the ANSWER block (300..316) and the
+    UNCERTAINTY registers (324..326, map version 2) that are stored with it."""
 
     seq: int
     status: Status
@@ -177,6 +185,8 @@ class AnswerBlock:
     applied: Applied = Applied.NONE
     latency_us: int = 0
     correction_10nm: int = 0
+    uncertainty_10nm: Vec3i = _U_UNKNOWN3
+    """Raw (Ux, Uy, Uz): 0.01 µm rounded up, 0xFFFF unknown, 0xFFFE more than 655.33 µm."""
 
     @classmethod
     def from_physical(
@@ -187,9 +197,11 @@ class AnswerBlock:
         applied: Applied,
         latency_us: float,
         correction_um: float,
+        uncertainty_um: tuple[float, float, float] | None = None,
     ) -> Self:
         """Build from the latency in µs and the correction length in µm (both rounded to
-        their raw units and saturated at 65535)."""
+        their raw units and saturated at 65535) and U (k = 2) in µm, rounded **up** (None or
+        NaN: unknown; :func:`codes.uncertainty_raw_from_um`)."""
         return cls(
             seq,
             status,
@@ -197,7 +209,19 @@ class AnswerBlock:
             applied,
             latency_raw_from_us(latency_us),
             correction_raw_from_um(correction_um),
+            uncertainty_raw3_from_um(uncertainty_um),
         )
+
+    @property
+    def uncertainty_um(self) -> tuple[float, float, float]:
+        """(Ux, Uy, Uz), µm: NaN where unknown, ``inf`` where saturated (never less than U)."""
+        x, y, z = self.uncertainty_10nm
+        return (um_from_uncertainty_raw(x), um_from_uncertainty_raw(y), um_from_uncertainty_raw(z))
+
+    @property
+    def uncertainty_known(self) -> bool:
+        """True when Ux, Uy and Uz are all values (neither unknown nor saturated)."""
+        return max(self.uncertainty_10nm) < UNCERTAINTY_SATURATED
 
     @property
     def position_mm(self) -> tuple[float, float, float]:
@@ -216,14 +240,30 @@ class AnswerBlock:
         ]
         return regs
 
+    def uncertainty_registers(self) -> list[int]:
+        """3 registers for addresses 324..326 (Ux, Uy, Uz raw)."""
+        x, y, z = self.uncertainty_10nm
+        return [_u16(x, "ux_10nm"), _u16(y, "uy_10nm"), _u16(z, "uz_10nm")]
+
     @classmethod
-    def from_registers(cls, regs: Sequence[int]) -> Self:
-        """Inverse of :meth:`to_registers`; ValueError on an undefined status code."""
+    def from_registers(cls, regs: Sequence[int], u_regs: Sequence[int] | None = None) -> Self:
+        """Inverse of :meth:`to_registers` (and :meth:`uncertainty_registers`: ``u_regs``,
+        None = not read, unknown); ValueError on an undefined status code."""
         _check_len("ANSWER block", regs, mm.ANSWER_SIZE)
         pos = _int64_triplet(regs, 2)
         applied = Applied(_word(regs[14]) & APPLIED_MASK)
+        u = _U_UNKNOWN3
+        if u_regs is not None:
+            _check_len("UNCERTAINTY block", u_regs, mm.UNCERTAINTY_SIZE)
+            u = (_word(u_regs[0]), _word(u_regs[1]), _word(u_regs[2]))
         return cls(
-            _word(regs[0]), Status(_word(regs[1])), pos, applied, _word(regs[15]), _word(regs[16])
+            _word(regs[0]),
+            Status(_word(regs[1])),
+            pos,
+            applied,
+            _word(regs[15]),
+            _word(regs[16]),
+            u,
         )
 
 
@@ -264,11 +304,15 @@ class DaemonBlock:
 
 
 def decode_output(regs: Sequence[int]) -> tuple[AnswerBlock, DaemonBlock]:
-    """Split a read of 300..323 (24 registers) into its ANSWER and DAEMON blocks."""
-    _check_len("ANSWER+DAEMON read", regs, mm.OUTPUT_SIZE)
+    """Split a read of 300..326 (27 registers) into the answer (ANSWER + UNCERTAINTY) and the
+    DAEMON block; a map-version-1 read of 300..323 (24 registers) gives U unknown."""
+    if len(regs) != mm.OUTPUT_SIZE_V1:
+        _check_len("ANSWER+DAEMON+UNCERTAINTY read", regs, mm.OUTPUT_SIZE)
+    daemon_end = mm.ANSWER_SIZE + mm.DAEMON_SIZE
+    u_regs = regs[daemon_end:] if len(regs) == mm.OUTPUT_SIZE else None
     return (
-        AnswerBlock.from_registers(regs[: mm.ANSWER_SIZE]),
-        DaemonBlock.from_registers(regs[mm.ANSWER_SIZE :]),
+        AnswerBlock.from_registers(regs[: mm.ANSWER_SIZE], u_regs),
+        DaemonBlock.from_registers(regs[mm.ANSWER_SIZE : daemon_end]),
     )
 
 

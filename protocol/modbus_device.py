@@ -11,8 +11,9 @@ Hooks (all optional) run inside the request, so keep them short:
 
 * ``on_commit(reading) -> AnswerBlock | None``: a validated write including SEQ; a returned
   answer is stored at once, so the controller's next read sees it.
-* ``answer_block() -> AnswerBlock | None``: pulled on every read touching ANSWER (None keeps
-  the stored answer): lets a daemon that computes elsewhere publish its answers.
+* ``answer_block() -> AnswerBlock | None``: pulled on every read touching ANSWER or
+  UNCERTAINTY (None keeps the stored answer): lets a daemon that computes elsewhere publish its
+  answers. An answer is stored in ANSWER and UNCERTAINTY together, in one step.
 * ``daemon_block() -> DaemonBlock``: pulled on every read touching DAEMON.
 * ``on_temperature(slot)``: each temperature slot a validated write touched, as it is after it.
 * ``identity() -> {object id: bytes}``: device identification objects, per request (None:
@@ -46,7 +47,8 @@ from .modbus_pdu import (
 )
 
 INITIAL_ANSWER = AnswerBlock(0, Status.NOT_READY, (0, 0, 0))
-"""ANSWER block before the first answer: an all-zero block would read as "seq 0, ok"."""
+"""ANSWER block before the first answer: an all-zero block would read as "seq 0, ok" (U reads
+unknown)."""
 
 CommitHook = Callable[[ReadingBlock], AnswerBlock | None]
 DaemonHook = Callable[[], DaemonBlock]
@@ -54,7 +56,7 @@ AnswerHook = Callable[[], AnswerBlock | None]
 TemperatureHook = Callable[[TemperatureSlot], None]
 IdentityHook = Callable[[], Mapping[int, bytes]]
 
-_SIZE = mm.DAEMON_START + mm.DAEMON_SIZE
+_SIZE = mm.UNCERTAINTY_START + mm.UNCERTAINTY_SIZE
 _TEMP_END = mm.TEMPERATURE_START + mm.TEMPERATURE_SIZE
 
 
@@ -91,12 +93,17 @@ class MapDevice:
         self.registers = [0] * _SIZE
         """Register contents, index = address (undefined addresses are never served)."""
         self.registers[mm.INFO_START : mm.INFO_START + mm.INFO_SIZE] = info_registers()
-        self._store(mm.ANSWER_START, INITIAL_ANSWER.to_registers())
+        self._store_answer(INITIAL_ANSWER)
         if daemon_block is not None:
             self._store(mm.DAEMON_START, daemon_block().to_registers())
 
     def _store(self, address: int, values: list[int]) -> None:
         self.registers[address : address + len(values)] = values
+
+    def _store_answer(self, answer: AnswerBlock) -> None:
+        """ANSWER and UNCERTAINTY of ``answer`` (one step: requests are handled one at a time)."""
+        self._store(mm.ANSWER_START, answer.to_registers())
+        self._store(mm.UNCERTAINTY_START, answer.uncertainty_registers())
 
     def handle_pdu(self, pdu: bytes) -> bytes:
         """Response PDU to ``pdu`` (the :class:`protocol.MbapServer` handler)."""
@@ -126,12 +133,13 @@ class MapDevice:
         address, count = request.address, request.count
         if code := mm.check_request(request.function_code, address, count):
             return code
-        if self.answer_block is not None and _overlaps(
-            address, count, mm.ANSWER_START, mm.ANSWER_SIZE
+        if self.answer_block is not None and (
+            _overlaps(address, count, mm.ANSWER_START, mm.ANSWER_SIZE)
+            or _overlaps(address, count, mm.UNCERTAINTY_START, mm.UNCERTAINTY_SIZE)
         ):
             answer = self.answer_block()
             if answer is not None:
-                self._store(mm.ANSWER_START, answer.to_registers())
+                self._store_answer(answer)
         if self.daemon_block is not None and _overlaps(
             address, count, mm.DAEMON_START, mm.DAEMON_SIZE
         ):
@@ -156,7 +164,7 @@ class MapDevice:
         block = self.registers[mm.READING_START : mm.READING_START + mm.READING_SIZE]
         reading = ReadingBlock.from_registers(block)  # check_write made it decodable
         if self.on_commit is not None and (answer := self.on_commit(reading)) is not None:
-            self._store(mm.ANSWER_START, answer.to_registers())
+            self._store_answer(answer)
 
     def _temperatures(self, address: int, end: int) -> None:
         assert self.on_temperature is not None

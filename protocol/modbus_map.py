@@ -12,12 +12,15 @@ significant word first** (big-endian word order), so an int64 in registers r0..r
 | TEMPERATURE | 200..263 | read/write | 16 slots × 4 registers: int32 m°C, flags, counter |
 | ANSWER | 300..316 | read | seq answered, status, corrected X/Y/Z (int64 nm), applied, latency, |correction| |
 | DAEMON | 317..323 | read | state, answered, not_ok, grid id (uint32), heartbeat, input errors |
+| UNCERTAINTY | 324..326 | read | U of the answer (k = 2) in X, Y, Z: uint16 0.01 µm rounded up, 0xFFFF unknown |
 
 Commit: a write request that includes ``SEQ`` (119) commits the reading block as it is after
 that request; write 100..119 in one FC16 request, or the values first and ``SEQ`` last.
 Reads may use FC3 or FC4 (same registers); writes FC6 or FC16; FC43/MEI 14 reads the device
 identification (:mod:`protocol.modbus_devid`); any other function code is ILLEGAL_FUNCTION.
-All reads of ANSWER+DAEMON (300..323, 24 registers) are one request.
+One read of 300..326 (27 registers) returns ANSWER, DAEMON and UNCERTAINTY together; the
+UNCERTAINTY registers belong to the answer in ANSWER (they are replaced with it, in one step).
+Map versions only add registers: a client written for version v works with any server ≥ v.
 """
 
 from __future__ import annotations
@@ -38,7 +41,8 @@ class ExceptionCode(enum.IntEnum):
     SERVER_DEVICE_FAILURE = 4
 
 
-MAP_VERSION = 1
+MAP_VERSION = 2
+"""1: the original map; 2: UNCERTAINTY (324..326) and APPLIED bit 5 (U known) added."""
 MAGIC = 0x434D
 """``"CM"``: lets a controller check it talks to a cmm-comp daemon."""
 TEMPERATURE_SLOTS = 16
@@ -112,9 +116,19 @@ REG_HEARTBEAT = 322  # uint16, incremented by the daemon at 10 Hz: a frozen valu
 REG_INPUT_ERRORS = 323  # uint16, rejected writes and unusable commits, mod 2**16
 DAEMON_SIZE = 7
 
+# --- UNCERTAINTY (read-only, daemon writes with ANSWER; map version 2) -------------------
+UNCERTAINTY_START = 324
+REG_UX_10NM = 324  # uint16, expanded uncertainty (k = 2) of the answer's X, 0.01 µm, rounded
+#                    up; 0xFFFF unknown (status not ok, or no U in the grid), 0xFFFE > 655.33 µm
+REG_UY_10NM = 325  # uint16, likewise for Y
+REG_UZ_10NM = 326  # uint16, likewise for Z
+UNCERTAINTY_SIZE = 3
+
 OUTPUT_START = ANSWER_START
-OUTPUT_SIZE = ANSWER_SIZE + DAEMON_SIZE
-"""ANSWER and DAEMON are contiguous: read 300..323 in one request."""
+OUTPUT_SIZE = ANSWER_SIZE + DAEMON_SIZE + UNCERTAINTY_SIZE
+"""ANSWER, DAEMON and UNCERTAINTY are contiguous: read 300..326 in one request."""
+OUTPUT_SIZE_V1 = ANSWER_SIZE + DAEMON_SIZE
+"""The map-version-1 output read, 300..323 (still served: U is then not read)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,6 +156,7 @@ BLOCKS: tuple[RegisterBlock, ...] = (
     RegisterBlock("TEMPERATURE", TEMPERATURE_START, TEMPERATURE_SIZE, writable=True),
     RegisterBlock("ANSWER", ANSWER_START, ANSWER_SIZE, writable=False),
     RegisterBlock("DAEMON", DAEMON_START, DAEMON_SIZE, writable=False),
+    RegisterBlock("UNCERTAINTY", UNCERTAINTY_START, UNCERTAINTY_SIZE, writable=False),
 )
 
 
@@ -149,7 +164,7 @@ def _spans(address: int, count: int, writable: bool) -> bool:
     """True if every register of the range is defined (and writable, if asked)."""
     end = address + count
     pos = address
-    for block in BLOCKS:  # BLOCKS are sorted and READING..TEMPERATURE are not adjacent
+    for block in BLOCKS:  # sorted; ANSWER, DAEMON, UNCERTAINTY adjacent, the others not
         if block.start <= pos < block.stop:
             if writable and not block.writable:
                 return False

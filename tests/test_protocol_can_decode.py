@@ -25,7 +25,7 @@ from cmm_comp.protocol import (
 )
 from cmm_comp.protocol.can_frames import FRAME_CLASS
 
-USED_BITS = {RawAxis: (7, 0x1F), TemperatureSample: (1, 0x01), CorrectionStatus: (3, 0x1F)}
+USED_BITS = {RawAxis: (7, 0x1F), TemperatureSample: (1, 0x01), CorrectionStatus: (3, 0x3F)}
 """(byte index, mask of defined bits) for the frames that have reserved bits."""
 
 
@@ -131,9 +131,10 @@ def test_ids_helpers() -> None:
     ids = CanIds(node_id=2)
     assert ids.id_of(MessageKind.HEARTBEAT) == 0x22F
     assert ids.kind_of(0x22B) is MessageKind.CORRECTION_STATUS
-    assert ids.kind_of(0x22C) is None and ids.kind_of(0x21B) is None
+    assert ids.kind_of(0x22C) is MessageKind.CORRECTION_UNCERTAINTY
+    assert ids.kind_of(0x22D) is None and ids.kind_of(0x21B) is None
     assert ids.controller_tx_ids() == {0x220, 0x221, 0x222, 0x223, 0x224}
-    assert ids.daemon_tx_ids() == {0x228, 0x229, 0x22A, 0x22B, 0x22F}
+    assert ids.daemon_tx_ids() == {0x228, 0x229, 0x22A, 0x22B, 0x22C, 0x22F}
     assert ids.can_filters() == [{"can_id": 0x220, "can_mask": 0x7F0, "extended": False}]
     assert Heartbeat.kind is MessageKind.HEARTBEAT
 

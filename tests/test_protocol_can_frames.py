@@ -17,6 +17,7 @@ from cmm_comp.protocol import (
     CanIds,
     CorrectedAxis,
     CorrectionStatus,
+    CorrectionUncertainty,
     DaemonState,
     Direction,
     Frame,
@@ -54,10 +55,11 @@ temps = st.builds(
     st.booleans(),
 )
 statuses = st.builds(
-    CorrectionStatus, u16, st.sampled_from(Status), st.integers(0, 31).map(Applied), u16, u16
+    CorrectionStatus, u16, st.sampled_from(Status), st.integers(0, 63).map(Applied), u16, u16
 )
+uncertainties = st.builds(CorrectionUncertainty, u16, u16, u16, u16)
 heartbeats = st.builds(Heartbeat, st.sampled_from(DaemonState), u16, u16, st.integers(0, 2**24 - 1))
-frames = st.one_of(raw_axes, corrected_axes, probe_dirs, temps, statuses, heartbeats)
+frames = st.one_of(raw_axes, corrected_axes, probe_dirs, temps, statuses, uncertainties, heartbeats)
 
 
 def expected_signals(frame: Frame) -> dict[str, int]:
@@ -94,6 +96,8 @@ def expected_signals(frame: Frame) -> dict[str, int]:
             "Latency": frame.latency_us,
             "Correction": frame.correction_10nm,
         }
+    if isinstance(frame, CorrectionUncertainty):
+        return {"Seq": frame.seq, "Ux": frame.ux_10nm, "Uy": frame.uy_10nm, "Uz": frame.uz_10nm}
     assert isinstance(frame, Heartbeat)
     return {
         "State": int(frame.state),

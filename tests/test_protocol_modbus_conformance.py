@@ -81,7 +81,7 @@ def test_exception_responses(client: RawClient, pdu: bytes, expected: bytes) -> 
 
 
 def test_normal_responses_byte_for_byte(client: RawClient) -> None:
-    assert client.request(read_pdu(3, 0, 3)) == bytes.fromhex("03 06 0001 434d 0010")
+    assert client.request(read_pdu(3, 0, 3)) == bytes.fromhex("03 06 0002 434d 0010")
     assert client.request(read_pdu(4, 1, 1)) == bytes.fromhex("04 02 434d")
     # docs/modbus.md worked example: sensor 3, 20.125 °C, valid, counter 258 at 212..215
     assert client.request(struct.pack(">BHH", 6, 213, 0x4E9D)) == bytes.fromhex("06 00d5 4e9d")
@@ -102,9 +102,9 @@ def test_transaction_and_unit_ids_echoed_and_pipelined_requests_answered_in_orde
         raw.send(burst[:5])  # split mid-header, then the rest in one go
         raw.send(burst[5:])
         assert [raw.response() for _ in range(3)] == [
-            (0xBEEF, 0, 1, b"\x03\x02\x00\x01"),
-            (7, 0, 0, b"\x03\x02\x00\x01"),
-            (0xFFFF, 0, 0xFF, b"\x03\x02\x00\x01"),
+            (0xBEEF, 0, 1, b"\x03\x02\x00\x02"),
+            (7, 0, 0, b"\x03\x02\x00\x02"),
+            (0xFFFF, 0, 0xFF, b"\x03\x02\x00\x02"),
         ]
 
 
@@ -131,13 +131,13 @@ def test_wrong_unit_gets_no_response_and_the_connection_stays_usable() -> None:
 def test_bad_frames_close_the_connection_and_are_reported(garbage: bytes, reason: str) -> None:
     with threaded_server(MapDevice()) as served:
         with RawClient(served.port) as raw:
-            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x01"
+            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x02"
             raw.send(garbage)
             raw.wait_eof()
         assert wait_for(lambda: served.recorder.bad_frames)
         assert len(served.recorder.bad_frames) == 1 and reason in served.recorder.bad_frames[0]
         with RawClient(served.port) as raw:  # the server itself is unharmed
-            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x01"
+            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x02"
 
 
 def test_truncated_header_then_silence_closes_as_a_bad_frame() -> None:
@@ -153,7 +153,7 @@ def test_truncated_header_then_silence_closes_as_a_bad_frame() -> None:
 def test_idle_connection_is_closed_and_reported() -> None:
     with threaded_server(MapDevice(), idle_timeout_s=1.0) as served:
         with RawClient(served.port) as raw:
-            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x01"
+            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x02"
             raw.wait_eof(WAIT_S)  # closed by the server, within a generous bound
         assert wait_for(lambda: served.recorder.idle_closed)
         assert served.recorder.bad_frames == []
@@ -162,12 +162,12 @@ def test_idle_connection_is_closed_and_reported() -> None:
 def test_idle_timeout_zero_never_closes() -> None:
     with threaded_server(MapDevice(), idle_timeout_s=0, frame_timeout_s=0.05) as served:
         with RawClient(served.port) as raw:
-            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x01"
+            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x02"
             raw.sock.settimeout(0.5)
             with pytest.raises(TimeoutError):  # nothing arrives, the connection is not closed
                 raw.sock.recv(1)
             raw.sock.settimeout(WAIT_S)
-            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x01"
+            assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x02"
         assert served.recorder.idle_closed == served.recorder.bad_frames == []
 
 
@@ -178,7 +178,7 @@ def test_failing_hook_answers_server_device_failure_and_keeps_serving() -> None:
     with threaded_server(MapDevice(on_commit=on_commit)) as served, RawClient(served.port) as raw:
         regs = ReadingBlock.from_mm(5, (1.0, 2.0, 3.0)).to_registers()
         assert raw.request(write_multiple_pdu(100, regs)) == b"\x90\x04"
-        assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x01"
+        assert raw.request(read_pdu(3, 0, 1)) == b"\x03\x02\x00\x02"
 
 
 def test_device_answers_every_request_it_parses() -> None:

@@ -34,7 +34,7 @@ from cmm_comp.daemon import DaemonService
 from cmm_comp.daemon.config import ConfigError, config_from_dict
 
 READ_INFO = struct.pack(">BHH", 3, 0, 3)
-INFO_RESPONSE = bytes.fromhex("03 06 0001 434d 0010")
+INFO_RESPONSE = bytes.fromhex("03 06 0002 434d 0010")
 
 
 class Lines(io.StringIO):
@@ -161,7 +161,7 @@ def test_device_identification_names_package_version_and_grid() -> None:
         daemon_sha = d.grids.current.sha256
     assert basic == {0: b"cmm-comp project", 1: b"cmm-comp", 2: version.encode()}
     assert extended[0x04] == b"cmm-comp volumetric compensation daemon"
-    assert extended[0x05] == b"Modbus register map v1"
+    assert extended[0x05] == b"Modbus register map v2"
     loaded_sha = extended[0x80].decode()
     with np.load(grid_file) as npz:  # the grid file's own sha256 member, read with numpy
         stored_sha = npz["sha256"].tobytes().decode("ascii")

@@ -38,7 +38,14 @@ readings = st.builds(
     st.tuples(st.booleans(), st.booleans(), st.booleans()),
 )
 answers = st.builds(
-    AnswerBlock, u16, st.sampled_from(Status), vec3, st.integers(0, 31).map(Applied), u16, u16
+    AnswerBlock,
+    u16,
+    st.sampled_from(Status),
+    vec3,
+    st.integers(0, 63).map(Applied),
+    u16,
+    u16,
+    st.tuples(u16, u16, u16),
 )
 daemons = st.builds(
     DaemonBlock, st.sampled_from(DaemonState), u16, u16, st.integers(0, 2**24 - 1), u16, u16
@@ -47,8 +54,9 @@ daemons = st.builds(
 
 def test_layout_constants_are_consistent() -> None:
     assert mm.REG_SEQ == mm.READING_START + mm.READING_SIZE - 1  # SEQ last: one write commits
-    assert mm.DAEMON_START == mm.ANSWER_START + mm.ANSWER_SIZE  # one read of 300..323
-    assert mm.OUTPUT_SIZE == 24
+    assert mm.DAEMON_START == mm.ANSWER_START + mm.ANSWER_SIZE  # one read of 300..326
+    assert mm.UNCERTAINTY_START == mm.DAEMON_START + mm.DAEMON_SIZE
+    assert mm.OUTPUT_SIZE == 27 and mm.OUTPUT_SIZE_V1 == 24
     assert mm.temperature_address(15) + 4 == mm.TEMPERATURE_START + mm.TEMPERATURE_SIZE
     starts = [b.start for b in mm.BLOCKS]
     assert starts == sorted(starts)
@@ -75,12 +83,16 @@ def test_reading_round_trip_and_word_order(reading: ReadingBlock) -> None:
 @settings(max_examples=200, deadline=None)
 @given(answers, daemons)
 def test_output_round_trip(answer: AnswerBlock, daemon: DaemonBlock) -> None:
-    regs = answer.to_registers() + daemon.to_registers()
+    regs = answer.to_registers() + daemon.to_registers() + answer.uncertainty_registers()
     assert decode_output(regs) == (answer, daemon)
     cx = ModbusClientMixin.convert_from_registers(regs[2:6], DT.INT64, "big")
     assert cx == answer.position_nm[0]
     grid = ModbusClientMixin.convert_from_registers(regs[20:22], DT.UINT32, "big")
     assert grid == daemon.grid_id
+    assert tuple(regs[24:27]) == answer.uncertainty_10nm  # 324..326
+    # a map-version-1 read (300..323) still decodes, U unknown
+    old, _ = decode_output(regs[:24])
+    assert old.uncertainty_10nm == (0xFFFF,) * 3 and old.position_nm == answer.position_nm
 
 
 @settings(max_examples=100, deadline=None)
@@ -128,7 +140,10 @@ def test_int_registers_helpers() -> None:
     [
         (3, 0, 3, None),
         (4, 0, 3, None),
-        (3, 300, 24, None),  # ANSWER + DAEMON in one read
+        (3, 300, 24, None),  # ANSWER + DAEMON in one read (map version 1)
+        (3, 300, 27, None),  # ANSWER + DAEMON + UNCERTAINTY (version 2)
+        (4, 324, 3, None),
+        (3, 326, 1, None),
         (3, 100, 20, None),  # reading back what was written is allowed
         (3, 200, 64, None),
         (16, 100, 20, None),
@@ -136,7 +151,10 @@ def test_int_registers_helpers() -> None:
         (16, 212, 4, None),
         (3, 0, 4, ExceptionCode.ILLEGAL_DATA_ADDRESS),  # runs past INFO
         (3, 50, 1, ExceptionCode.ILLEGAL_DATA_ADDRESS),  # gap
-        (3, 300, 25, ExceptionCode.ILLEGAL_DATA_ADDRESS),  # past DAEMON
+        (3, 300, 28, ExceptionCode.ILLEGAL_DATA_ADDRESS),  # past UNCERTAINTY
+        (3, 327, 1, ExceptionCode.ILLEGAL_DATA_ADDRESS),
+        (16, 324, 1, ExceptionCode.ILLEGAL_DATA_ADDRESS),  # UNCERTAINTY is read-only
+        (6, 326, 1, ExceptionCode.ILLEGAL_DATA_ADDRESS),
         (3, 110, 100, ExceptionCode.ILLEGAL_DATA_ADDRESS),  # READING..gap..TEMPERATURE
         (3, 65535, 1, ExceptionCode.ILLEGAL_DATA_ADDRESS),
         (16, 300, 1, ExceptionCode.ILLEGAL_DATA_ADDRESS),  # ANSWER is read-only

@@ -115,7 +115,8 @@ def test_exception_responses_seen_by_an_independent_client() -> None:
             assert await raw.connect()
             cases: list[tuple[str, Any, int]] = [
                 ("gap", raw.read_holding_registers(50, count=1, device_id=1), 2),
-                ("past DAEMON", raw.read_holding_registers(300, count=25, device_id=1), 2),
+                ("past UNCERTAINTY", raw.read_holding_registers(300, count=28, device_id=1), 2),
+                ("write UNCERTAINTY", raw.write_registers(324, [1], device_id=1), 2),
                 ("write ANSWER", raw.write_registers(300, [1], device_id=1), 2),
                 ("write INFO", raw.write_register(0, 5, device_id=1), 2),
                 ("direction 3", raw.write_register(mm.REG_DIR_X, 3, device_id=1), 3),
