@@ -62,7 +62,7 @@ from .status import (
     check_policy,
     statuses,
 )
-from .uncertainty import GridUncertainty, expanded_uncertainty_point, expanded_uncertainty_um
+from .uncertainty import GridUncertainty, PointUncertainty, expanded_uncertainty_um
 
 __all__ = ["CorrectionGrid"]
 
@@ -233,9 +233,6 @@ class CorrectionGrid:
         self._lock = threading.Lock()
         self._dummy_q = np.zeros((1, 4))
         self._u_tab = (self._lo, self._inv_d, self._shape, *self._knots, *self._spans)
-        self._u_buf = np.zeros((3, 4))
-        self._u_cov = np.zeros((1, 15))
-        self._u_out = np.zeros((1, 3))
         self._dummy_t = np.zeros((1, 3))
         if not _WARM["done"]:  # compile or load the cached kernels now, not on first use
             p = np.array([0.5 * (self.lower_mm + self.upper_mm)])
@@ -512,6 +509,7 @@ class CorrectionGrid:
                 f"uncertainty covariance has {gu.covariance.shape[:3]} nodes, the grid {self.steps}"
             )
         self.uncertainty = gu
+        self._u_point: PointUncertainty | None = None  # prepared on first use (not pickled)
         gu.coefficients(self.axes)
 
     def with_uncertainty(self, uncertainty: GridUncertainty | None) -> CorrectionGrid:
@@ -520,6 +518,7 @@ class CorrectionGrid:
 
         out = copy.copy(self)
         out.uncertainty = None
+        out._u_point = None
         out.sha256 = None
         if uncertainty is not None:
             out._set_uncertainty(uncertainty)
@@ -561,7 +560,7 @@ class CorrectionGrid:
             self.uncertainty,
             self.uncertainty.coefficients(self.axes),
             self._u_tables(),
-            np.clip(np.where(np.isfinite(pts), pts, 0.0), self.lower_mm, self.upper_mm),
+            np.clip(pts, self.lower_mm, self.upper_mm),  # rows not ok (NaN too) are not read
             stylus,
             temps,
             ok,
@@ -603,19 +602,12 @@ class CorrectionGrid:
         x, y, z = map(float, point_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
         px, py, pz = map(float, stylus_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
         with self._lock:
-            u = expanded_uncertainty_point(
-                gu,
-                gu.coefficients(self.axes),
-                self._u_tables(),
-                (x, y, z),
-                (px, py, pz),
-                temps_C,
-                inputs,
-                self._u_buf,
-                self._u_cov,
-                self._u_out,
-            )
-        return out, status, u
+            point_u = self.__dict__.get("_u_point")
+            if point_u is None:
+                point_u = self._u_point = PointUncertainty(
+                    gu, gu.coefficients(self.axes), self._u_tables()
+                )
+            return out, status, point_u((x, y, z), (px, py, pz), temps_C, inputs)
 
     def uncertainty_point(
         self,
@@ -711,6 +703,7 @@ class CorrectionGrid:
         """Picklable (a daemon builds a grid in a worker process): the lock is not sent."""
         state = dict(self.__dict__)
         state.pop("_lock", None)
+        state.pop("_u_point", None)  # views of its own buffers: rebuilt where it is used
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:

@@ -36,6 +36,7 @@ __all__ = [
     "COVARIANCE_COMPONENTS",
     "UNCERTAINTY_MEMBER",
     "GridUncertainty",
+    "PointUncertainty",
     "ThermalUncertainty",
     "variance_from_covariance",
 ]
@@ -50,6 +51,8 @@ COVARIANCE_COMPONENTS: tuple[str, ...] = (
     "wx_wx", "wy_wy", "wz_wz", "wx_wy", "wx_wz", "wy_wz",
 )  # fmt: skip
 _NCOV = len(COVARIANCE_COMPONENTS)
+PARALLEL_MIN = 256
+"""Points from which the batch U pass runs on the thread pool (as the grid's correction)."""
 
 
 @dataclass(frozen=True)
@@ -176,6 +179,20 @@ class GridUncertainty:
             (a, ua, ut) if not (ua == 0.0 and (a == 0.0 or ut == 0.0)) else (0.0, 0.0, 0.0)
             for a, ua, ut in zip(t.expansion, t.u_expansion, t.u_temperature_C, strict=True)
         ]
+        #: (column, role) of the temperatures U depends on (columns of ΔT: T_x, T_y, T_z,
+        #: T_wp); any other temperature cannot change U and is not read (a NaN there cannot
+        #: poison it).
+        self.active_roles: tuple[tuple[int, str], ...] = tuple(
+            (k, role)
+            for k, (role, used) in enumerate(
+                zip(
+                    ("T_x", "T_y", "T_z", "T_wp"),
+                    (*(v != (0.0, 0.0, 0.0) for v in scale), wp != [0.0, 0.0, 0.0]),
+                    strict=True,
+                )
+            )
+            if used
+        )
         #: [reference_C, reference (3), α (3), uα (3), uT (3), α_wp, uα_wp, uT_wp, fixture (3),
         #: probe σ², coverage factor] for the compiled single-point path.
         self.thermal_vector = np.array(
@@ -332,9 +349,11 @@ def expanded_uncertainty_um(
 
     ``coef`` the spline coefficients (:meth:`GridUncertainty.coefficients`), ``tables`` the
     grid's ``(lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz)``; ``stylus_mm`` (1 or N, 3);
-    ``temps_C`` temperatures by role (scalars or (N,) arrays). One compiled, parallel pass
-    (:func:`_u_rows`); :func:`variance_from_covariance` and :meth:`ThermalUncertainty.variance_um2`
-    are the same mathematics in numpy."""
+    ``temps_C`` temperatures by role (scalars or (N,) arrays; only the roles U depends on,
+    :attr:`GridUncertainty.active_roles`, are read). One compiled pass, parallel from
+    :data:`PARALLEL_MIN` points (a small batch, e.g. a daemon's wake-up, is not worth waking
+    a thread pool: :func:`_u_rows_serial`); :func:`variance_from_covariance` and
+    :meth:`ThermalUncertainty.variance_um2` are the same mathematics in numpy."""
     n = points_mm.shape[0]
     out = np.full((n, 3), np.nan)
     idx = np.flatnonzero(ok)
@@ -344,52 +363,66 @@ def expanded_uncertainty_um(
     pts = np.ascontiguousarray(points_mm[idx])
     sty = np.ascontiguousarray(stylus_mm if stylus_mm.shape[0] == 1 else stylus_mm[idx])
     ref_c = float(gu.thermal_vector[0])
-    cols = []
-    for name in ("T_x", "T_y", "T_z", "T_wp"):
+    scalars = [0.0, 0.0, 0.0, 0.0]  # ΔT of T_x, T_y, T_z, T_wp; 0 = reference or not used
+    columns: dict[int, FloatArray] = {}
+    for k, name in gu.active_roles:
         value = (temps_C or {}).get(name)
         if value is None:
-            cols.append(np.zeros(1))
             continue
         arr = np.asarray(value, dtype=np.float64)
-        cols.append(np.array([float(arr) - ref_c]) if arr.ndim == 0 else arr[idx] - ref_c)
-    rows = max(len(c) for c in cols)
-    d_t = np.ascontiguousarray(np.stack([np.broadcast_to(c, (rows,)) for c in cols], axis=1))
+        if arr.ndim == 0:
+            scalars[k] = float(arr) - ref_c
+        else:
+            columns[k] = arr[idx] - ref_c
+    d_t = np.empty((idx.size if columns else 1, 4))  # one row: the same for every point
+    d_t[:] = scalars
+    for k, col in columns.items():
+        d_t[:, k] = col
     u = np.empty((idx.size, 3))
-    _u_rows(pts, sty, d_t, lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef, gu.thermal_vector, u)
+    rows_fn = _u_rows if idx.size >= PARALLEL_MIN else _u_rows_serial
+    rows_fn(pts, sty, d_t, lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef, gu.thermal_vector, u)
     out[idx] = u
     return out
 
 
-def expanded_uncertainty_point(
-    gu: GridUncertainty,
-    coef: FloatArray,
-    tables: tuple[Any, ...],
-    point: tuple[float, float, float],
-    stylus: tuple[float, float, float],
-    temps_C: Mapping[str, Any] | None,
-    inputs: Mapping[str, Any] | None,
-    buf: FloatArray,
-    buf_cov: FloatArray,
-    buf_out: FloatArray,
-) -> tuple[float, float, float]:
-    """U (µm, k = ``gu.coverage_factor``) of one point whose status is ok, the single-reading
-    path: one compiled call; ``buf`` (3, 4), ``buf_cov`` (1, 15) and ``buf_out`` (1, 3) are
-    scratch arrays the caller owns and locks. A temperature is read from ``temps_C``, else from
-    ``inputs``, as the correction reads it. Same mathematics as :func:`expanded_uncertainty_um`."""
-    ref_c = gu.thermal_vector[0]
-    buf[0, 0], buf[0, 1], buf[0, 2] = point
-    buf[1, 0], buf[1, 1], buf[1, 2] = stylus
-    for i, name in enumerate(("T_x", "T_y", "T_z", "T_wp")):
-        value = None if temps_C is None else temps_C.get(name)
-        if value is None and inputs is not None:
-            value = inputs.get(name)
-        buf[2, i] = 0.0 if value is None else float(value) - ref_c
-    lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
-    _point_kernel(
-        buf[0:1], buf[1:2], buf[2:3], lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef,
-        gu.thermal_vector, buf_cov, buf_out,
-    )  # fmt: skip
-    return float(buf_out[0, 0]), float(buf_out[0, 1]), float(buf_out[0, 2])
+class PointUncertainty:
+    """U of one reading whose status is ok, the single-reading path (the daemon's): the
+    buffers and the compiled kernel's arguments are prepared once, so a reading costs one
+    compiled call plus the few temperatures U depends on. Not thread-safe: the grid calls it
+    under its lock. Same mathematics as :func:`expanded_uncertainty_um` (equal bit for bit)."""
+
+    def __init__(self, gu: GridUncertainty, coef: FloatArray, tables: tuple[Any, ...]) -> None:
+        self._buf = np.zeros((3, 4))
+        self._out = np.zeros((1, 3))
+        self._roles = tuple((k, name, float(gu.thermal_vector[0])) for k, name in gu.active_roles)
+        lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
+        b = self._buf
+        self._args = (
+            b[0:1], b[1:2], b[2:3], lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef,
+            gu.thermal_vector, np.zeros((1, coef.shape[3])), self._out,
+        )  # fmt: skip
+
+    def __call__(
+        self,
+        point: tuple[float, float, float],
+        stylus: tuple[float, float, float],
+        temps_C: Mapping[str, Any] | None,
+        inputs: Mapping[str, Any] | None,
+    ) -> tuple[float, float, float]:
+        """(Ux, Uy, Uz) µm at ``point`` (mm, inside the volume) and ``stylus`` (mm); a
+        temperature is read from ``temps_C``, else from ``inputs``, as the correction reads it
+        (a role absent from both counts as the reference)."""
+        b = self._buf
+        b[0, 0], b[0, 1], b[0, 2] = point
+        b[1, 0], b[1, 1], b[1, 2] = stylus
+        for k, name, ref_c in self._roles:
+            value = None if temps_C is None else temps_C.get(name)
+            if value is None and inputs is not None:
+                value = inputs.get(name)
+            b[2, k] = 0.0 if value is None else float(value) - ref_c
+        _point_kernel(*self._args)
+        o = self._out
+        return float(o[0, 0]), float(o[0, 1]), float(o[0, 2])
 
 
 @njit(cache=True)
@@ -457,6 +490,19 @@ def _u_rows(points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spa
             cov,
             out,
         )
+
+
+@njit(cache=True)
+def _u_rows_serial(
+    points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, out
+):  # type: ignore[no-untyped-def]
+    """:func:`_u_rows` without threads (a small batch: no thread-pool wake-up)."""
+    cov = np.empty((points.shape[0], coef.shape[3]))
+    for n in range(points.shape[0]):
+        _u_row(
+            n, points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th,
+            cov, out,
+        )  # fmt: skip
 
 
 @njit(cache=True)
