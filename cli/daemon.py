@@ -112,6 +112,11 @@ def _bus_options(items: list[str]) -> dict[str, Any]:
     return out
 
 
+def _u_known_text(report: Any) -> str:
+    grid = "" if report.grid_has_uncertainty else " (the replay's grid carries no U)"
+    return f"{report.sent_uncertainty_known} / {report.replayed_uncertainty_known}{grid}"
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     """Re-correct a session (default) or re-send it to a bus (``--to-bus``)."""
     import can
@@ -139,6 +144,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
         ("max |replayed − sent|", f"{report.max_abs_diff_um:.4f} µm"),
         ("RMS 3-D difference", f"{report.rms_diff_um:.4f} µm"),
         ("status agrees", f"{report.status_agree}/{report.readings}"),
+        ("U known, sent / replayed", _u_known_text(report)),
+        ("U compared (both known)", str(report.uncertainty_compared)),
+        ("max |replayed U − sent U|", f"{report.max_abs_u_diff_um:.4f} µm"),
+        ("U known by one side only", str(report.uncertainty_mismatch)),
     ]
     rows += [(f"  status {k}", str(v)) for k, v in sorted(report.status_differ.items())]
     width = max(len(k) for k, _ in rows)

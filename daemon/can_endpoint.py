@@ -4,7 +4,8 @@ One supervised thread owns the bus: on each wake-up it drains every frame alread
 to ``_DRAIN_MAX``), assembles X/Y/Z triplets (:class:`protocol.TripletAssembler`), corrects the
 completed readings together (:meth:`daemon.engine.CorrectionEngine.correct_many`: one
 vectorised grid call for a batch, the same answers bit for bit as one at a time), sends the
-three corrected axis frames and the correction-status frame of each in one batch
+three corrected axis frames, the uncertainty frame (``[can] send_uncertainty``) and the
+correction-status frame of each in one batch
 (:func:`daemon.can_send.send_batch`) and counts the answers. A temperature frame or an
 ``incomplete_reading`` answer first answers the readings completed before it, so the order of
 the wire is kept.
@@ -36,6 +37,7 @@ from cmm_comp.protocol import (
     CanIds,
     CorrectedAxis,
     CorrectionStatus,
+    CorrectionUncertainty,
     Duplicate,
     Heartbeat,
     Incomplete,
@@ -51,6 +53,7 @@ from cmm_comp.protocol import (
     decode_message,
     encode_corrected_axes,
     encode_correction_status,
+    encode_correction_uncertainty,
     encode_message,
 )
 from cmm_comp.protocol.can_codec import RawAxisDecoder
@@ -159,7 +162,9 @@ class CanEndpoint(can.Listener):
             self.ids.corrected_id(Axis.Y),
             self.ids.corrected_id(Axis.Z),
             self.ids.id_of(MessageKind.CORRECTION_STATUS),
+            self.ids.id_of(MessageKind.CORRECTION_UNCERTAINTY),
         )
+        self._send_u = config.send_uncertainty
         self._stop = threading.Event()
         self._connected = threading.Event()
         self._sent_state: DaemonState | None = None
@@ -319,7 +324,9 @@ class CanEndpoint(can.Listener):
                 self._probe[frame.seq] = frame.unit_vector
                 while len(self._probe) > _PROBE_MEMORY:
                     self._probe.popitem(last=False)
-        elif isinstance(frame, CorrectedAxis | CorrectionStatus | Heartbeat):
+        elif isinstance(
+            frame, CorrectedAxis | CorrectionStatus | CorrectionUncertainty | Heartbeat
+        ):
             self.metrics.count("own_frames_ignored")  # udp_multicast echoes our own frames
         else:
             self._on_undecodable(frame)
@@ -413,24 +420,28 @@ class CanEndpoint(can.Listener):
         self._deferred += zip(ready, answers, latencies, strict=True)
 
     def _answer_frames(self, answer: Answer, t_rx: float, out: list[can.Message]) -> float:
-        """Append the 4 answer frames of ``answer`` to ``out``; return the latency, µs."""
+        """Append the answer frames of ``answer`` to ``out`` (X, Y, Z, U when configured,
+        STATUS last); return the latency, µs."""
         seq, st = answer.seq, int(answer.status)
         ids = self._corrected_ids
         x, y, z = encode_corrected_axes(seq, st, answer.position_nm)
-        latency_us = (time.perf_counter() - t_rx) * 1e6
-        status = encode_correction_status(
-            seq, st, int(answer.applied), latency_us, answer.correction_norm_um
-        )
         out += (
             can.Message(arbitration_id=ids[0], is_extended_id=False, data=x),
             can.Message(arbitration_id=ids[1], is_extended_id=False, data=y),
             can.Message(arbitration_id=ids[2], is_extended_id=False, data=z),
-            can.Message(arbitration_id=ids[3], is_extended_id=False, data=status),
         )
+        if self._send_u:  # unknown (0xFFFF) unless the status is ok and the grid carries U
+            u = encode_correction_uncertainty(seq, answer.uncertainty_um)
+            out.append(can.Message(arbitration_id=ids[4], is_extended_id=False, data=u))
+        latency_us = (time.perf_counter() - t_rx) * 1e6
+        status = encode_correction_status(
+            seq, st, int(answer.applied), latency_us, answer.correction_norm_um
+        )
+        out.append(can.Message(arbitration_id=ids[3], is_extended_id=False, data=status))
         return latency_us
 
     def _send_answer(self, answer: Answer, t_rx: float) -> float:
-        """Send the 4 frames of one answer now; return the latency in its status frame, µs."""
+        """Send the frames of one answer now; return the latency in its status frame, µs."""
         msgs: list[can.Message] = []
         latency_us = self._answer_frames(answer, t_rx, msgs)
         self._send_msgs(msgs)

@@ -88,6 +88,10 @@ class CanSection:
     """Delay before reopening the bus after a bus error, s (doubles up to 10 s)."""
     log_frames: bool = True
     """Log every received and sent frame to MCAP (/cmm/can_rx, /cmm/can_tx)."""
+    send_uncertainty: bool = False
+    """Send each answer's expanded uncertainty U (k = 2) in a CORRECTION_UNCERTAINTY frame
+    between CORRECTED_Z and CORRECTION_STATUS (a fifth frame per reading, +25 % answer bus
+    load; docs/can.md). U is always in the Modbus registers and the MCAP log."""
 
 
 @dataclass

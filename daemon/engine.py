@@ -7,6 +7,12 @@ that says exactly what was applied. Whenever the status is not ``ok``,
 unchanged: never a silently wrong coordinate. It never raises: an unexpected exception becomes
 ``internal_error`` (counted and logged).
 
+When the grid carries an uncertainty (``grid build --uncertainty``), every answer computed
+with it carries U (k = 2 per component, µm; docs/uncertainty.md): a value only when the final
+status is ``ok`` (after the limits), NaN (unknown) otherwise, and ``Applied.UNCERTAINTY`` says
+which. The endpoints put it on the wire (CAN ``CORRECTION_UNCERTAINTY`` when configured,
+Modbus 324..326) and in the log.
+
 The endpoints reply first and then call :meth:`CorrectionEngine.record` (metrics, MCAP, events)
 so logging never adds to the reply latency.
 """
@@ -45,6 +51,9 @@ BATCH_MIN = 8
 BATCH_MAX = 128
 """Readings per vectorised grid call (below the grid's parallel threshold)."""
 _PROBE_KEYS = ("nx", "ny", "nz")
+_INF = math.inf
+U_UNKNOWN: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+"""The uncertainty of an answer whose grid carries U but whose status is not ``ok``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +90,16 @@ class Answer:
     correction_um: tuple[float, float, float]
     """Applied correction vector (corrected − indicated), µm."""
     detail: str = ""
+    uncertainty_um: tuple[float, float, float] | None = None
+    """Expanded uncertainty U (k = 2) of the corrected X, Y, Z, µm: finite values ≥ 0 when
+    the status is ``ok`` and the grid carries U; :data:`U_UNKNOWN` (NaN) for any other answer
+    made with such a grid; None when no grid carrying U was used (no grid, or one without U)."""
+
+    @property
+    def uncertainty_known(self) -> bool:
+        """True when :attr:`uncertainty_um` holds values."""
+        u = self.uncertainty_um
+        return u is not None and u[0] == u[0]
 
     @property
     def correction_norm_um(self) -> float:
@@ -110,15 +129,23 @@ class CorrectionEngine:
         self.logger = logger
         self._stylus = np.asarray(config.grid.stylus_mm, dtype=float)
         self._stylus_t = tuple(float(v) for v in config.grid.stylus_mm)
-        self._applied_cache: dict[tuple[int, bool, bool, bool], Applied] = {}
+        self._applied_cache: dict[tuple[int, bool, bool, bool, bool], Applied] = {}
         self._warn_um = config.limits.warn_um
         self._error_um = config.limits.error_um
         self._geometry_only = config.temperatures.on_fault == "geometry_only"
         self.last_temperature_fault: str | None = None
 
     # ------------------------------------------------------------------ hot path
-    def _raw(self, r: Reading, status: Status, detail: str = "") -> Answer:
-        return Answer(r.seq, status, r.position_nm, Applied.NONE, (0.0, 0.0, 0.0), detail)
+    def _raw(
+        self,
+        r: Reading,
+        status: Status,
+        detail: str = "",
+        u: tuple[float, float, float] | None = None,
+    ) -> Answer:
+        """The indicated position with ``status`` (``u``: :data:`U_UNKNOWN` when the grid
+        consulted carries U, else None)."""
+        return Answer(r.seq, status, r.position_nm, Applied.NONE, (0.0, 0.0, 0.0), detail, u)
 
     def correct(self, reading: Reading, now_s: float | None = None) -> Answer:
         """Answer ``reading``; ``now_s`` is the monotonic time for staleness checks, s."""
@@ -133,15 +160,17 @@ class CorrectionEngine:
         loaded = self.grids.current
         if loaded is None:
             return self._raw(r, Status.NO_GRID, "no grid loaded")
+        unknown = U_UNKNOWN if loaded.has_uncertainty else None
         if not all(r.valid):
             bad = "".join(a for a, v in zip("XYZ", r.valid, strict=True) if not v)
-            return self._raw(r, Status.INVALID_READING, f"controller flagged {bad} invalid")
+            msg = f"controller flagged {bad} invalid"
+            return self._raw(r, Status.INVALID_READING, msg, unknown)
         verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
         temps: dict[str, float] | None = verdict.temps_C
         if verdict.status is not None:
             self.last_temperature_fault = verdict.detail
             if not self._geometry_only:
-                return self._raw(r, verdict.status, verdict.detail)
+                return self._raw(r, verdict.status, verdict.detail, unknown)
             temps = None  # geometry only: the grid flags the missing thermal terms
         else:
             self.last_temperature_fault = None
@@ -155,13 +184,18 @@ class CorrectionEngine:
             inputs.update(zip(_PROBE_KEYS, r.probe, strict=True))
         p = mm3_from_nm(r.position_nm)
         grid = loaded.grid
-        if hasattr(grid, "correct_point"):  # the grid's single-reading fast path
+        u: tuple[float, float, float] | None = None
+        if unknown is not None:  # the grid carries U: correction and U in one call
+            c, label, u = grid.correct_point_with_uncertainty(
+                p, self._stylus_t, temps, inputs or None
+            )
+        elif hasattr(grid, "correct_point"):  # the grid's single-reading fast path
             c, label = grid.correct_point(p, self._stylus_t, temps, inputs or None)
         else:
             out, st = grid.correct(np.array([p]), self._stylus, temps, inputs or None)
             c, label = tuple(out[0].tolist()), str(st[0])
         has_dir = r.directions != (0, 0, 0)
-        return self._finish(r, p, c, label, loaded, temps, has_dir, r.probe is not None)
+        return self._finish(r, p, c, label, loaded, temps, has_dir, r.probe is not None, u)
 
     def _finish(
         self,
@@ -173,25 +207,33 @@ class CorrectionEngine:
         temps: dict[str, float] | None,
         has_dir: bool,
         has_probe: bool,
+        u: tuple[float, float, float] | None = None,
     ) -> Answer:
-        """The answer from the grid's corrected position ``c`` (mm) and status ``label`` of
-        indicated ``p`` (mm): limits, applied terms, rounding to nm."""
+        """The answer from the grid's corrected position ``c`` (mm), status ``label`` and U
+        ``u`` (µm; None: the grid carries no U) of indicated ``p`` (mm): limits, applied
+        terms, rounding to nm; U is kept only for a final status ``ok`` and finite values."""
         status = _GRID_STATUS.get(label, Status.INTERNAL_ERROR)
+        unknown = None if u is None else U_UNKNOWN
         if not status.geometric_correction_applied:
-            return self._raw(r, status, f"grid status {label}")
+            return self._raw(r, status, f"grid status {label}", unknown)
         if not (math.isfinite(c[0]) and math.isfinite(c[1]) and math.isfinite(c[2])):
-            return self._raw(r, Status.INTERNAL_ERROR, "non-finite correction")
+            return self._raw(r, Status.INTERNAL_ERROR, "non-finite correction", unknown)
         d_um = ((c[0] - p[0]) * 1000.0, (c[1] - p[1]) * 1000.0, (c[2] - p[2]) * 1000.0)
         norm = math.sqrt(d_um[0] ** 2 + d_um[1] ** 2 + d_um[2] ** 2)
         if norm > self._error_um:
             detail = f"|correction| {norm:.1f} µm > error limit {self._error_um} µm"
-            return self._raw(r, Status.CORRECTION_LIMIT, detail)
+            return self._raw(r, Status.CORRECTION_LIMIT, detail, unknown)
         detail = ""
         if norm > self._warn_um:
             detail = f"|correction| {norm:.1f} µm > warning limit {self._warn_um} µm"
-        applied = self._applied(loaded, temps, has_dir, has_probe, status)
+        if u is not None and not (
+            status is Status.OK and 0.0 <= u[0] < _INF and 0.0 <= u[1] < _INF and 0.0 <= u[2] < _INF
+        ):
+            u = U_UNKNOWN  # a term left out (its uncertainty too), or no usable value
+        known = u is not None and u is not U_UNKNOWN
+        applied = self._applied(loaded, temps, has_dir, has_probe, status, known)
         pos = nm3_from_mm(c)
-        return Answer(r.seq, status, pos, applied, d_um, detail)
+        return Answer(r.seq, status, pos, applied, d_um, detail, u)
 
     def correct_many(self, readings: Sequence[Reading], now_s: float | None = None) -> list[Answer]:
         """Answers to ``readings``, equal bit for bit to :meth:`correct` of each at ``now_s``
@@ -220,6 +262,7 @@ class CorrectionEngine:
         if temps and (filters := getattr(loaded.grid, "signal_filters", None)):
             temps = self.temperatures.effective(temps, filters, now_s)
         answers: list[Answer | None] = [None] * len(readings)
+        with_u = loaded.has_uncertainty
         plain = [i for i, r in enumerate(readings) if r.probe is None and all(r.valid)]
         for start in range(0, len(plain), BATCH_MAX):
             idx = plain[start : start + BATCH_MAX]
@@ -230,16 +273,24 @@ class CorrectionEngine:
                 signs = [r.directions[k] for r in rs]
                 if any(signs):  # 0 (unknown) is an absent input, as in correct(): NaN
                     inputs[key] = np.array([float(v) if v else math.nan for v in signs])
-            out, st = loaded.grid.correct(
-                np.array(pts), self._stylus, temps, inputs or None, outside=None
-            )
+            u_rows: list[list[float]] | None = None
+            if with_u:
+                out, st, u_arr = loaded.grid.correct(
+                    np.array(pts), self._stylus, temps, inputs or None, with_uncertainty=True
+                )
+                u_rows = u_arr.tolist()
+            else:
+                out, st = loaded.grid.correct(
+                    np.array(pts), self._stylus, temps, inputs or None, outside=None
+                )
             rows = out.tolist()
             labels = st.tolist()
             for j, i in enumerate(idx):
                 r = rs[j]
                 c = (rows[j][0], rows[j][1], rows[j][2])
+                u = None if u_rows is None else (u_rows[j][0], u_rows[j][1], u_rows[j][2])
                 has_dir = r.directions != (0, 0, 0)
-                answers[i] = self._finish(r, pts[j], c, labels[j], loaded, temps, has_dir, False)
+                answers[i] = self._finish(r, pts[j], c, labels[j], loaded, temps, has_dir, False, u)
         return [
             a if a is not None else self.correct(readings[i], now_s) for i, a in enumerate(answers)
         ]
@@ -255,13 +306,21 @@ class CorrectionEngine:
         has_dir: bool,
         has_probe: bool,
         st: Status,
+        u_known: bool = False,
     ) -> Applied:
-        """Terms that went into the answer (cached per grid and input pattern)."""
-        key = (id(loaded), bool(temps), has_dir and st != Status.MISSING_DIRECTION, has_probe)
+        """Terms that went into the answer, and whether its U is known (cached per grid and
+        input pattern)."""
+        key = (
+            id(loaded),
+            bool(temps),
+            has_dir and st != Status.MISSING_DIRECTION,
+            has_probe,
+            u_known,
+        )
         cached = self._applied_cache.get(key)
         if cached is not None:
             return cached
-        applied = Applied.GEOMETRY
+        applied = Applied.UNCERTAINTY | Applied.GEOMETRY if u_known else Applied.GEOMETRY
         if temps:
             roles = set(loaded.temperature_roles) & set(temps)
             if roles & _SCALE_ROLES:
@@ -335,8 +394,9 @@ class CorrectionEngine:
     def _corrected_record(
         self, reading: Reading, answer: Answer, latency_us: float
     ) -> tuple[object, ...]:
-        """The compact ``/cmm/corrected`` record (sessionlog.records.CorrectedRecord)."""
-        return (
+        """The compact ``/cmm/corrected`` record (sessionlog.records.CorrectedRecord): U
+        appended when the answer's grid carries U (None = unknown: logged as nulls)."""
+        rec = (
             answer.seq,
             *answer.position_nm,
             answer.status.label,
@@ -346,6 +406,10 @@ class CorrectionEngine:
             reading.source,
             answer.detail,
         )
+        u = answer.uncertainty_um
+        if u is None:
+            return rec
+        return (*rec, u if u[0] == u[0] else None)
 
     def report(self, reading: Reading, answer: Answer, latency_us: float) -> None:
         """Events and MCAP records of one answer (may wait until the line is quiet)."""

@@ -53,6 +53,8 @@ class LoadedGrid:
     """Key id of the verified signature; empty when the grid was accepted unsigned."""
     loaded_by_pid: int = 0
     """Process that read, verified and built it (a SIGHUP reload: the loader process)."""
+    has_uncertainty: bool = False
+    """The grid carries U (``grid build --uncertainty``): answers carry it too."""
 
     def identity(self) -> dict[str, Any]:
         """The /cmm/grid payload (without stamp)."""
@@ -65,6 +67,7 @@ class LoadedGrid:
             "path": self.path,
             "loaded_at": {"sec": sec, "nsec": nsec},
             "signals": [s.name for s in self.grid.signals if s.needed],
+            "uncertainty": self.has_uncertainty,
         }
 
 
@@ -114,6 +117,7 @@ def load_grid(path: str | Path, trust: GridTrust | None = None) -> LoadedGrid:
         model=str(machine.get("model", "")),
         signed_by=signer[0],
         loaded_by_pid=os.getpid(),
+        has_uncertainty=bool(getattr(grid, "has_uncertainty", False)),
     )
 
 

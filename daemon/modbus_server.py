@@ -2,8 +2,8 @@
 
 The controller writes a reading into READING (100..119; the write that includes SEQ commits
 it) and temperatures into TEMPERATURE slots (200..263); the commit is corrected inside the
-request, so the ANSWER block (300..316) already holds the answer when the controller's next
-read arrives. Framing, exception codes, unit-id policy, idle and bad-frame handling come from
+request, so the ANSWER block (300..316) and its uncertainty (324..326) already hold the answer
+when the controller's next read arrives. Framing, exception codes, unit-id policy, idle and bad-frame handling come from
 :class:`protocol.MbapServer` and :class:`protocol.MapDevice` (docs/modbus.md); this module
 wires them to the engine, fills the DAEMON block and the device identification, counts what
 goes wrong (metrics) and logs it (one line per kind per 10 s at most, with the number of
@@ -309,6 +309,7 @@ class ModbusEndpoint:
             answer.applied,
             latency_us,
             answer.correction_norm_um,
+            answer.uncertainty_um,  # registers 324..326: unknown unless known
         )
         loop = self._loop
         if loop is not None:  # log after the response has gone out

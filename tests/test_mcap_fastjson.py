@@ -79,7 +79,7 @@ raws = st.tuples(
     st.tuples(FLOATS, FLOATS, FLOATS),
     st.one_of(st.none(), st.tuples(FLOATS, FLOATS, FLOATS)),
 )
-correcteds = st.tuples(
+CORRECTED_FIELDS = (
     st.integers(0, 2**64 - 1),
     st.integers(-(2**63), 2**64 - 1),
     st.integers(-(2**63), 2**64 - 1),
@@ -90,6 +90,12 @@ correcteds = st.tuples(
     st.integers(0, 255),
     st.sampled_from(["can", "modbus"]),
     st.one_of(st.just(""), TEXT),
+)
+correcteds = st.tuples(*CORRECTED_FIELDS)
+U_UM = st.floats(0.0, 1e6)  # the expanded uncertainty (µm, k = 2): finite, ≥ 0
+correcteds_u = st.tuples(  # an answer made with a grid carrying U: U values or None (unknown)
+    *CORRECTED_FIELDS,
+    st.one_of(st.none(), st.tuples(U_UM, U_UM, U_UM), st.just((0.0, -0.0, 5e-324))),
 )
 
 
@@ -112,12 +118,47 @@ def test_corrected_equal_the_general_path(rec: tuple, t_ns: int) -> None:
     assert agree("/cmm/corrected", rec, t_ns) is not None
 
 
+@settings(max_examples=300, deadline=None)
+@given(correcteds_u, T_NS)
+def test_corrected_with_uncertainty_equal_the_general_path(rec: tuple, t_ns: int) -> None:
+    fast = agree("/cmm/corrected", rec, t_ns)
+    assert fast is not None
+    obj = json.loads(fast)
+    u = rec[10]
+    assert [obj["ux_um"], obj["uy_um"], obj["uz_um"]] == ([None] * 3 if u is None else list(u))
+
+
+@pytest.mark.parametrize(
+    "u",
+    [
+        (math.nan, 1.0, 1.0),
+        (1.0, math.inf, 1.0),
+        (1.0, 1.0, -1e-9),
+        (1, 2.0, 3.0),  # an int: the general path writes 1.0, the fast path steps aside
+        (1.0, 2.0),
+        (None, None, None),  # unknown is None for the whole U, not per component
+        np.array([1.0, 2.0, 3.0]),
+    ],
+)
+def test_bad_uncertainty_never_takes_the_fast_path(u: object) -> None:
+    rec = (1, 0, 0, 0, "ok", (0.0,) * 3, 1.0, 33, "can", "", u)
+    assert FAST_JSON["/cmm/corrected"](rec, 5) is None
+    slow = general("/cmm/corrected", rec, 5)
+    if slow is not None:  # only the int is writable (as a float), never NaN/inf/negative
+        assert json.loads(slow)["ux_um"] == 1.0
+
+
 @settings(max_examples=400, deadline=None)
 @given(st.data(), T_NS)
 def test_any_odd_field_is_equal_or_left_to_the_general_path(data: st.DataObject, t_ns: int) -> None:
     topic, strat = data.draw(
         st.sampled_from(
-            [("/cmm/can_rx", frames), ("/cmm/raw", raws), ("/cmm/corrected", correcteds)]
+            [
+                ("/cmm/can_rx", frames),
+                ("/cmm/raw", raws),
+                ("/cmm/corrected", correcteds),
+                ("/cmm/corrected", correcteds_u),
+            ]
         )
     )
     rec = list(data.draw(strat))

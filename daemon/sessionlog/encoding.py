@@ -74,40 +74,43 @@ def _bad(where: str, value: Any, what: str) -> ValueError:
 
 def check_payload(value: Any, schema: Mapping[str, Any] | None, where: str, depth: int = 0) -> None:
     """Raise ValueError/TypeError naming the key path when ``value`` is not acceptable JSON for
-    ``schema`` (a JSON Schema subset: type, properties, required, additionalProperties, items,
-    enum, minimum, maximum; ``None`` = any JSON value)."""
+    ``schema`` (a JSON Schema subset: type — a name or a list of names —, properties, required,
+    additionalProperties, items, enum, minimum, maximum; ``None`` = any JSON value)."""
     if depth > MAX_DEPTH:
         raise ValueError(f"{where}: nested deeper than {MAX_DEPTH} levels")
     kind = None if schema is None else schema.get("type")
+    kinds: tuple[str, ...] | None = (
+        None if kind is None else (kind,) if isinstance(kind, str) else tuple(kind)
+    )  # a list of types, e.g. ["number", "null"]: any of them
     t = type(value)
     if t is float or (t is not bool and isinstance(value, float)):
-        if kind not in (None, "number"):
+        if kinds is not None and "number" not in kinds:
             raise _bad(where, value, f"is not of type {kind}")
         if not math.isfinite(value):
             raise _bad(where, value, "is not finite")
     elif t is int or (t is not bool and isinstance(value, int)):
-        if kind not in (None, "number", "integer"):
+        if kinds is not None and "number" not in kinds and "integer" not in kinds:
             raise _bad(where, value, f"is not of type {kind}")
         if not INT_MIN <= value <= INT_MAX:
             raise ValueError(f"{where}: integer out of the 64-bit range")
     elif t is bool:
-        if kind not in (None, "boolean"):
+        if kinds is not None and "boolean" not in kinds:
             raise _bad(where, value, f"is not of type {kind}")
         return
     elif t is str:
-        if kind not in (None, "string"):
+        if kinds is not None and "string" not in kinds:
             raise _bad(where, value, f"is not of type {kind}")
     elif value is None:
-        if kind is not None:
+        if kinds is not None and "null" not in kinds:
             raise _bad(where, value, f"is not of type {kind}")
         return
     elif t is dict:
-        if kind not in (None, "object"):
+        if kinds is not None and "object" not in kinds:
             raise _bad(where, value, f"is not of type {kind}")
         _check_object(value, schema, where, depth)
         return
     elif t is list or t is tuple:
-        if kind not in (None, "array"):
+        if kinds is not None and "array" not in kinds:
             raise _bad(where, value, f"is not of type {kind}")
         items = None if schema is None else schema.get("items")
         for i, item in enumerate(value):

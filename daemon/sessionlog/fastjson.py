@@ -180,11 +180,25 @@ _CORRECTED = (
 _NM_PER_MM = 1_000_000
 
 
+_U_NULL = ',"ux_um":null,"uy_um":null,"uz_um":null'
+
+
+def _u_json(u: Any) -> str | None:
+    """The U keys of a record's ``u_um`` (None: nulls), or None when not plain finite ≥ 0."""
+    if u is None:
+        return _U_NULL
+    if not (_three_floats(u) and u[0] >= 0.0 and u[1] >= 0.0 and u[2] >= 0.0):
+        return None
+    return f',"ux_um":{u[0]!r},"uy_um":{u[1]!r},"uz_um":{u[2]!r}'
+
+
 def corrected_json(rec: tuple[Any, ...], t_ns: int) -> bytes | None:
     """The ``/cmm/corrected`` message of a ``CorrectedRecord``, or None."""
-    if len(rec) != 10:
+    n = len(rec)
+    u_part = "" if n == 10 else _u_json(rec[10]) if n == 11 else None
+    if u_part is None:
         return None
-    seq, x_nm, y_nm, z_nm, status, corr, latency_us, applied, source, detail = rec
+    seq, x_nm, y_nm, z_nm, status, corr, latency_us, applied, source, detail = rec[:10]
     if not (
         type(seq) is int
         and 0 <= seq <= _INT_MAX
@@ -203,7 +217,7 @@ def corrected_json(rec: tuple[Any, ...], t_ns: int) -> bytes | None:
         and type(detail) is str
     ):
         return None
-    extra = f',"detail":{json.dumps(detail)}' if detail else ""
+    extra = u_part + (f',"detail":{json.dumps(detail)}' if detail else "")
     ssec, snsec = divmod(t_ns, NS_PER_S)
     return (
         _CORRECTED

@@ -15,6 +15,7 @@ scaling), which is all the process writer's child needs of them.
 
 from __future__ import annotations
 
+import math
 import numbers
 from collections.abc import Callable
 from typing import Any
@@ -41,8 +42,11 @@ RawRecord = tuple[
 ]
 """``(seq, x_mm, y_mm, z_mm, travel_dir, valid, source, stylus_mm, probe_dir or None)``."""
 
-CorrectedRecord = tuple[int, int, int, int, str, tuple[float, float, float], float, int, str, str]
-"""``(seq, x_nm, y_nm, z_nm, status, correction_um, latency_us, applied, source, detail)``."""
+CorrectedRecord = tuple[Any, ...]
+"""``(seq, x_nm, y_nm, z_nm, status, correction_um, latency_us, applied, source, detail)``,
+optionally followed by ``u_um``: ``(Ux, Uy, Uz)`` µm (finite, ≥ 0) or None (unknown) — given
+for every answer made with a grid that carries U, written as ``ux_um``/``uy_um``/``uz_um``
+(numbers, or ``null`` when unknown: never NaN); a 10-field record writes no U keys."""
 
 
 _INT_MIN, _INT_MAX = -(2**63), 2**64 - 1
@@ -145,9 +149,19 @@ def raw_payload(rec: RawRecord) -> dict[str, Any]:
     return out
 
 
+def _u_component(value: Any, what: str) -> float:
+    """One U component: a finite number ≥ 0 (NaN, inf, negative: an error, never written)."""
+    u = _real(value, what)
+    if not 0.0 <= u < math.inf:
+        raise ValueError(f"{what}: {u!r} is not a finite uncertainty ≥ 0 (unknown is None)")
+    return u
+
+
 def corrected_payload(rec: CorrectedRecord) -> dict[str, Any]:
     """The ``/cmm/corrected`` payload of a :data:`CorrectedRecord` (positions nm → mm)."""
-    seq, x_nm, y_nm, z_nm, status, corr_um, latency_us, applied, source, detail = rec
+    if len(rec) not in (10, 11):
+        raise ValueError(f"a /cmm/corrected record has 10 or 11 fields, not {len(rec)}")
+    seq, x_nm, y_nm, z_nm, status, corr_um, latency_us, applied, source, detail = rec[:10]
     x_mm, y_mm, z_mm = mm3_from_nm((_int(x_nm, "x_nm"), _int(y_nm, "y_nm"), _int(z_nm, "z_nm")))
     dx, dy, dz = _three(corr_um, "correction_um")
     out: dict[str, Any] = {
@@ -163,6 +177,15 @@ def corrected_payload(rec: CorrectedRecord) -> dict[str, Any]:
         "applied": _int(applied, "applied", 0),
         "source": _str(source, "source"),
     }
+    if len(rec) == 11:
+        u_um = rec[10]
+        if u_um is None:
+            out["ux_um"] = out["uy_um"] = out["uz_um"] = None
+        else:
+            ux, uy, uz = _three(u_um, "u_um")
+            out["ux_um"] = _u_component(ux, "ux_um")
+            out["uy_um"] = _u_component(uy, "uy_um")
+            out["uz_um"] = _u_component(uz, "uz_um")
     if detail:
         out["detail"] = _str(detail, "detail")
     return out

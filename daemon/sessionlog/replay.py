@@ -5,7 +5,9 @@ files cut by a crash read up to the break), pairs every ``/cmm/raw`` reading wit
 ``/cmm/corrected`` answer the daemon sent, rebuilds each reading's temperatures from the
 ``/cmm/temperature`` samples logged before it, re-corrects all readings in one call of
 ``CorrectionGrid.correct`` with the session's grid or another one, and reports the differences
-(µm) from what was sent.
+(µm) from what was sent: of the corrected positions, and of the expanded uncertainty U
+(``ux_um``/``uy_um``/``uz_um``) where both the session and the replay know it, with the count
+of readings where only one of them does.
 
 :func:`replay_to_bus` re-sends the received CAN frames (``/cmm/can_rx``: readings and
 temperatures, byte-exact) at the recorded pace (or faster) to a daemon on any python-can bus.
@@ -59,6 +61,19 @@ class ReplayReport:
     """(compared, 3) differences, µm (not in :meth:`as_dict`)."""
     read_error: str | None = None
     """Where and why a cut file stopped reading (None when every file was complete)."""
+    grid_has_uncertainty: bool = False
+    """The replay's grid carries U."""
+    sent_uncertainty_known: int = 0
+    """Answers logged with a U (numbers in ``ux_um``…)."""
+    replayed_uncertainty_known: int = 0
+    """Readings the replay gave a U (status ``ok`` and a grid carrying U)."""
+    uncertainty_compared: int = 0
+    """Readings whose U both the session and the replay know."""
+    max_abs_u_diff_um: float = float("nan")
+    """Largest |replayed U − sent U| over those readings and components, µm."""
+    uncertainty_mismatch: int = 0
+    """Readings whose U only one side knows (e.g. another grid with or without U, a status
+    that differs, a correction the daemon refused by its limits)."""
 
     @property
     def warning(self) -> str | None:
@@ -73,7 +88,7 @@ class ReplayReport:
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly report."""
         out = {k: v for k, v in self.__dict__.items() if k != "diffs_um"}
-        for k in ("max_abs_diff_um", "rms_diff_um"):
+        for k in ("max_abs_diff_um", "rms_diff_um", "max_abs_u_diff_um"):
             out[k] = None if not np.isfinite(out[k]) else float(out[k])
         return out
 
@@ -159,7 +174,9 @@ def replay_offline(source: str | Path, grid_path: str | Path | None = None) -> R
         col = travel[:, k]
         if np.any(col != 0):
             inputs[key] = np.where(col != 0, col, np.nan)
-    corrected, status = grid.correct(pts, stylus, temps_C or None, inputs or None)
+    corrected, status, u_replayed = grid.correct(
+        pts, stylus, temps_C or None, inputs or None, with_uncertainty=True
+    )
     sent_pos = np.array([[s["x_mm"], s["y_mm"], s["z_mm"]] for s in sent], dtype=float)
     sent_status = np.array([s["status"] for s in sent])
     replayed = np.array([_as_sent_label(s) for s in status])
@@ -177,7 +194,35 @@ def replay_offline(source: str | Path, grid_path: str | Path | None = None) -> R
         report.status_differ[key] = report.status_differ.get(key, 0) + 1
     report.sent_statuses = _counts(sent_status)
     report.replayed_statuses = _counts(replayed)
+    _compare_uncertainty(report, grid.has_uncertainty, sent, u_replayed)
     return report
+
+
+def _compare_uncertainty(
+    report: ReplayReport, grid_has_u: bool, sent: list[dict[str, Any]], u_replayed: np.ndarray
+) -> None:
+    """Fill the U fields of ``report``: the logged U (null or absent: unknown) against the
+    replay's (NaN: unknown)."""
+    u_sent = np.array(
+        [[_u_value(s.get(k)) for k in ("ux_um", "uy_um", "uz_um")] for s in sent], dtype=float
+    ).reshape(-1, 3)
+    known_sent = np.all(np.isfinite(u_sent), axis=1)
+    known_replayed = np.all(np.isfinite(u_replayed), axis=1)
+    both = known_sent & known_replayed
+    report.grid_has_uncertainty = grid_has_u
+    report.sent_uncertainty_known = int(known_sent.sum())
+    report.replayed_uncertainty_known = int(known_replayed.sum())
+    report.uncertainty_compared = int(both.sum())
+    report.uncertainty_mismatch = int((known_sent != known_replayed).sum())
+    if report.uncertainty_compared:
+        report.max_abs_u_diff_um = float(np.abs(u_replayed[both] - u_sent[both]).max())
+
+
+def _u_value(value: Any) -> float:
+    """A logged U component as a float: NaN for null, absent or anything not a number."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return float("nan")
+    return float(value)
 
 
 def _as_sent_label(grid_status: str) -> str:

@@ -9,8 +9,9 @@ The only two time conversions of the project's log live here:
 * :func:`stamp_from_ns` - integer nanoseconds (MCAP ``log_time``) to ``{sec, nsec}``;
 * :func:`ns_from_can_timestamp` - python-can's float seconds (``Message.timestamp``) to ns.
 
-:func:`check_message` is a small validator for the subset of JSON Schema used here (type,
-required, properties, items, enum, minimum, maximum, additionalProperties); it lets tests and
+:func:`check_message` is a small validator for the subset of JSON Schema used here (type, also
+as a list such as ``["number", "null"]``, required, properties, items, enum, minimum, maximum,
+additionalProperties); it lets tests and
 replay tools check payloads without the ``jsonschema`` package.
 """
 
@@ -73,6 +74,15 @@ _INT = {"type": "integer"}
 _UINT = {"type": "integer", "minimum": 0}
 _STR = {"type": "string"}
 _BOOL = {"type": "boolean"}
+_U = {
+    "type": ["number", "null"],
+    "minimum": 0,
+}
+_U_TEXT = (
+    "Expanded uncertainty U of the corrected {axis}, coverage factor k = 2 (per component), "
+    "µm; null when unknown (status not ok). Present on every answer made with a grid that "
+    "carries U (docs/uncertainty.md); absent otherwise."
+)
 
 
 def _obj(title: str, description: str, props: dict[str, Any], required: list[str]) -> dict:
@@ -179,6 +189,14 @@ _SCHEMAS: tuple[TopicSchema, ...] = (
                 "dy_um": _d(_NUM, "Applied correction Y, µm."),
                 "dz_um": _d(_NUM, "Applied correction Z, µm."),
                 "latency_us": _d(_NUM, "Raw reading received to answer sent, µs."),
+                "applied": _d(
+                    _UINT,
+                    "Applied bit mask: 1 geometry, 2 scale thermal, 4 workpiece thermal, "
+                    "8 reversal, 16 probe direction, 32 U known.",
+                ),
+                "ux_um": _d(_U, _U_TEXT.format(axis="X")),
+                "uy_um": _d(_U, _U_TEXT.format(axis="Y")),
+                "uz_um": _d(_U, _U_TEXT.format(axis="Z")),
                 "stamp": _STAMP,
             },
             ["seq", "x_mm", "y_mm", "z_mm", "status", "stamp"],
@@ -237,6 +255,9 @@ _SCHEMAS: tuple[TopicSchema, ...] = (
                 "steps": {"type": "array", "items": _UINT, "description": "Grid steps (x, y, z)."},
                 "path": _d(_STR, "Grid file path."),
                 "loaded_at": {**_TIME, "description": "Time the grid was loaded."},
+                "uncertainty": _d(
+                    _BOOL, "The grid carries U: answers carry ux_um/uy_um/uz_um (optional)."
+                ),
                 "stamp": _STAMP,
             },
             ["sha256", "machine", "model", "steps", "path", "loaded_at", "stamp"],
@@ -307,14 +328,22 @@ _TYPES: dict[str, tuple[type, ...]] = {
 }
 
 
+def _is_type(value: Any, kind: str) -> bool:
+    if kind == "null":
+        return value is None
+    if kind in ("integer", "number") and isinstance(value, bool):
+        return False
+    return isinstance(value, _TYPES[kind])
+
+
 def _check(value: Any, schema: Mapping[str, Any], where: str) -> None:
     kind = schema.get("type")
     if kind is not None:
-        ok = isinstance(value, _TYPES[kind])
-        if kind in ("integer", "number") and isinstance(value, bool):
-            ok = False
-        if not ok:
+        kinds = (kind,) if isinstance(kind, str) else tuple(kind)
+        if not any(_is_type(value, k) for k in kinds):
             raise ValueError(f"{where}: {value!r} is not of type {kind}")
+    if value is None:
+        return
     if "enum" in schema and value not in schema["enum"]:
         raise ValueError(f"{where}: {value!r} is not one of {schema['enum']}")
     if "minimum" in schema and value < schema["minimum"]:
