@@ -601,6 +601,8 @@ class CorrectionGrid:
             return out, status, _NAN3
         x, y, z = map(float, point_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
         px, py, pz = map(float, stylus_mm)  # type: ignore[arg-type, call-overload, unused-ignore]
+        lo, hi = self._lo_list, self._hi_list  # "ok" is within VOLUME_TOL_MM: clamp as correct()
+        x, y, z = min(max(x, lo[0]), hi[0]), min(max(y, lo[1]), hi[1]), min(max(z, lo[2]), hi[2])
         with self._lock:
             point_u = self.__dict__.get("_u_point")
             if point_u is None:
