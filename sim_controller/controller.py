@@ -25,6 +25,7 @@ from cmm_comp.protocol import (
     CanIds,
     CorrectedAxis,
     CorrectionStatus,
+    CorrectionUncertainty,
     Heartbeat,
     ProbeDirection,
     RawAxis,
@@ -60,6 +61,9 @@ class AnswerRecord:
     daemon_latency_us: int = 0
     correction_um: float = 0.0
     applied: int = 0
+    uncertainty_um: tuple[float, float, float] | None = None
+    """U (k = 2) of X, Y, Z as the CORRECTION_UNCERTAINTY frame stated it (µm; NaN unknown,
+    inf saturated); None when the daemon sent no such frame."""
 
 
 class CanController(can.Listener):
@@ -76,6 +80,7 @@ class CanController(can.Listener):
         self._own = self.ids.controller_tx_ids()
         self._assembler: TripletAssembler[CorrectedAxis] = TripletAssembler(window=64)
         self._triplets: dict[int, Triplet[CorrectedAxis]] = {}
+        self._uncertainty: dict[int, tuple[float, float, float]] = {}
         self._answers: dict[int, AnswerRecord] = {}
         self._sent_at: dict[int, float] = {}
         self._cond = threading.Condition()
@@ -136,6 +141,10 @@ class CanController(can.Listener):
             for ev in self._assembler.feed(frame):
                 if isinstance(ev, Triplet):
                     self._triplets[ev.seq] = ev
+        elif isinstance(frame, CorrectionUncertainty):
+            self._uncertainty[frame.seq] = frame.u_um
+            while len(self._uncertainty) > 64:  # never-completed seqs do not pile up
+                del self._uncertainty[next(iter(self._uncertainty))]
         elif isinstance(frame, CorrectionStatus):
             self._complete(frame, t)
         elif isinstance(frame, Heartbeat):
@@ -163,6 +172,7 @@ class CanController(can.Listener):
                 st.latency_us,
                 st.correction_um,
                 int(st.applied),
+                self._uncertainty.pop(st.seq, None),
             )
             self._cond.notify_all()
 
