@@ -26,6 +26,11 @@ transport, so read the differences and ratios, not absolute numbers (the machine
   log's own exact counters once it has stopped); ratios daemon/echo in the same process.
 * ``--before-tree``: the udp_multicast rounds also run an older tree's daemon (MCAP on): the
   reply latency now against before, same run, interleaved.
+* Uncertainty (issue 13): ``daemon_mcap_u`` is ``daemon_mcap`` with the grid carrying U (the
+  same grid plus the virtual CMM's covariances) and ``[can] send_uncertainty`` on (U computed
+  per reading, a fifth frame sent), in the same interleaved rounds, for latency and for the
+  unpaced flood; ``--only-uncertainty`` runs just these two cases and writes
+  ``benchmarks/results/daemon_uncertainty.json``.
 * Modbus TCP on 127.0.0.1: one reading = FC16 write of READING + FC3 read of ANSWER; the bare
   baseline is the same two requests against a plain pymodbus ``SimDevice`` without any action,
   served like the daemon's endpoint from its own thread and event loop.
@@ -168,7 +173,31 @@ VIRTUAL_CASES = (  # name, MCAP on, writer
     ("daemon_no_mcap", False, "process"),
     ("daemon_mcap", True, "process"),  # the default writer
     ("daemon_mcap_thread", True, "thread"),
+    ("daemon_mcap_u", True, "process"),  # grid carrying U, U sent (a fifth frame)
+    ("daemon_mcap_u_nosend", True, "process"),  # grid carrying U, U computed and logged only
 )
+U_GRID: Path | None = None
+"""The benchmark grid carrying U (set by :func:`main`): the ``*_u`` cases use it."""
+
+
+def daemon_config(grid: Path, ch: str, mcap: str, name: str, writer: str = "process") -> Any:
+    """:func:`config` for case ``name``: a ``*_u`` case takes :data:`U_GRID` and sends U, a
+    ``*_u_nosend`` case takes it without sending U on CAN (U computed and logged only)."""
+    with_u = name.endswith(("_u", "_u_nosend"))
+    if with_u and U_GRID is None:
+        raise RuntimeError("the *_u cases need U_GRID (built by main)")
+    cfg = config(U_GRID if with_u and U_GRID else grid, "virtual", ch, mcap, writer=writer)
+    cfg.can.send_uncertainty = name.endswith("_u")
+    return cfg
+
+
+def build_u_grid(machine: Machine, grid: Path, out: Path, trials: int = 300) -> Path:
+    """``grid`` (built from ``machine``) carrying U (virtual CMM, ``trials`` per node)."""
+    from cmm_comp.compensation.uncertainty.grid_field import add_uncertainty
+
+    g = CorrectionGrid.load(grid)
+    add_uncertainty(g, machine, rng=np.random.default_rng(13), seed=13, trials=trials).save(out)
+    return out
 
 
 def _virtual_round(
@@ -189,7 +218,7 @@ def _virtual_round(
             echo_bus.shutdown()
     path = str(tmp / f"{ch}.mcap") if mcap else ""
     with (
-        DaemonService(config(grid, "virtual", ch, path, writer=writer), events_stream=None),
+        DaemonService(daemon_config(grid, ch, path, name, writer), events_stream=None),
         can.Bus(interface="virtual", channel=ch) as bus,
         CanController(bus) as ctl,
     ):
@@ -217,11 +246,19 @@ def interleaved(
 
 
 def bench_virtual(
-    grid: Path, rs: list[RawReading], rate_hz: float, tmp: Path, rounds: int = 3
+    grid: Path,
+    rs: list[RawReading],
+    rate_hz: float,
+    tmp: Path,
+    rounds: int = 3,
+    only: tuple[str, ...] | None = None,
 ) -> dict[str, Any]:
-    """The :data:`VIRTUAL_CASES` in interleaved rounds (:func:`interleaved`)."""
+    """The :data:`VIRTUAL_CASES` (or those named in ``only``) in interleaved rounds
+    (:func:`interleaved`)."""
     chunk = rs[: 200 + max(1, (len(rs) - 200) // rounds)]
-    spec = {name: (mcap, writer) for name, mcap, writer in VIRTUAL_CASES}
+    spec = {
+        name: (mcap, writer) for name, mcap, writer in VIRTUAL_CASES if only is None or name in only
+    }
     return interleaved(
         list(spec),
         rounds,
@@ -356,7 +393,7 @@ def _throughput_round(
             echo_bus.shutdown()
     path = "" if name.endswith("no_mcap") else str(tmp / f"{ch}.mcap")
     with (
-        DaemonService(config(grid, "virtual", ch, path), events_stream=None) as d,
+        DaemonService(daemon_config(grid, ch, path, name), events_stream=None) as d,
         can.Bus(interface="virtual", channel=ch) as bus,
     ):
         CanController(bus).send_temperatures(Environment().samples(0.0))
@@ -381,6 +418,7 @@ def bench_throughput(
     window: int = 512,
     sustain_hz: float = 10_000.0,
     sustain_n: int = 100_000,
+    cases: tuple[str, ...] = ("echo", "daemon_mcap", "daemon_no_mcap", "sustained"),
 ) -> dict[str, Any]:
     """Two questions on ``virtual``, the cases in interleaved rounds:
 
@@ -391,14 +429,15 @@ def bench_throughput(
       daemon with MCAP on: achieved readings/s, lost answers, answers missing from the log
       and the log's drops per topic (frames go first under overload, by policy)."""
     frames = raw_frames(readings(n, np.random.default_rng(2)))
-    sframes = raw_frames(readings(sustain_n, np.random.default_rng(3)))
-    cases = ["echo", "daemon_mcap", "daemon_no_mcap", "sustained"]
+    sframes = raw_frames(readings(sustain_n, np.random.default_rng(3))) if sustain_n else []
     runs: dict[str, list[dict[str, Any]]] = {c: [] for c in cases}
     for k in range(rounds):
         shift = k % len(cases)
         for name in cases[shift:] + cases[:shift]:
             if name == "sustained":
                 r = _throughput_round("daemon_mcap", grid, sframes, tmp, window, sustain_hz)
+            elif name == "sustained_u":
+                r = _throughput_round("daemon_mcap_u", grid, sframes, tmp, window, sustain_hz)
             else:
                 r = _throughput_round(name, grid, frames, tmp, window, 0.0)
             runs[name].append(r)
@@ -410,11 +449,19 @@ def bench_throughput(
         if name != "echo":
             out[name]["all_answers_not_logged"] = [r.get("answers_not_logged") for r in runs[name]]
             out[name]["all_mcap_dropped"] = [r.get("mcap_dropped") for r in runs[name]]
-    for name in ("daemon_mcap", "daemon_no_mcap"):
-        out[f"{name}_over_echo"] = out[name]["readings_per_s"] / out["echo"]["readings_per_s"]
-    out["daemon_mcap_over_no_mcap"] = (
-        out["daemon_mcap"]["readings_per_s"] / out["daemon_no_mcap"]["readings_per_s"]
-    )
+    if "echo" in cases:
+        for name in ("daemon_mcap", "daemon_no_mcap", "daemon_mcap_u"):
+            if name in cases:
+                echo = out["echo"]["readings_per_s"]
+                out[f"{name}_over_echo"] = out[name]["readings_per_s"] / echo
+    if "daemon_no_mcap" in cases:
+        out["daemon_mcap_over_no_mcap"] = (
+            out["daemon_mcap"]["readings_per_s"] / out["daemon_no_mcap"]["readings_per_s"]
+        )
+    if "daemon_mcap_u" in cases:
+        out["daemon_mcap_u_over_daemon_mcap"] = (
+            out["daemon_mcap_u"]["readings_per_s"] / out["daemon_mcap"]["readings_per_s"]
+        )
     return out
 
 
@@ -635,6 +682,59 @@ def bench_modbus(grid: Path, n: int) -> dict[str, Any]:
     return {"bare": b, "daemon": dm, "ratio_p50": dm["p50"] / b["p50"]}
 
 
+def uncertainty_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
+    """``--only-uncertainty``: the latency rounds and the floods of ``daemon_mcap`` and
+    ``daemon_mcap_u``, interleaved; table and ``results/daemon_uncertainty.json``."""
+    cases = ("daemon_mcap", "daemon_mcap_u", "daemon_mcap_u_nosend")
+    print("virtual latency …", file=sys.stderr)
+    virt = bench_virtual(grid, rs, args.rate, tmp, args.rounds, only=cases)
+    print(f"throughput, flood of {args.flood} …", file=sys.stderr)
+    sus = bench_throughput(grid, args.flood, tmp, rounds=3, sustain_n=0, cases=cases)
+    out = {
+        "machine": platform.node(),
+        "python": platform.python_version(),
+        "rate_hz": args.rate,
+        "virtual": virt,
+        "throughput_virtual": sus,
+        "ratios": {
+            "p50": virt["daemon_mcap_u"]["p50"] / virt["daemon_mcap"]["p50"],
+            "p99": virt["daemon_mcap_u"]["p99"] / virt["daemon_mcap"]["p99"],
+            "readings_per_s": sus["daemon_mcap_u_over_daemon_mcap"],
+            "nosend_p50": virt["daemon_mcap_u_nosend"]["p50"] / virt["daemon_mcap"]["p50"],
+            "nosend_p99": virt["daemon_mcap_u_nosend"]["p99"] / virt["daemon_mcap"]["p99"],
+            "nosend_readings_per_s": sus["daemon_mcap_u_nosend"]["readings_per_s"]
+            / sus["daemon_mcap"]["readings_per_s"],
+        },
+    }
+    path = RESULTS.with_name("daemon_uncertainty.json")
+    path.write_text(json.dumps(out, indent=2) + "\n")
+    print(f"{'virtual, MCAP on (default writer)':<44} {'p50 µs':>8} {'p99 µs':>8} {'n':>6}")
+    for name, label in (
+        ("daemon_mcap", "grid without U"),
+        ("daemon_mcap_u", "grid with U, U sent"),
+        ("daemon_mcap_u_nosend", "grid with U, not sent on CAN (logged)"),
+    ):
+        r = virt[name]
+        print(f"{label:<44} {r['p50']:>8.0f} {r['p99']:>8.0f} {r['n']:>6}")
+    rt = out["ratios"]
+    print(
+        f"with U / without: p50 {rt['p50']:.2f}×, p99 {rt['p99']:.2f}× (target ≤ 1.10); "
+        f"not sent: p50 {rt['nosend_p50']:.2f}×, p99 {rt['nosend_p99']:.2f}×"
+    )
+    for name in cases:
+        r = sus[name]
+        allr = ", ".join(f"{v:.0f}" for v in r["all_readings_per_s"])
+        print(
+            f"flood {name:<16} best {r['readings_per_s']:.0f} readings/s (all {allr}), "
+            f"lost {r['lost']}, unlogged {r.get('answers_not_logged')}"
+        )
+    print(
+        f"throughput with U / without: {rt['readings_per_s']:.2f}× (not sent: "
+        f"{rt['nosend_readings_per_s']:.2f}×); wrote {path}"
+    )
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=6000, help="paced readings per latency case")
@@ -656,6 +756,12 @@ def main() -> int:
         action="store_true",
         help="run only the virtual-bus latency cases (quick check; prints, writes no JSON)",
     )
+    ap.add_argument(
+        "--only-uncertainty",
+        action="store_true",
+        help="run only daemon_mcap against daemon_mcap_u (grid with U, U sent): latency "
+        "rounds and floods on virtual; writes benchmarks/results/daemon_uncertainty.json",
+    )
     args = ap.parse_args()
     if args.echo_server:
         echo_main(args.echo_server)
@@ -666,11 +772,21 @@ def main() -> int:
         tmp = Path(tmpd)
         grid = tmp / "npl.grid"
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
+        global U_GRID
+        U_GRID = build_u_grid(machine, grid, tmp / "npl-u.grid")
         rs = readings(args.n + 200, np.random.default_rng(1))
+        if args.only_uncertainty:
+            return uncertainty_only(grid, rs, args, tmp)
         print("virtual …", file=sys.stderr)
         virt = bench_virtual(grid, rs, args.rate, tmp, args.rounds)
         if args.only_virtual:
-            for name in ("echo", "daemon_no_mcap", "daemon_mcap", "daemon_mcap_thread"):
+            for name in (
+                "echo",
+                "daemon_no_mcap",
+                "daemon_mcap",
+                "daemon_mcap_thread",
+                "daemon_mcap_u",
+            ):
                 r = virt[name]
                 print(f"{name:<22} p50 {r['p50']:7.0f}  p99 {r['p99']:7.0f}  n {r['n']}")
             return 0
@@ -683,7 +799,12 @@ def main() -> int:
         udp = bench_udp(grid, rs, args.rate, tmp, udp_cases, rounds=max(1, args.rounds // 2))
         print(f"throughput, flood of {args.flood} …", file=sys.stderr)
         sus = bench_throughput(
-            grid, args.flood, tmp, sustain_hz=args.sustain_hz, sustain_n=args.sustain_n
+            grid,
+            args.flood,
+            tmp,
+            sustain_hz=args.sustain_hz,
+            sustain_n=args.sustain_n,
+            cases=("echo", "daemon_mcap", "daemon_no_mcap", "daemon_mcap_u", "sustained"),
         )
         print("modbus …", file=sys.stderr)
         mb = bench_modbus(grid, args.modbus_n)
@@ -696,6 +817,9 @@ def main() -> int:
         "throughput_virtual": sus,
         "modbus": mb,
         "targets": {
+            "uncertainty_p50_ratio": virt["daemon_mcap_u"]["p50"] / virt["daemon_mcap"]["p50"],
+            "uncertainty_p99_ratio": virt["daemon_mcap_u"]["p99"] / virt["daemon_mcap"]["p99"],
+            "uncertainty_throughput_ratio": sus["daemon_mcap_u_over_daemon_mcap"],
             "virtual_p50_over_echo_us": virt["daemon_mcap"]["p50"] - virt["echo"]["p50"],
             "virtual_p99_over_echo_us": virt["daemon_mcap"]["p99"] - virt["echo"]["p99"],
             "udp_p50_over_echo_us": udp["daemon"]["p50"] - udp["echo"]["p50"],

@@ -1,7 +1,8 @@
 """CPU of the daemon's CAN reply path per reading, without any bus or thread wake-ups.
 
-Run: ``.venv/bin/python benchmarks/bench_hotpath.py``. Prints a table and writes
-``benchmarks/results/hotpath.json``. A stub bus (sends are dropped, nothing is ever received) is
+Run: ``.venv/bin/python benchmarks/bench_hotpath.py [--uncertainty-only] [--rounds 5]``. Prints
+a table and writes ``benchmarks/results/hotpath.json``; the uncertainty comparison (below) goes
+to ``benchmarks/results/hotpath_uncertainty.json``. A stub bus (sends are dropped, nothing is ever received) is
 handed to a real :class:`daemon.service.DaemonService`; the frames a simulated controller would
 send are fed straight to the endpoint's handler in one thread, so the figures are pure CPU of
 decoding, assembling, correcting, answering, counting and (after ``bookkeeping``) building the
@@ -9,10 +10,16 @@ MCAP records, µs per reading (3 raw frames), frame by frame (the low-rate case)
 of 32 readings per wake-up (a drained queue: one vectorised correction, one send batch). The baseline in the same run is the bare
 ``can.Message`` construction + ``struct`` unpack of the same frames, and the parts are timed on
 their own: ``decode_message`` per frame, ``CorrectionEngine.correct`` per reading.
+
+Uncertainty (issue 13): the same reply path with a grid carrying U (``grid build
+--uncertainty``) and ``[can] send_uncertainty`` on (U computed per reading, a fifth frame sent)
+against the same grid without U (four frames), in interleaved rounds (the order rotated every
+round), frame by frame and in bursts of 32, MCAP off and on; ratios of the medians over rounds.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import platform
 import struct
@@ -39,6 +46,7 @@ from cmm_comp.sim_controller.controller import CanController  # noqa: E402
 from cmm_comp.sim_controller.sim_machine import Environment  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results" / "hotpath.json"
+U_RESULTS = ROOT / "benchmarks" / "results" / "hotpath_uncertainty.json"
 N = 6000
 
 
@@ -84,12 +92,18 @@ def controller_frames(n: int) -> tuple[list[can.Message], list[can.Message]]:
 
 
 def per_reading_us(
-    grid: Path, tmp: Path, mcap: str, writer: str = "process", batch: int = 1
+    grid: Path,
+    tmp: Path,
+    mcap: str,
+    writer: str = "process",
+    batch: int = 1,
+    send_uncertainty: bool = False,
 ) -> float:
     """µs per reading; ``batch`` readings' frames are handled per wake-up (1: the low-rate
     case, frame by frame; 32: a drained burst, corrected and answered together)."""
     temps, frames = controller_frames(N)
     cfg = config(grid, "virtual", "stub", mcap, writer=writer)
+    cfg.can.send_uncertainty = send_uncertainty
     with DaemonService(cfg, events_stream=None, bus_factory=lambda c, i: StubBus()) as d:
         ep = d.can
         assert ep is not None
@@ -114,9 +128,82 @@ def per_reading_us(
     return dt / ((len(frames) - warm) / 3) * 1e6
 
 
+def u_grid(machine: Machine, plain: Path, out: Path, trials: int = 300) -> Path:
+    """``plain`` (built from ``machine``) carrying U from the virtual CMM, saved at ``out``."""
+    from cmm_comp.compensation.uncertainty.grid_field import add_uncertainty
+
+    grid = CorrectionGrid.load(plain)
+    add_uncertainty(grid, machine, rng=np.random.default_rng(13), seed=13, trials=trials).save(out)
+    return out
+
+
+U_CASES = (  # name, grid carries U + U sent, MCAP, burst
+    ("plain_1", False, False, 1),
+    ("u_1", True, False, 1),
+    ("plain_32", False, False, 32),
+    ("u_32", True, False, 32),
+    ("plain_1_mcap", False, True, 1),
+    ("u_1_mcap", True, True, 1),
+)
+
+
+def bench_uncertainty(machine: Machine, grid: Path, tmp: Path, rounds: int) -> dict[str, Any]:
+    """The reply path with a grid carrying U and U sent against the same grid without U:
+    :data:`U_CASES` in ``rounds`` interleaved rounds; medians and their ratios."""
+    ugrid = u_grid(machine, grid, tmp / "npl-u.grid")
+    runs: dict[str, list[float]] = {name: [] for name, *_ in U_CASES}
+    for k in range(rounds):
+        order = list(U_CASES[k % len(U_CASES) :] + U_CASES[: k % len(U_CASES)])
+        for name, with_u, mcap, batch in order:
+            path = str(tmp / f"{name}-{k}.mcap") if mcap else ""
+            g = ugrid if with_u else grid
+            runs[name].append(per_reading_us(g, tmp, path, "process", batch, with_u))
+    med = {name: float(np.median(v)) for name, v in runs.items()}
+    out: dict[str, Any] = {"rounds": rounds, "readings_per_run": N, "runs_us": runs}
+    out["median_us"] = med
+    for tag in ("1", "32", "1_mcap"):
+        out[f"ratio_{tag}"] = med[f"u_{tag}"] / med[f"plain_{tag}"]
+        out[f"ratio_{tag}_per_round"] = [
+            u / p for u, p in zip(runs[f"u_{tag}"], runs[f"plain_{tag}"], strict=True)
+        ]
+    return out
+
+
+def print_uncertainty(u: dict[str, Any]) -> None:
+    med = u["median_us"]
+    print(
+        f"\nreply path per reading, grid with U + U sent vs the same grid without U "
+        f"(median of {u['rounds']} interleaved rounds)"
+    )
+    print(f"{'case':<40} {'no U µs':>8} {'U µs':>8} {'ratio':>6}  per round")
+    for tag, label in (
+        ("1", "frame by frame, MCAP off"),
+        ("32", "bursts of 32 per wake-up, MCAP off"),
+        ("1_mcap", "frame by frame, MCAP on (process)"),
+    ):
+        per = ", ".join(f"{r:.2f}" for r in u[f"ratio_{tag}_per_round"])
+        print(
+            f"{label:<40} {med[f'plain_{tag}']:>8.1f} {med[f'u_{tag}']:>8.1f} "
+            f"{u[f'ratio_{tag}']:>6.2f}  {per}"
+        )
+
+
 def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rounds", type=int, default=5, help="interleaved rounds of the U cases")
+    ap.add_argument("--uncertainty-only", action="store_true", help="run only the U comparison")
+    args = ap.parse_args()
     sys.setswitchinterval(0.0005)
     machine = Machine.from_toml(ROOT / "examples" / "machines" / "npl-bridge.toml")
+    if args.uncertainty_only:
+        with tempfile.TemporaryDirectory() as tmpd:
+            tmp = Path(tmpd)
+            grid = tmp / "npl.grid"
+            CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
+            u = bench_uncertainty(machine, grid, tmp, args.rounds)
+        write_uncertainty(u)
+        print_uncertainty(u)
+        return 0
     _, frames = controller_frames(2000)
     ids = CanIds()
     unpack = struct.Struct("<5sHB").unpack
@@ -133,6 +220,7 @@ def main() -> int:
         thread = per_reading_us(grid, tmp, str(tmp / "t.mcap"), "thread")
         off_32 = per_reading_us(grid, tmp, "", batch=32)
         on_32 = per_reading_us(grid, tmp, str(tmp / "p32.mcap"), "process", batch=32)
+        u = bench_uncertainty(machine, grid, tmp, args.rounds)
         cfg = config(grid, "virtual", "stub", "")
         with DaemonService(cfg, events_stream=None, bus_factory=lambda c, i: StubBus()) as d:
             temps, _ = controller_frames(1)
@@ -171,7 +259,16 @@ def main() -> int:
     for name, v in rows:
         print(f"{name:<52} {v:>8.1f}")
     print(f"decode / baseline: {decode_us / base_us:.1f}×; wrote {RESULTS}")
+    write_uncertainty(u)
+    print_uncertainty(u)
     return 0
+
+
+def write_uncertainty(u: dict[str, Any]) -> None:
+    out = {"machine": platform.node(), "python": platform.python_version(), **u}
+    U_RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    U_RESULTS.write_text(json.dumps(out, indent=2) + "\n")
+    print(f"wrote {U_RESULTS}")
 
 
 if __name__ == "__main__":
