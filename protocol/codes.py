@@ -41,13 +41,13 @@ CORRECTION_UM_PER_LSB = 1 / CORRECTION_LSB_PER_UM
 UINT16_MAX = 0xFFFF
 UNCERTAINTY_LSB_PER_UM = CORRECTION_LSB_PER_UM
 """Raw uncertainty units (10 nm) per µm: the same 0.01 µm as the correction magnitude."""
-_UNCERTAINTY_UM_PER_LSB = 1 / UNCERTAINTY_LSB_PER_UM
 UNCERTAINTY_UNKNOWN = 0xFFFF
 """Raw uncertainty code: U unknown (status not ok, or the grid carries no U)."""
 UNCERTAINTY_SATURATED = 0xFFFE
 """Raw uncertainty code: U larger than the field holds (more than 655.33 µm): "at least"."""
 UNCERTAINTY_RAW_MAX = UNCERTAINTY_SATURATED - 1
 """Largest raw uncertainty that is a value (655.33 µm)."""
+_U_TOP_UM = UNCERTAINTY_RAW_MAX / UNCERTAINTY_LSB_PER_UM
 SEQ_MODULUS = 1 << 16
 """Sequence counters and event counters wrap modulo 2**16."""
 
@@ -253,21 +253,16 @@ def uncertainty_raw_from_um(u_um: float) -> int:
     """
     if not u_um >= 0.0:  # NaN or negative: no value to state
         return UNCERTAINTY_UNKNOWN
-    if u_um > UNCERTAINTY_RAW_MAX / UNCERTAINTY_LSB_PER_UM:
+    if u_um > _U_TOP_UM:
         return UNCERTAINTY_SATURATED
-    raw = math.ceil(u_um * UNCERTAINTY_LSB_PER_UM)
-    # the product is within an ulp of U·100: the smallest raw whose decoded value is not
-    # below U is raw − 1, raw or raw + 1
-    if raw and _decodes_not_below(raw - 1, u_um):
+    raw = math.ceil(u_um * 100)  # 100 = UNCERTAINTY_LSB_PER_UM (the reply path: no lookups)
+    # the product is within an ulp of U·100: the smallest raw whose value read back (raw / 100
+    # or raw · 0.01) is not below U is raw − 1, raw or raw + 1
+    if raw and (raw - 1) / 100 >= u_um and (raw - 1) * 0.01 >= u_um:
         raw -= 1
-    elif not _decodes_not_below(raw, u_um):
+    elif raw / 100 < u_um or raw * 0.01 < u_um:
         raw += 1
     return raw if raw <= UNCERTAINTY_RAW_MAX else UNCERTAINTY_SATURATED
-
-
-def _decodes_not_below(raw: int, u_um: float) -> bool:
-    """True when ``raw`` read back (``raw / 100`` or ``raw · 0.01``) is at least ``u_um``."""
-    return raw / UNCERTAINTY_LSB_PER_UM >= u_um and raw * _UNCERTAINTY_UM_PER_LSB >= u_um
 
 
 def um_from_uncertainty_raw(u_raw: int) -> float:

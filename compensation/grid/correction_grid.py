@@ -142,6 +142,7 @@ class CorrectionGrid:
         )
         self.sha256: str | None = None
         self.uncertainty: GridUncertainty | None = None
+        self._u_point: PointUncertainty | None = None  # prepared on first use (not pickled)
         if uncertainty is not None:
             self._set_uncertainty(uncertainty)
         self._prepare()
@@ -509,7 +510,7 @@ class CorrectionGrid:
                 f"uncertainty covariance has {gu.covariance.shape[:3]} nodes, the grid {self.steps}"
             )
         self.uncertainty = gu
-        self._u_point: PointUncertainty | None = None  # prepared on first use (not pickled)
+        self._u_point = None
         gu.coefficients(self.axes)
 
     def with_uncertainty(self, uncertainty: GridUncertainty | None) -> CorrectionGrid:
@@ -604,7 +605,7 @@ class CorrectionGrid:
         lo, hi = self._lo_list, self._hi_list  # "ok" is within VOLUME_TOL_MM: clamp as correct()
         x, y, z = min(max(x, lo[0]), hi[0]), min(max(y, lo[1]), hi[1]), min(max(z, lo[2]), hi[2])
         with self._lock:
-            point_u = self.__dict__.get("_u_point")
+            point_u = self._u_point
             if point_u is None:
                 point_u = self._u_point = PointUncertainty(
                     gu, gu.coefficients(self.axes), self._u_tables()
@@ -711,6 +712,7 @@ class CorrectionGrid:
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._lock = threading.Lock()
+        self._u_point = None
 
     def __repr__(self) -> str:
         m = self.metadata.get("machine", {})

@@ -392,15 +392,29 @@ class PointUncertainty:
     under its lock. Same mathematics as :func:`expanded_uncertainty_um` (equal bit for bit)."""
 
     def __init__(self, gu: GridUncertainty, coef: FloatArray, tables: tuple[Any, ...]) -> None:
-        self._buf = np.zeros((3, 4))
+        self._flat = np.zeros(10)  # point (3), stylus (3), ΔT of T_x, T_y, T_z, T_wp
         self._out = np.zeros((1, 3))
         self._roles = tuple((k, name, float(gu.thermal_vector[0])) for k, name in gu.active_roles)
         lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
-        b = self._buf
+        f = self._flat
         self._args = (
-            b[0:1], b[1:2], b[2:3], lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef,
-            gu.thermal_vector, np.zeros((1, coef.shape[3])), self._out,
-        )  # fmt: skip
+            f[0:3].reshape(1, 3),
+            f[3:6].reshape(1, 3),
+            f[6:10].reshape(1, 4),
+            lo,
+            inv_d,
+            shape,
+            tx,
+            ty,
+            tz,
+            sx,
+            sy,
+            sz,
+            coef,
+            gu.thermal_vector,
+            np.zeros((1, coef.shape[3])),
+            self._out,
+        )  # fmt: skip (views of one buffer: one assignment fills them)
 
     def __call__(
         self,
@@ -412,14 +426,14 @@ class PointUncertainty:
         """(Ux, Uy, Uz) µm at ``point`` (mm, inside the volume) and ``stylus`` (mm); a
         temperature is read from ``temps_C``, else from ``inputs``, as the correction reads it
         (a role absent from both counts as the reference)."""
-        b = self._buf
-        b[0, 0], b[0, 1], b[0, 2] = point
-        b[1, 0], b[1, 1], b[1, 2] = stylus
+        d_t = [0.0, 0.0, 0.0, 0.0]
         for k, name, ref_c in self._roles:
             value = None if temps_C is None else temps_C.get(name)
             if value is None and inputs is not None:
                 value = inputs.get(name)
-            b[2, k] = 0.0 if value is None else float(value) - ref_c
+            if value is not None:
+                d_t[k] = float(value) - ref_c
+        self._flat[:] = (*point, *stylus, *d_t)
         _point_kernel(*self._args)
         o = self._out
         return float(o[0, 0]), float(o[0, 1]), float(o[0, 2])
