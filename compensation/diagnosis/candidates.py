@@ -584,8 +584,12 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 )
             )
         if res.has(f"T_{a}"):
-            # the scale expands about the point where it is fixed (the reference or an end: a
-            # free fixing point); rich: plus its static image
+            # the scale expands about the reference (one parameter) or about a free fixing
+            # point (a scale clamped at one end): both shapes compete; rich: plus the image
+            scale = Candidate(
+                "scale_expansion", {"axis": a}, 1, scale_builder(a), drivers=(f"T_{a}",)
+            )
+            out.append(_imaged(scale, res))
             out.append(_imaged(_scale_origin_candidate(res, a, ref_c), res))
         if res.has(f"dir_{a}"):
             span = _span(res, a)
@@ -642,8 +646,16 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             else m.volume.reference_mm
         )
         fx = [float(v) for v in fixture]
-        # the part expands about where it is clamped, which need not be the fixture described
-        # (a free fixture point); rich: plus its static image
+        # the part expands about the fixture described (one parameter) or about where it is
+        # really clamped (a free fixture point): both shapes compete; rich: plus the image
+        workpiece = Candidate(
+            "workpiece_expansion",
+            {},
+            1,
+            lambda p, _t: thermal(WorkpieceExpansionEffect(p[0], fx)),
+            drivers=("T_wp",),
+        )
+        out.append(_imaged(workpiece, res))
         out.append(_imaged(_workpiece_fixture_candidate(res, fx, ref_c), res))
     if res.has("T_air"):
         for comp in SQUARENESS:

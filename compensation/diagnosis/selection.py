@@ -345,7 +345,10 @@ def _diagnose(
     local_hits: list[dict[str, Any]] = []
     while len(slots) < max_effects:
         taken = {id(s.root) for s in slots} | excluded
-        remaining = [c for c in pool if id(c) not in taken]
+        # one entry per identity (the shapes of one family compete, never both named); two
+        # cyclic errors of one axis with different periods are two causes
+        named = {s.root.identity for s in slots if s.root.cause != "periodic"}
+        remaining = [c for c in pool if id(c) not in taken and c.identity not in named]
         say(f"round {len(rounds) + 1}: {len(remaining)} candidates")
         term, rows = _round(
             problem, slots, remaining, n_tried, alpha, min_cv_gain, cv_history[-1], local_hits
