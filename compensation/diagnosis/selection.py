@@ -346,8 +346,11 @@ def _diagnose(
     while len(slots) < max_effects:
         taken = {id(s.root) for s in slots} | excluded
         # one entry per identity (the shapes of one family compete, never both named); two
-        # cyclic errors of one axis with different periods are two causes
-        named = {s.root.identity for s in slots if s.root.cause != "periodic"}
+        # cyclic errors of one axis with different periods are two causes, and a local bump
+        # is fitted per error component (one `unexplained` entry for all of them)
+        named = {
+            s.root.identity for s in slots if s.root.cause != "periodic" and not is_local(s.root)
+        }
         remaining = [c for c in pool if id(c) not in taken and c.identity not in named]
         say(f"round {len(rounds) + 1}: {len(remaining)} candidates")
         term, rows = _round(
