@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,13 +16,13 @@ from typing import Any
 import numpy as np
 
 from ..effects.base import Effect, effect_from_table
-from ..errors import MachineFileError
 from ..kinematics import MODEL_CHAINS, Chain
 from ..machine_parts import ArmDeflection, Probe, Volume
 from ..models import known_models, model_code
 from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, canonical_name, parse_component
 from ..tables import MAX_POLYNOMIAL_ORDER, ErrorTable, fit_polynomial
 from ..thermal import Thermal
+from ..toml_checks import TomlChecks
 from ..uncertainty.model import UncertaintyModel, parse_uncertainty
 
 FORMAT = "cmm-machine/1"
@@ -85,26 +84,13 @@ def parse_machine(data: Mapping[str, Any], *, source: str, base_dir: Path) -> Pa
     return _Parser(source, base_dir).machine(data)
 
 
-class _Parser:
+class _Parser(TomlChecks):
     def __init__(self, source: str, base_dir: Path) -> None:
-        self.source = source
+        super().__init__(source)
         self.base_dir = base_dir
         self.warnings: list[str] = []
 
-    def fail(self, where: str, problem: str) -> MachineFileError:
-        return MachineFileError(self.source, where, problem)
-
     # ---------------------------------------------------------------- scalars / vectors
-    def number(self, value: Any, where: str, *, positive: bool = False) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.fail(where, f"expected a number, got {value!r}")
-        out = float(value)
-        if not math.isfinite(out):
-            raise self.fail(where, f"expected a finite number, got {value!r}")
-        if positive and out <= 0:
-            raise self.fail(where, f"must be > 0, got {value!r}")
-        return out
-
     def vector(self, value: Any, where: str, length: int | None = None) -> np.ndarray:
         if not isinstance(value, list):
             raise self.fail(where, f"expected an array of numbers, got {value!r}")
@@ -119,11 +105,6 @@ class _Parser:
         if not isinstance(value, Mapping):
             raise self.fail(key, f"expected a table [{key}], got {type(value).__name__}")
         return value
-
-    def check_keys(self, table: Mapping[str, Any], where: str, allowed: set[str]) -> None:
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            raise self.fail(where, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
 
     # ---------------------------------------------------------------- sections
     def machine(self, data: Mapping[str, Any]) -> ParsedMachine:

@@ -23,7 +23,6 @@ Values not given are defaulted (typical laser-interferometer calibration, see
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,8 +30,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import MachineFileError
 from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, canonical_name, parse_component
+from ..toml_checks import TomlChecks
 
 __all__ = [
     "EXPANSION_DEFAULT_FRACTION",
@@ -182,24 +181,16 @@ class UncertaintyModel:
         }
 
 
-class _Reader:
+class _Reader(TomlChecks):
     """Validation of the ``[uncertainty]`` table: one :class:`MachineFileError` per problem."""
 
     def __init__(self, source: str) -> None:
-        self.source = source
+        super().__init__(source)
         self.defaulted: list[str] = []
 
-    def fail(self, where: str, problem: str) -> MachineFileError:
-        return MachineFileError(self.source, where, problem)
-
     def number(self, value: Any, where: str, *, positive: bool = False) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.fail(where, f"expected a number, got {value!r}")
-        out = float(value)
-        if not math.isfinite(out):
-            raise self.fail(where, f"expected a finite number, got {value!r}")
-        if positive and out <= 0:
-            raise self.fail(where, f"must be > 0, got {value!r}")
+        """A finite number ≥ 0 (a standard uncertainty); ``positive``: > 0."""
+        out = super().number(value, where, positive=positive)
         if out < 0:
             raise self.fail(where, f"a standard uncertainty must be ≥ 0, got {value!r}")
         return out
@@ -207,9 +198,7 @@ class _Reader:
     def table(self, value: Any, where: str, allowed: set[str]) -> Mapping[str, Any]:
         if not isinstance(value, Mapping):
             raise self.fail(where, f"expected a table, got {value!r}")
-        unknown = sorted(set(value) - allowed)
-        if unknown:
-            raise self.fail(where, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+        self.check_keys(value, where, allowed)
         return value
 
     def per_name(
