@@ -188,7 +188,7 @@ def _points_mode(
         "U_k2_um": _stats(result.U_um[ok]),
         "U95_zero_centred_um": _stats(result.U95_um[ok]),
         "gum_vs_monte_carlo_u_ratio": _ratio(result.gum_u_um, result.u_um, ok),
-        "monte_carlo": None if mc is None else _mc_json(mc),
+        "monte_carlo": None if mc is None else mc.info(),
         "uncertainty_model": result.model,
     }
     if axes is not None:
@@ -226,12 +226,7 @@ def _points_mode(
         )
     else:
         print(f"0/{len(pts)} points ok: nothing to evaluate (see the status column)")
-    if mc is not None and not mc.stable and args.trials is None:
-        print(
-            "cmm-comp: warning: the Monte Carlo did not stabilise within --max-trials "
-            f"({mc.trials}); worst 2s/δ = {mc.worst:.2f}",
-            file=sys.stderr,
-        )
+    _warn_if_unstable(mc, args)
     return 0
 
 
@@ -239,6 +234,16 @@ def _stability(mc: Any, args: argparse.Namespace) -> str:
     if args.trials is not None:
         return " (a fixed number: no stopping rule)"
     return ", stable (JCGM 101 §7.9)" if mc.stable else ", NOT stable"
+
+
+def _warn_if_unstable(mc: Any, args: argparse.Namespace) -> None:
+    """One line on stderr when the adaptive Monte Carlo stopped at --max-trials unstable."""
+    if mc is not None and not mc.stable and args.trials is None:
+        print(
+            "cmm-comp: warning: the Monte Carlo did not stabilise within --max-trials "
+            f"({mc.trials}); worst 2s/δ = {mc.worst:.2f}",
+            file=sys.stderr,
+        )
 
 
 def _write_points_csv(
@@ -284,19 +289,6 @@ def _ratio(gum: Any, mc: Any, ok: Any) -> dict[str, float] | None:
         return None
     r = g[keep] / m[keep]
     return {"min": float(r.min()), "max": float(r.max())}
-
-
-def _mc_json(mc: Any) -> dict[str, Any]:
-    import numpy as np
-
-    return {
-        "trials": mc.trials,
-        "runs": mc.runs,
-        "stable": mc.stable,
-        "worst_2s_over_tolerance": None if not np.isfinite(mc.worst) else float(mc.worst),
-        "coverage_probability": mc.probability,
-        "interval_method": mc.interval_method,
-    }
 
 
 def _task_mode(
@@ -386,12 +378,7 @@ def _task_mode(
     if "p_pass" in result.nominal:
         print(f"probability of passing the E0 test: {result.nominal['p_pass']:.3f}")
     print(f"{mc.trials} trials{_stability(mc, args)}")
-    if not mc.stable and args.trials is None:
-        print(
-            f"cmm-comp: warning: the Monte Carlo did not stabilise within --max-trials "
-            f"({mc.trials}); worst 2s/δ = {mc.worst:.2f}",
-            file=sys.stderr,
-        )
+    _warn_if_unstable(mc, args)
     return 0
 
 

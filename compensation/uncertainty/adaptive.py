@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -117,6 +118,18 @@ class McResult:
     def U(self) -> FloatArray:
         """Expanded uncertainty with coverage factor k = 2."""
         return 2.0 * self.u
+
+    def info(self) -> dict[str, Any]:
+        """JSON-able: trials, runs, whether stable, the worst 2s/δ (None when not finite), the
+        coverage probability and the interval method."""
+        return {
+            "trials": self.trials,
+            "runs": self.runs,
+            "stable": self.stable,
+            "worst_2s_over_tolerance": None if not np.isfinite(self.worst) else float(self.worst),
+            "coverage_probability": self.probability,
+            "interval_method": self.interval_method,
+        }
 
 
 def numerical_tolerance(u: FloatArray, ndig: int) -> FloatArray:

@@ -115,12 +115,7 @@ class TaskUncertainty:
 
 def _mc_info(mc: McResult) -> dict[str, Any]:
     return {
-        "trials": mc.trials,
-        "runs": mc.runs,
-        "stable": mc.stable,
-        "worst_2s_over_tolerance": None if not np.isfinite(mc.worst) else float(mc.worst),
-        "coverage_probability": mc.probability,
-        "interval_method": mc.interval_method,
+        **mc.info(),
         "method": "JCGM 101 Monte Carlo, adaptive per §7.9; virtual CMM after ISO/TS 15530-4",
     }
 
