@@ -16,7 +16,9 @@ from ..parametric_errors import AXES
 from .maps import LineReport, VolumetricMap, diagonal_endpoints
 
 
-def _save(fig: Figure, path: str | Path) -> Path:
+def save_png(fig: Figure, path: str | Path) -> Path:
+    """Draw ``fig`` on an Agg canvas and write it to ``path`` as PNG (110 dpi) atomically (a
+    temporary sibling renamed over it), creating the folder; returns the path."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     FigureCanvasAgg(fig)
@@ -51,7 +53,7 @@ def plot_parametric_errors(machine: Machine, path: str | Path, samples: int = 20
             if ax.lines:
                 ax.legend(fontsize=7)
     fig.suptitle(f"{machine.name} ({machine.model}): parametric errors, shaded = random 2σ")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def plot_vector_map(
@@ -92,7 +94,7 @@ def plot_vector_map(
     ax.set_title(
         f"{title} volumetric error map, magnification ×{mag:.0f} (peak {peak * 1000:.1f} µm)"
     )
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def plot_line(report: LineReport, path: str | Path, title: str = "") -> Path:
@@ -111,7 +113,7 @@ def plot_line(report: LineReport, path: str | Path, title: str = "") -> Path:
     ax.set_ylabel("error / µm")
     ax.grid(True, alpha=0.3)
     ax.legend()
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def plot_diagonals(machine: Machine, diagonals_um: list[float], path: str | Path) -> Path:
@@ -128,4 +130,4 @@ def plot_diagonals(machine: Machine, diagonals_um: list[float], path: str | Path
     ax.set_ylabel("length error (true − indicated) / µm")
     ax.set_title(f"{machine.name}: space diagonals")
     ax.tick_params(axis="x", labelsize=7)
-    return _save(fig, path)
+    return save_png(fig, path)

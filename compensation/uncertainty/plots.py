@@ -9,24 +9,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
+
+from ..reports.plots import save_png
 
 __all__ = ["plot_histogram", "plot_points_u", "plot_volume_u"]
 
 FloatArray = NDArray[np.float64]
 _COMPONENTS = ("x", "y", "z")
-
-
-def _save(fig: Figure, path: str | Path) -> Path:
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(fig)
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    tmp.replace(out)
-    return out
 
 
 def plot_volume_u(
@@ -59,7 +50,7 @@ def plot_volume_u(
         if mesh is not None:
             fig.colorbar(mesh, ax=list(axs[row]), label=f"U{comp} (k = 2) / µm")
     fig.suptitle(title or "expanded uncertainty of the corrected position over the volume")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def plot_points_u(
@@ -84,7 +75,7 @@ def plot_points_u(
         ax.set_ylabel("y / mm")
         ax.set_aspect("equal", adjustable="datalim")
     fig.suptitle(title or "expanded uncertainty of the corrected positions")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def plot_histogram(
@@ -123,4 +114,4 @@ def plot_histogram(
     for j in range(n, rows * cols):
         axs[j // cols][j % cols].set_visible(False)
     fig.suptitle(title or "Monte Carlo outputs")
-    return _save(fig, path)
+    return save_png(fig, path)
