@@ -134,8 +134,8 @@ def residual_std(
     p = np.broadcast_to(machine.stylus_or_probe(stylus_mm), q.shape)
     for i in range(0, q.shape[0], step):
         sl = slice(i, i + step)
-        sub_t = _slice_signals(temps_C, sl, q.shape[0])
-        sub_i = _slice_signals(inputs, sl, q.shape[0])
+        sub_t = signals_at(temps_C, sl, q.shape[0])
+        sub_i = signals_at(inputs, sl, q.shape[0])
         c = residual_covariance(
             machine, q[sl], p[sl], sub_t, sub_i, model=model, random_parts=random_parts
         )
@@ -144,13 +144,17 @@ def residual_std(
     return out
 
 
-def _slice_signals(mapping: Mapping[str, Any] | None, sl: slice, n: int) -> dict[str, Any] | None:
+def signals_at(
+    mapping: Mapping[str, Any] | None, sel: slice | NDArray[np.bool_], n: int
+) -> dict[str, Any] | None:
+    """The signals (temperatures °C, other inputs) of the points ``sel`` (a slice or a mask) of
+    n: a per-point (n,) value indexed, a scalar (or None) as given; None without signals."""
     if not mapping:
         return None
     out: dict[str, Any] = {}
     for k, v in mapping.items():
         arr = None if v is None else np.asarray(v, dtype=float)
-        out[k] = arr[sl] if arr is not None and arr.ndim == 1 and arr.shape[0] == n else arr
+        out[k] = arr[sel] if arr is not None and arr.ndim == 1 and arr.shape[0] == n else arr
     return out
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .adaptive import McResult, MonteCarloSettings, run_monte_carlo
-from .gum import gum_check, residual_covariance, residual_std
+from .gum import gum_check, residual_covariance, residual_std, signals_at
 from .model import UncertaintyModel
 from .virtual_cmm import Prepared, VirtualCMM
 
@@ -142,17 +142,6 @@ def _check_inside(machine: Machine, q: FloatArray, what: str) -> None:
         )
 
 
-def _subset(mapping: Mapping[str, Any] | None, keep: NDArray[np.bool_]) -> dict[str, Any] | None:
-    if not mapping:
-        return None
-    out: dict[str, Any] = {}
-    n = keep.shape[0]
-    for k, v in mapping.items():
-        arr = None if v is None else np.asarray(v, dtype=float)
-        out[k] = arr[keep] if arr is not None and arr.ndim == 1 and arr.shape[0] == n else arr
-    return out
-
-
 def _residual_runner(
     vcmm: VirtualCMM, prep: Prepared
 ) -> Callable[[int, np.random.Generator], FloatArray]:
@@ -212,7 +201,7 @@ def point_uncertainty(
     inside = status == "ok"
     nan3 = np.full((n, 3), np.nan)
     out = {k: nan3.copy() for k in ("mean", "u", "low", "high", "U95")}
-    vcmm = VirtualCMM(machine, model, _subset(temps_C, inside), _subset(inputs, inside))
+    vcmm = VirtualCMM(machine, model, signals_at(temps_C, inside, n), signals_at(inputs, inside, n))
     mc = None
     if inside.any():
         prep = vcmm.prepare(q[inside], p[inside])
