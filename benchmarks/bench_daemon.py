@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import platform
@@ -51,7 +52,7 @@ import threading
 import time
 import uuid
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -117,6 +118,24 @@ def echo_main(port: int) -> None:
         sys.stdin.read()
         stop.set()
         t.join()
+
+
+@contextlib.contextmanager
+def virtual_echo(
+    channel: str, echo: Callable[[can.BusABC, threading.Event], None]
+) -> Iterator[None]:
+    """``echo`` (:func:`run_echo` or :func:`run_batch_echo`) answering on the virtual bus
+    ``channel`` in a thread for the duration of the block."""
+    stop = threading.Event()
+    echo_bus = can.Bus(interface="virtual", channel=channel)
+    t = threading.Thread(target=echo, args=(echo_bus, stop))
+    t.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        t.join()
+        echo_bus.shutdown()
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -205,17 +224,12 @@ def _virtual_round(
 ) -> tuple[list[float], int]:
     ch = f"bench-{uuid.uuid4().hex[:8]}"
     if name == "echo":
-        stop = threading.Event()
-        echo_bus = can.Bus(interface="virtual", channel=ch)
-        t = threading.Thread(target=run_echo, args=(echo_bus, stop))
-        t.start()
-        try:
-            with can.Bus(interface="virtual", channel=ch) as bus, CanController(bus) as ctl:
-                return measure(ctl, rs, rate_hz)
-        finally:
-            stop.set()
-            t.join()
-            echo_bus.shutdown()
+        with (
+            virtual_echo(ch, run_echo),
+            can.Bus(interface="virtual", channel=ch) as bus,
+            CanController(bus) as ctl,
+        ):
+            return measure(ctl, rs, rate_hz)
     path = str(tmp / f"{ch}.mcap") if mcap else ""
     with (
         DaemonService(daemon_config(grid, ch, path, name, writer), events_stream=None),
@@ -380,17 +394,8 @@ def _throughput_round(
     every topic written or dropped, and whether every answer reached the file)."""
     ch = f"bench-{uuid.uuid4().hex[:8]}"
     if name == "echo":
-        stop = threading.Event()
-        echo_bus = can.Bus(interface="virtual", channel=ch)
-        t = threading.Thread(target=run_batch_echo, args=(echo_bus, stop))
-        t.start()
-        try:
-            with can.Bus(interface="virtual", channel=ch) as bus:
-                return flood(bus, frames, window, rate_hz=rate_hz)
-        finally:
-            stop.set()
-            t.join()
-            echo_bus.shutdown()
+        with virtual_echo(ch, run_batch_echo), can.Bus(interface="virtual", channel=ch) as bus:
+            return flood(bus, frames, window, rate_hz=rate_hz)
     path = "" if name.endswith("no_mcap") else str(tmp / f"{ch}.mcap")
     with (
         DaemonService(daemon_config(grid, ch, path, name), events_stream=None) as d,
