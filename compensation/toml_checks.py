@@ -6,10 +6,11 @@ wrong or allowed."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Container, Mapping
 from typing import Any
 
 from .errors import MachineFileError
+from .parametric_errors import TABLE_COMPONENTS, canonical_name
 
 __all__ = ["TomlChecks"]
 
@@ -39,3 +40,16 @@ class TomlChecks:
         unknown = sorted(set(table) - allowed)
         if unknown:
             raise self.fail(where, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
+
+    def error_component(self, key: str, where: str, seen: Container[str]) -> str:
+        """The canonical error component (``dx_x``, …) of a table key (ours or ISO 230-1 names),
+        refused when unknown or when an alias of it is already in ``seen``."""
+        canon = canonical_name(key)
+        if canon is None or canon not in TABLE_COMPONENTS:
+            raise self.fail(
+                where,
+                f"unknown error component; allowed: {', '.join(TABLE_COMPONENTS)} or ISO 230-1 names",
+            )
+        if canon in seen:
+            raise self.fail(where, f"component {canon} is given twice (aliases count)")
+        return canon

@@ -19,7 +19,7 @@ from ..effects.base import Effect, effect_from_table
 from ..kinematics import MODEL_CHAINS, Chain
 from ..machine_parts import ArmDeflection, Probe, Volume
 from ..models import known_models, model_code
-from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, canonical_name, parse_component
+from ..parametric_errors import AXES, SQUARENESS, parse_component
 from ..tables import MAX_POLYNOMIAL_ORDER, ErrorTable, fit_polynomial
 from ..thermal import Thermal
 from ..toml_checks import TomlChecks
@@ -288,14 +288,7 @@ class _Parser(TomlChecks):
         normalised: dict[str, Any] = {}
         for key, tbl in errors.items():
             where = f"errors.{key}"
-            canon = canonical_name(key)
-            if canon is None or canon not in TABLE_COMPONENTS:
-                raise self.fail(
-                    where,
-                    f"unknown error component; allowed: {', '.join(TABLE_COMPONENTS)} or ISO 230-1 names",
-                )
-            if canon in tables:
-                raise self.fail(where, f"component {canon} is given twice (aliases count)")
+            canon = self.error_component(key, where, tables)
             if not isinstance(tbl, Mapping):
                 raise self.fail(where, "expected a table")
             table, norm = self.error_table(canon, tbl, where)

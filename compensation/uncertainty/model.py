@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, canonical_name, parse_component
+from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, parse_component
 from ..toml_checks import TomlChecks
 
 __all__ = [
@@ -249,14 +249,7 @@ def parse_uncertainty(
         )
     for key, value in errors_tbl.items():
         where = f"uncertainty.errors.{key}"
-        canon = canonical_name(key)
-        if canon is None or canon not in TABLE_COMPONENTS:
-            raise r.fail(
-                where,
-                f"unknown error component; allowed: {', '.join(TABLE_COMPONENTS)} or ISO 230-1 names",
-            )
-        if canon in explicit:
-            raise r.fail(where, f"component {canon} is given twice (aliases count)")
+        canon = r.error_component(key, where, explicit)
         explicit[canon] = r.table(value, where, set(TABLE_KEYS))
     out_tables: dict[str, TableUncertainty] = {}
     for comp in TABLE_COMPONENTS:
