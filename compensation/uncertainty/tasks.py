@@ -151,6 +151,21 @@ def _residual_runner(
     return draw
 
 
+def _virtual_task(
+    machine: Machine,
+    model: UncertaintyModel | None,
+    temps_C: Mapping[str, Any] | None,
+    inputs: Mapping[str, Any] | None,
+    pts: FloatArray,
+    stylus_mm: ArrayLike | None,
+) -> tuple[VirtualCMM, Prepared, Callable[[int, np.random.Generator], FloatArray]]:
+    """A task's virtual CMM, its probing points (mm) prepared, and the draw of M trials'
+    residuals (M, N, 3) µm at them."""
+    vcmm = VirtualCMM(machine, model, temps_C, inputs)
+    prep = vcmm.prepare(pts, stylus_mm)
+    return vcmm, prep, _residual_runner(vcmm, prep)
+
+
 def _gum(
     vcmm: VirtualCMM, pts: FloatArray, stylus: FloatArray, sens: FloatArray, mc: McResult
 ) -> dict[str, Any]:
@@ -271,9 +286,7 @@ def length_uncertainty(
     length = float(np.linalg.norm(pts[1] - pts[0]))
     if length <= 0:
         raise ValueError("a and b are the same point: no length to measure")
-    vcmm = VirtualCMM(machine, model, temps_C, inputs)
-    prep = vcmm.prepare(pts, stylus_mm)
-    runner = _residual_runner(vcmm, prep)
+    vcmm, prep, runner = _virtual_task(machine, model, temps_C, inputs, pts, stylus_mm)
     mc = run_monte_carlo(lambda m, g: _length_errors_um(pts, runner(m, g)), rng, settings, progress)
     direction = (pts[1] - pts[0]) / length
     sens = np.stack([-direction, direction])[None]  # (1 output, 2 points, 3)
@@ -320,9 +333,7 @@ def e0_uncertainty(
         if not (np.isfinite(a_um) and np.isfinite(k) and a_um >= 0 and k > 0):
             raise ValueError(f"MPE A + L/K needs A ≥ 0 µm and K > 0, got A={a_um}, K={k}")
         mpe_um = a_um + lengths / k
-    vcmm = VirtualCMM(machine, model, temps_C, inputs)
-    prep = vcmm.prepare(pts, stylus_mm)
-    runner = _residual_runner(vcmm, prep)
+    vcmm, prep, runner = _virtual_task(machine, model, temps_C, inputs, pts, stylus_mm)
 
     def draw(m: int, g: np.random.Generator) -> FloatArray:
         err = _length_errors_um(pts, runner(m, g))
@@ -433,9 +444,7 @@ def sphere_uncertainty(
     centre, radius = _reference_sphere(pts)
     if not (np.all(np.isfinite(centre)) and np.isfinite(radius) and radius > 0):
         raise ValueError("the sphere points do not define a sphere (all on a plane or a line?)")
-    vcmm = VirtualCMM(machine, model, temps_C, inputs)
-    prep = vcmm.prepare(pts, stylus_mm)
-    runner = _residual_runner(vcmm, prep)
+    vcmm, prep, runner = _virtual_task(machine, model, temps_C, inputs, pts, stylus_mm)
 
     def draw(m: int, g: np.random.Generator) -> FloatArray:
         measured = pts[None] - runner(m, g) / 1000.0
@@ -509,9 +518,7 @@ def flatness_uncertainty(
             f"the plane points are not coplanar (flatness {form_um:.3g} µm): give points of a "
             "perfect plane (the artefact's form is not part of this method)"
         )
-    vcmm = VirtualCMM(machine, model, temps_C, inputs)
-    prep = vcmm.prepare(pts, stylus_mm)
-    runner = _residual_runner(vcmm, prep)
+    vcmm, _, runner = _virtual_task(machine, model, temps_C, inputs, pts, stylus_mm)
 
     def draw(m: int, g: np.random.Generator) -> FloatArray:
         return _ls_flatness_um(pts[None] - runner(m, g) / 1000.0)[:, None]
