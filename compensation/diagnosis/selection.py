@@ -13,6 +13,7 @@ time, temperatures, directions) tests whether structure remains that no cause ex
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -277,6 +278,22 @@ def _backward(
     return dropped
 
 
+def _one_blas_thread(fn: Callable[..., Diagnosis]) -> Callable[..., Diagnosis]:
+    """Run ``fn`` with BLAS on one thread: the matrices are a few thousand rows by tens of
+    columns, where threads only cost (measured on a busy 2-core machine: an SVD of 2100 × 132
+    took 2.6–4.1 s with two OpenBLAS threads, 0.02–0.05 s with one)."""
+
+    @functools.wraps(fn)
+    def run(*args: Any, **kwargs: Any) -> Diagnosis:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return run
+
+
+@_one_blas_thread
 def diagnose(
     machine: Machine,
     data: Measurements,
@@ -294,35 +311,7 @@ def diagnose(
     More than ``max_points`` points (a dense record) are thinned to every k-th point (in file
     order) before anything is fitted; ``n_points_given`` in the summary says so.
 
-    BLAS runs on one thread meanwhile: the matrices are a few thousand rows by tens of columns,
-    where threads only cost (measured on a busy 2-core machine: an SVD of 2100 × 132 took
-    2.6–4.1 s with two OpenBLAS threads, 0.02–0.05 s with one)."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _diagnose(
-            machine,
-            data,
-            alpha=alpha,
-            min_cv_gain=min_cv_gain,
-            max_effects=max_effects,
-            n_folds=n_folds,
-            progress=progress,
-            max_points=max_points,
-        )
-
-
-def _diagnose(
-    machine: Machine,
-    data: Measurements,
-    *,
-    alpha: float,
-    min_cv_gain: float,
-    max_effects: int,
-    n_folds: int,
-    progress: Callable[[str], None] | None,
-    max_points: int | None,
-) -> Diagnosis:
+    BLAS runs on one thread meanwhile (:func:`_one_blas_thread`)."""
     t0 = time.perf_counter()
     say = progress or (lambda _msg: None)
     n_given = data.n
