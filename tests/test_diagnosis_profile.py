@@ -73,3 +73,25 @@ def test_periodic_on_an_unmeasured_component_explains_nothing(problem) -> None:
     rss, rank = profile_rss(p2, cand, cand.thetas[:5], slice(None), None, y)
     np.testing.assert_allclose(rss, float(y @ y))
     assert np.all(rank == 0)
+
+
+def test_a_start_up_transient_is_not_extrapolated_back_before_the_training_span(problem) -> None:
+    """Held-out rows earlier than every training row get no start-up transient (the structure's
+    state at the session's start is not known from later blocks); the lag law itself is kept,
+    and rows inside the training span keep the transient."""
+    from cmm_comp.compensation.diagnosis.fitting import _held_out_design
+
+    lag = next(c for c in all_candidates(problem.res) if c.cause == "thermal_lag")
+    assert lag.transient_columns == (0, 1, 2)
+    t = problem.res.signals["t"]
+    order = np.argsort(t)
+    early, late = order[: len(t) // 3], order[len(t) // 3 :]
+    term = Term(lag, 1800.0)
+    plain = problem.stacked([term], early)
+    held = _held_out_design(problem, [term], late, early)
+    cols = problem.n_nuisance + np.arange(3)
+    assert np.abs(plain[:, cols]).max() > 0
+    assert np.all(held[:, cols] == 0.0)
+    np.testing.assert_array_equal(held[:, problem.n_nuisance + 3], plain[:, problem.n_nuisance + 3])
+    inside = _held_out_design(problem, [term], early, late[: len(late) // 2])
+    np.testing.assert_array_equal(inside, problem.stacked([term], late[: len(late) // 2]))
