@@ -740,6 +740,67 @@ def uncertainty_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> 
     return 0
 
 
+def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
+    """``--only-before``: the udp_multicast daemon (MCAP on) against the ``--before-tree``
+    daemon and the bare echo, ``--rounds`` interleaved rounds (order rotated); the p50 and p99
+    ratio now / before of every round (the spread says what is noise), and of the pooled
+    latencies. Table and ``results/daemon_before.json``."""
+    cases = ["echo", "daemon", "daemon_before"]
+    chunk = rs[: 200 + args.n]
+    per_round: list[dict[str, dict[str, float]]] = []
+    pooled: dict[str, list[float]] = {c: [] for c in cases}
+    lost: dict[str, int] = dict.fromkeys(cases, 0)
+    for k in range(args.rounds):
+        shift = k % len(cases)
+        row: dict[str, dict[str, float]] = {}
+        for name in cases[shift:] + cases[:shift]:
+            values, n_lost = _udp_round(name, grid, chunk, args.rate, tmp, None)
+            pooled[name] += values
+            lost[name] += n_lost
+            row[name] = pct(values)
+        per_round.append(row)
+        print(
+            f"round {k + 1}/{args.rounds}: p50 now {row['daemon']['p50']:.0f} before "
+            f"{row['daemon_before']['p50']:.0f} echo {row['echo']['p50']:.0f} µs",
+            file=sys.stderr,
+        )
+    r50 = [r["daemon"]["p50"] / r["daemon_before"]["p50"] for r in per_round]
+    r99 = [r["daemon"]["p99"] / r["daemon_before"]["p99"] for r in per_round]
+    total = {c: pct(pooled[c]) for c in cases}
+    out = {
+        "machine": platform.node(),
+        "python": platform.python_version(),
+        "before_tree": args.before_tree,
+        "rate_hz": args.rate,
+        "n_per_round": args.n,
+        "rounds": per_round,
+        "pooled": total,
+        "lost": lost,
+        "p50_ratio_per_round": r50,
+        "p99_ratio_per_round": r99,
+        "p50_ratio_median": float(np.median(r50)),
+        "p99_ratio_median": float(np.median(r99)),
+        "p50_ratio_pooled": total["daemon"]["p50"] / total["daemon_before"]["p50"],
+        "p99_ratio_pooled": total["daemon"]["p99"] / total["daemon_before"]["p99"],
+    }
+    path = RESULTS.with_name("daemon_before.json")
+    path.write_text(json.dumps(out, indent=2) + "\n")
+    print(f"{'udp_multicast, pooled over rounds':<40} {'p50 µs':>8} {'p99 µs':>8} {'n':>6} lost")
+    for c in cases:
+        r = total[c]
+        print(f"{c:<40} {r['p50']:>8.0f} {r['p99']:>8.0f} {r['n']:>6} {lost[c]}")
+    print(
+        f"now / before p50: median {out['p50_ratio_median']:.3f}× over {len(r50)} rounds "
+        f"(min {min(r50):.3f}, max {max(r50):.3f}), pooled {out['p50_ratio_pooled']:.3f}×"
+    )
+    print(
+        f"now / before p99: median {out['p99_ratio_median']:.3f}× "
+        f"(min {min(r99):.3f}, max {max(r99):.3f}), pooled {out['p99_ratio_pooled']:.3f}×"
+    )
+    print(f"wrote {path}")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=6000, help="paced readings per latency case")
@@ -767,7 +828,15 @@ def main() -> int:
         help="run only daemon_mcap against daemon_mcap_u (grid with U, U sent): latency "
         "rounds and floods on virtual; writes benchmarks/results/daemon_uncertainty.json",
     )
+    ap.add_argument(
+        "--only-before",
+        action="store_true",
+        help="with --before-tree: only the udp_multicast daemon against that tree's daemon "
+        "(and the bare echo), --rounds interleaved rounds of --n readings, per-round ratios; "
+        "writes benchmarks/results/daemon_before.json",
+    )
     args = ap.parse_args()
+    global BEFORE_TREE
     if args.echo_server:
         echo_main(args.echo_server)
         return 0
@@ -782,6 +851,11 @@ def main() -> int:
         rs = readings(args.n + 200, np.random.default_rng(1))
         if args.only_uncertainty:
             return uncertainty_only(grid, rs, args, tmp)
+        if args.only_before:
+            if not args.before_tree:
+                ap.error("--only-before needs --before-tree")
+            BEFORE_TREE = args.before_tree
+            return before_only(grid, rs, args, tmp)
         print("virtual …", file=sys.stderr)
         virt = bench_virtual(grid, rs, args.rate, tmp, args.rounds)
         if args.only_virtual:
@@ -796,7 +870,6 @@ def main() -> int:
                 print(f"{name:<22} p50 {r['p50']:7.0f}  p99 {r['p99']:7.0f}  n {r['n']}")
             return 0
         print("udp_multicast …", file=sys.stderr)
-        global BEFORE_TREE
         BEFORE_TREE = args.before_tree
         udp_cases = ("echo", "daemon_no_mcap", "daemon", "daemon_reloads")
         if BEFORE_TREE:

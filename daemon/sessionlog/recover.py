@@ -21,6 +21,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 from .reader import TRUNCATION_ERRORS
+from .summary import close_spool, finish_writer, spool_chunk_index
 
 RECOVER_LIBRARY = "cmm-comp mcap recover"
 
@@ -93,6 +94,18 @@ def _copy(
     f.seek(0)
     report = RecoverReport(src, dst, size, complete=False, cut_at=None, error=None)
     writer = Writer(out, compression=compression)
+    spool_chunk_index(writer, dst.parent)  # memory stays flat whatever the file's length
+    try:
+        _copy_records(f, writer, size, src, report)
+        finish_writer(writer)
+    finally:
+        close_spool(writer)
+    return report
+
+
+def _copy_records(
+    f: io.BufferedReader, writer: Writer, size: int, src: Path, report: RecoverReport
+) -> None:
     started = False
     schema_ids: dict[int, int] = {0: 0}
     channels: dict[int, tuple[int, str]] = {}
@@ -157,5 +170,3 @@ def _copy(
                 "error": report.error or "",
             },
         )
-    writer.finish()
-    return report

@@ -11,14 +11,14 @@ import io
 import os
 import re
 import struct
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
-from mcap.records import ChunkIndex
 from mcap.writer import CompressionType, IndexType, Writer
 
 from .schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, TopicSchema
+from .summary import close_spool, finish_writer, spool_chunk_index
 
 PROFILE = ""  # no well-known MCAP profile applies to JSON messages
 LIBRARY = "cmm-comp mcap 1.x"
@@ -27,9 +27,8 @@ SESSION_FILE_RE = re.compile(r"^session-(\d{8}T\d{6})-(\d{3,})\.mcap$")
 INDEX_TYPES = IndexType.CHUNK | IndexType.ATTACHMENT | IndexType.METADATA
 """Summary indexes written: chunk, attachment and metadata indexes, no per-chunk message index
 records. Readers (the ``mcap`` package, Foxglove) find every message through the chunk index
-(message indexes are optional in MCAP); the writer keeps the chunk index in memory until the
-file is finished, and without message indexes each chunk's entry is half the size (~0.8 KiB
-instead of ~1.5 KiB with nine channels: a one-hour file at 1 kHz holds ~20k chunks)."""
+(message indexes are optional in MCAP; files are smaller without). The chunk index waits on
+disk until the file is finished (:mod:`.summary`)."""
 
 WRITE_SLICE = 16 * 1024
 """Largest single ``write`` system call, bytes (see :class:`SlicedFileIO`)."""
@@ -48,75 +47,6 @@ class SlicedFileIO(io.FileIO):
         view = memoryview(b).cast("B")
         n = super().write(view[:WRITE_SLICE])
         return 0 if n is None else n
-
-
-_PACKED_INDEX = struct.Struct("<7QB")
-"""One chunk index entry kept in memory: start and end time, offset, length, message index
-length, compressed and uncompressed size, compression code."""
-_COMPRESSIONS = ("", "zstd", "lz4")
-
-
-class ChunkIndexStore:
-    """Where the ``mcap`` writer keeps its chunk index until the file is finished, packed:
-    57 bytes a chunk instead of a ``ChunkIndex`` object (~0.8 KiB with its dict). The writer
-    only appends and iterates (``mcap`` 1.6, pinned); an entry with message index offsets or an
-    unknown compression is kept as the object itself. A one-hour file at 1 kHz holds ~4k-20k
-    chunks: this is what keeps the writer's memory flat."""
-
-    def __init__(self) -> None:
-        self._packed = bytearray()
-        self._objects: dict[int, ChunkIndex] = {}
-        self._n = 0
-
-    def append(self, index: ChunkIndex) -> None:
-        if index.message_index_offsets or index.compression not in _COMPRESSIONS:
-            self._objects[self._n] = index
-            self._packed += bytes(_PACKED_INDEX.size)
-        else:
-            self._packed += _PACKED_INDEX.pack(
-                index.message_start_time,
-                index.message_end_time,
-                index.chunk_start_offset,
-                index.chunk_length,
-                index.message_index_length,
-                index.compressed_size,
-                index.uncompressed_size,
-                _COMPRESSIONS.index(index.compression),
-            )
-        self._n += 1
-
-    def __len__(self) -> int:
-        return self._n
-
-    def __iter__(self) -> Iterator[ChunkIndex]:
-        for i, fields in enumerate(_PACKED_INDEX.iter_unpack(self._packed)):
-            obj = self._objects.get(i)
-            if obj is not None:
-                yield obj
-                continue
-            start, end, offset, length, mi_length, csize, usize, comp = fields
-            yield ChunkIndex(
-                message_start_time=start,
-                message_end_time=end,
-                chunk_start_offset=offset,
-                chunk_length=length,
-                message_index_offsets={},
-                message_index_length=mi_length,
-                compression=_COMPRESSIONS[comp],
-                compressed_size=csize,
-                uncompressed_size=usize,
-            )
-
-
-def compact_chunk_index(writer: Writer) -> bool:
-    """Give ``writer`` a :class:`ChunkIndexStore` (before its first chunk); False (and nothing
-    changed) if this ``mcap`` version keeps its chunk index differently."""
-    name = "_Writer__chunk_indices"
-    current = getattr(writer, name, None)
-    if not isinstance(current, list) or current:
-        return False
-    setattr(writer, name, ChunkIndexStore())
-    return True
 
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
@@ -219,7 +149,7 @@ def open_session_file(
     if isinstance(stream, io.RawIOBase):  # else mcap wraps it in a buffer we cannot flush
         stream = io.BufferedWriter(stream)
     writer = Writer(stream, chunk_size=chunk_size, compression=compression, index_types=INDEX_TYPES)
-    compact_chunk_index(writer)
+    spool_chunk_index(writer, path.parent)
     writer.start(profile=PROFILE, library=LIBRARY)
     ids: dict[str, int] = {}
     channels: dict[str, int] = {}
@@ -235,13 +165,17 @@ def open_session_file(
 def finish_session_file(
     writer: Writer, stream: IO[bytes], session_end: Mapping[str, str], fsync: bool
 ) -> None:
-    """Add the ``session_end`` metadata record, write summary and indexes, flush (and fsync),
-    close the stream (also when finishing fails)."""
+    """Add the ``session_end`` metadata record, write summary and indexes (the chunk index
+    streamed from its spool: :func:`.summary.finish_writer`), flush (and fsync), close the
+    stream and delete the spool (also when finishing fails)."""
     try:
         writer.add_metadata("session_end", dict(session_end))
-        writer.finish()
+        finish_writer(writer)
         stream.flush()
         if fsync:
             os.fsync(stream.fileno())
     finally:
-        stream.close()
+        try:
+            stream.close()
+        finally:
+            close_spool(writer)
