@@ -75,10 +75,12 @@ def test_periodic_on_an_unmeasured_component_explains_nothing(problem) -> None:
     assert np.all(rank == 0)
 
 
-def test_a_start_up_transient_is_not_extrapolated_back_before_the_training_span(problem) -> None:
-    """Held-out rows earlier than every training row get no start-up transient (the structure's
-    state at the session's start is not known from later blocks); the lag law itself is kept,
-    and rows inside the training span keep the transient."""
+def test_a_start_up_transient_is_extrapolated_back_at_most_twofold(problem) -> None:
+    """Held-out rows earlier than every training row get the start-up transient at most at twice
+    its value at the first training time (a first-order decay seen by later blocks fixes its
+    size only where it had not decayed much; the state at the start of a fast one they did not
+    see is unknown); the lag law itself is kept, and rows inside the training span keep the
+    transient."""
     from cmm_comp.compensation.diagnosis.fitting import _held_out_design
 
     lag = next(c for c in all_candidates(problem.res) if c.cause == "thermal_lag")
@@ -86,12 +88,21 @@ def test_a_start_up_transient_is_not_extrapolated_back_before_the_training_span(
     t = problem.res.signals["t"]
     order = np.argsort(t)
     early, late = order[: len(t) // 3], order[len(t) // 3 :]
-    term = Term(lag, 1800.0)
+    tau = 1800.0
+    term = Term(lag, tau)
     plain = problem.stacked([term], early)
     held = _held_out_design(problem, [term], late, early)
     cols = problem.n_nuisance + np.arange(3)
     assert np.abs(plain[:, cols]).max() > 0
-    assert np.all(held[:, cols] == 0.0)
+    # the transient of each row at the first training time, by the e-folding law
+    t_lo = float(np.min(t[late]))
+    n_ax = len(problem.axes)
+    t_rows = np.repeat(t[early], n_ax)
+    at_lo = plain[:, cols] * np.exp(-(t_lo - t_rows) / tau)[:, None]
+    within = t_rows >= t_lo - tau * np.log(2.0)
+    assert within.any() and (~within).any()  # both kinds of rows are checked
+    np.testing.assert_allclose(held[within][:, cols], plain[within][:, cols], rtol=1e-12)
+    np.testing.assert_allclose(held[~within][:, cols], 2.0 * at_lo[~within], rtol=1e-9, atol=1e-15)
     np.testing.assert_array_equal(held[:, problem.n_nuisance + 3], plain[:, problem.n_nuisance + 3])
     inside = _held_out_design(problem, [term], early, late[: len(late) // 2])
     np.testing.assert_array_equal(inside, problem.stacked([term], late[: len(late) // 2]))

@@ -1,7 +1,8 @@
 """Explanations a session cannot tell apart, and the measurement that would separate them.
 
 After selection, each accepted cause is swapped in turn for every other candidate (the other
-accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit is worse by less
+accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit (at its default or its
+rich shape, each parameter beyond the named term's charged one noise variance) is worse by less
 than the ``1 − alpha`` quantile of χ²(1) times the noise variance is an *alternative*: the data
 do not prefer the named cause over it. Typical case: with one stylus straight down, an angular
 error of Z and a straightness of Z have the same Abbe arm and act identically.
@@ -144,12 +145,18 @@ def find_alternatives(
     taken = {c.identity for c in accepted_roots} | {term.candidate.identity}
     threshold = float(stats.chi2.ppf(1.0 - alpha, 1)) * sigma2
     found: list[tuple[float, Candidate, Any]] = []
-    for cand in pool:
-        if cand.identity in taken:
+    n_named = term.candidate.n_params
+    for root in pool:
+        if root.identity in taken:
             continue
-        theta, rss, _ = best_theta(problem, others, cand)
-        if rss - rss_after < threshold:
-            found.append((rss, cand, theta))
+        # the family at its default and its rich shape: a cause the session cannot tell from the
+        # named one may need its richer shape to act alike (a twist that sags along the other
+        # axis); each parameter beyond the named term's is charged the σ² it gains from noise
+        for cand in (root,) if root.rich is None else (root, root.rich):
+            theta, rss, _ = best_theta(problem, others, cand)
+            charged = rss + sigma2 * max(cand.n_params - n_named, 0)
+            if charged - rss_after < threshold:
+                found.append((charged, cand, theta))
     if not found:
         return None
     found.sort(key=lambda f: f[0])

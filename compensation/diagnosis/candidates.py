@@ -42,7 +42,7 @@ from ..thermal import (
 from .residuals import FloatArray, Residuals
 
 LAG_TIME_CONSTANTS_S: tuple[float, ...] = tuple(
-    float(v) for v in np.geomspace(120.0, 4 * 3600.0, 28)
+    float(v) for v in np.geomspace(120.0, 12 * 3600.0, 34)
 )
 LOBES: tuple[int, ...] = (2, 3, 4, 5, 6)
 #: Plausible size (1σ) of a structure's start-up offset from its sensor (°C): a machine that has
@@ -346,9 +346,9 @@ def _coupling_builder(
     sb: tuple[float, float],
     orders: tuple[int, ...],
     with_orders: tuple[int, ...],
+    n_along: int,
 ) -> EffectBuilder:
     # a: offset, the part along a at b's reference (orders 1…n_along), then the products
-    n_along = COUPLING_ALONG[1] if len(orders) > len(COUPLING_ORDERS[0][0]) else COUPLING_ALONG[0]
     return lambda a, _t: CouplingEffect(
         comp, other, a[1 + n_along :], sa, sb, orders, with_orders, a[0], a[1 : 1 + n_along]
     )
@@ -360,7 +360,7 @@ def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuild
 
 #: Shapes of each family: (default, rich). The default is what a cause usually looks like; the
 #: rich one absorbs what a mis-shaped default leaves behind and is reported when the data need it.
-COUPLING_ORDERS = (((0, 1, 2), (1,)), ((0, 1, 2, 3), (1, 2)))
+COUPLING_ORDERS = (((0, 1, 2), (1, 2)), ((0, 1, 2, 3), (1, 2)))
 #: Orders of the part along a at b's reference position (default, rich).
 COUPLING_ALONG = (2, 3)
 PERIODIC_HARMONICS = (1, 3)
@@ -378,12 +378,18 @@ def candidate_orders(component: str) -> list[int]:
 
 
 def rich_orders(component: str) -> list[int]:
-    """Legendre orders of a table correction's rich shape (up to 8 along the axis)."""
+    """Legendre orders of a table correction's rich shape (up to 8 along the axis; a straightness
+    with its line)."""
     base = default_orders(component)
     if component in SQUARENESS:
         return base
     if component in ANGULAR:  # a constant too: the carriage tilted by the same angle everywhere
         return list(range(0, 7))
+    if component[1] != component[-1]:
+        # a straightness with its line: what a squareness would carry beside a straightness
+        # change whose reference line was fitted on other points (the default names the line a
+        # squareness; the rich shape keeps it with the table, so it is never a second cause)
+        return list(range(1, 9))
     return list(range(base[0], 9))
 
 
@@ -526,17 +532,23 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             sa, sb = _span(res, comp[-1]), _span(res, other)
             keys = {"component": comp, "varies_with": other}
             (o1, w1), (o2, w2) = COUPLING_ORDERS
+            if comp in LINEAR:
+                # a straightness that varies with b by the same amount all along a is a
+                # translation that depends on b alone: a straightness table of b (parametric),
+                # whatever the chain — only the part growing along a is a coupling
+                o1, o2 = tuple(k for k in o1 if k), tuple(k for k in o2 if k)
+            n1, n2 = COUPLING_ALONG
             out.append(
                 Candidate(
                     "coupling",
                     keys,
-                    1 + COUPLING_ALONG[0] + len(o1) * len(w1),
-                    _coupling_builder(comp, other, sa, sb, o1, w1),
-                    static_columns=1 + COUPLING_ALONG[0],
+                    1 + n1 + len(o1) * len(w1),
+                    _coupling_builder(comp, other, sa, sb, o1, w1, n1),
+                    static_columns=1 + n1,
                 ).with_rich(
-                    n_params=1 + COUPLING_ALONG[1] + len(o2) * len(w2),
-                    build=_coupling_builder(comp, other, sa, sb, o2, w2),
-                    static_columns=1 + COUPLING_ALONG[1],
+                    n_params=1 + n2 + len(o2) * len(w2),
+                    build=_coupling_builder(comp, other, sa, sb, o2, w2, n2),
+                    static_columns=1 + n2,
                 )
             )
 

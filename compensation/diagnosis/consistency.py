@@ -11,8 +11,11 @@ the half with it predicts structure where there is none.
 
 For each accepted term, the others held at their joint full-data fit, the term is refitted on each
 half of every *split coordinate* (x, y, z with a median split; not the axes the cause is a
-function of — its table must not be extrapolated) and scored on the other half. The held-out gain
-(decrease of the sum of squares over both halves) is compared with the in-sample gain. A cause is
+function of — its table must not be extrapolated) and scored on the other half, on the points
+that lie within the range of the cause's own axes the fitted half covers (artefact lines along a
+diagonal cover other ranges of y and z in each half of x: no table is judged where it would be
+extrapolated). The held-out gain (decrease of the sum of squares on the points scored) is compared
+with the full-data fit's in-sample gain on the same points. A cause is
 *local* when every split that can be tested gives a held-out gain below ``MIN_RATIO`` of its
 in-sample gain.
 """
@@ -70,9 +73,21 @@ def own_axes(term: Term) -> set[int]:
     return out
 
 
-def _fit_predict(x_train: FloatArray, y_train: FloatArray, x_test: FloatArray) -> FloatArray:
-    beta, _, _ = lstsq(x_train, y_train)
-    return x_test @ beta
+#: Combinations of a term's coefficients (columns scaled to the whole session's norms) that a
+#: half determines worse than this fraction of its best-determined one (relative singular
+#: value) are not fitted on that half.
+_RCOND = 1e-2
+
+
+def _fit_predict(
+    x_train: FloatArray, y_train: FloatArray, x_test: FloatArray, scale: FloatArray
+) -> FloatArray:
+    """Fit on the training rows and predict the test rows, with the columns scaled to the whole
+    session's norms and combinations the half cannot determine dropped (truncated SVD): a half
+    that saw too few styli or directions to pin a coefficient must not extrapolate it."""
+    xs = x_train / scale
+    beta, *_ = np.linalg.lstsq(xs, y_train, rcond=_RCOND)
+    return (x_test / scale) @ beta
 
 
 def spatial_consistency(
@@ -95,12 +110,16 @@ def spatial_consistency(
     x_off = problem.stacked([])  # (N·axes, offsets)
     x_full = np.hstack([x_off, x_term])
     y = partial.reshape(-1)
-    _, rss0, _ = lstsq(x_off, y)
-    _, rss1, _ = lstsq(x_full, y)
+    beta0, rss0, _ = lstsq(x_off, y)
+    beta1, rss1, _ = lstsq(x_full, y)
     gain_in = rss0 - rss1
+    # the full-data gain per observation: the in-sample reference for any subset scored below
+    gain_rows = (y - x_off @ beta0) ** 2 - (y - x_full @ beta1) ** 2
+    norms = np.linalg.norm(x_full, axis=0)
+    scale = np.where(norms > 0, norms, 1.0)
     ratios: dict[str, float] = {}
     q = problem.res.q_mm
-    own = own_axes(term)
+    own = sorted(own_axes(term))
     p = x_full.shape[1]
     for k in range(3):
         if k in own or float(np.ptp(q[:, k])) <= 1e-6:
@@ -112,11 +131,24 @@ def spatial_consistency(
         if min(len(h) for h in halves) * n_axes < _MIN_OBS_PER_PARAM * p:
             continue
         gain_out = 0.0
+        gain_ref = 0.0
         for train, test in ((halves[0], halves[1]), (halves[1], halves[0])):
+            # scored only where the half fitted on covers the term's own axes: a table is not
+            # extrapolated (artefact lines along a diagonal cover other ranges in each half)
+            inside = np.ones(len(test), dtype=bool)
+            for a in own:
+                lo, hi = float(np.min(q[train, a])), float(np.max(q[train, a]))
+                inside &= (q[test, a] >= lo) & (q[test, a] <= hi)
+            test = test[inside]
+            if len(test) * n_axes < p:
+                continue
             rows_tr = (train[:, None] * n_axes + np.arange(n_axes)).reshape(-1)
             rows_te = (test[:, None] * n_axes + np.arange(n_axes)).reshape(-1)
-            p0 = _fit_predict(x_off[rows_tr], y[rows_tr], x_off[rows_te])
-            p1 = _fit_predict(x_full[rows_tr], y[rows_tr], x_full[rows_te])
+            p0 = _fit_predict(x_off[rows_tr], y[rows_tr], x_off[rows_te], scale[: x_off.shape[1]])
+            p1 = _fit_predict(x_full[rows_tr], y[rows_tr], x_full[rows_te], scale)
             gain_out += float(np.sum((y[rows_te] - p0) ** 2) - np.sum((y[rows_te] - p1) ** 2))
-        ratios["xyz"[k]] = gain_out / gain_in if gain_in > 0 else 0.0
+            gain_ref += float(np.sum(gain_rows[rows_te]))
+        if gain_ref <= 0.0:  # nothing scored within the range fitted on: not testable this way
+            continue
+        ratios["xyz"[k]] = gain_out / gain_ref
     return Consistency(term.candidate.label, float(gain_in), ratios)

@@ -371,12 +371,18 @@ def cv_predictions(
     return pred
 
 
+#: How far back a start-up transient is extrapolated before a training span: at most this factor
+#: of its value at the span's first training time (the transient's e-folding law, not a fit).
+TRANSIENT_BACK = 2.0
+
+
 def _held_out_design(
     problem: Problem, terms: Sequence[Term], train: NDArray[np.intp], test: NDArray[np.intp]
 ) -> FloatArray:
     """The stacked design of ``test`` rows, with the columns of terms that are not extrapolated
     in time (``Candidate.hold_time``) evaluated at the time clipped to the training span, and
-    the start-up transient of a ``start_state`` term left out before the training span."""
+    the start-up transient of a ``start_state`` term extrapolated back before the training span
+    by at most :data:`TRANSIENT_BACK` (left out where its time constant is unknown)."""
     x = problem.stacked(terms, test)
     t = problem.res.signals.get("t")
     if t is None or not any(
@@ -389,14 +395,23 @@ def _held_out_design(
         return x
     before = t_test < lo
     if np.any(before):
-        # a start-up transient is not extrapolated back before the training span: what the
-        # structure's state was at the session's start is not known from later blocks
-        rows = np.repeat(before, len(problem.axes))
+        # a start-up transient (∝ e^{−(t−t₀)/τ}) is extrapolated back before the training span
+        # by at most a factor TRANSIENT_BACK: what later blocks saw of it fixes its size only
+        # where it had not yet decayed much (a structure hours from equilibrium: the decay is
+        # the lag's physics), never the state at the start of a fast one they did not see
         col = problem.n_nuisance
         for term in terms:
             cols = [col + j for j in term.candidate.transient_columns]
             if cols:
-                x[np.ix_(rows, np.asarray(cols))] = 0.0
+                tau = float(term.theta) if isinstance(term.theta, float | int) else 0.0
+                if tau > 0.0:
+                    t_cap = lo - tau * np.log(TRANSIENT_BACK)
+                    shrink = np.exp(-np.maximum(t_cap - t_test, 0.0) / tau)
+                    factor = np.where(before, shrink, 1.0)
+                else:
+                    factor = np.where(before, 0.0, 1.0)
+                f_rows = np.repeat(factor, len(problem.axes))
+                x[:, np.asarray(cols)] *= f_rows[:, None]
             col += term.candidate.n_params
     if not any(term.candidate.hold_time for term in terms):
         return x
