@@ -141,34 +141,47 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--client", help=argparse.SUPPRESS)
     parser.add_argument("--daemon", action="store_true", help="also the daemon's reply latency")
     parser.add_argument("--daemon-n", type=int, default=3000, help="readings per daemon case")
+    parser.add_argument(
+        "--daemon-only", action="store_true", help="only the daemon's reply latency"
+    )
+    parser.add_argument(
+        "--with-thread", action="store_true", help="also the sender thread in the daemon"
+    )
     args = parser.parse_args(argv)
     if args.client:
         client_main(args.client)
         return 0
 
-    from cmm_comp.daemon.live import LiveFanOut, LiveSection, LiveSink
+    from cmm_comp.daemon.live import LiveFanOut, LiveProcessSink, LiveSection, LiveSink
 
     sys.setswitchinterval(0.0005)  # as `cmm-comp daemon` does
+    if args.daemon_only:
+        daemon = bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.with_thread)
+        out_path = ROOT / "benchmarks" / "results" / "live_daemon.json"
+        out_path.write_text(
+            json.dumps({"benchmark": "bench_live --daemon-only", **(daemon or {})}, indent=2) + "\n"
+        )
+        print(f"wrote {out_path.relative_to(ROOT)}")
+        return 0
     n = int(args.seconds_per_case * args.rate_hz)
     idle = LiveSink(LiveSection(enabled=True, port=0)).start()
     busy = LiveSink(LiveSection(enabled=True, port=0)).start()
-    client = subprocess.Popen(
-        [sys.executable, __file__, "--client", busy.url],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert client.stdout is not None and client.stdin is not None
+    proc = LiveProcessSink(LiveSection(enabled=True, port=0)).start()
+    client = start_client(busy.url)
+    pclient = start_client(proc.url)
     try:
-        assert client.stdout.readline().strip() == "subscribed"
         deadline = time.monotonic() + 5.0
         while busy.stats().subscriptions < 7 and time.monotonic() < deadline:
             time.sleep(0.01)
         assert busy.stats().subscriptions == 7, busy.stats()
+        while proc.stats().subscriptions < 7 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert proc.stats().subscriptions == 7, proc.stats()
         cases = {
             "off": NullLogger(),
-            "on, no client": LiveFanOut(None, idle),
-            "on, subscribed": LiveFanOut(None, busy),
+            "on (thread), no client": LiveFanOut(None, idle),
+            "on (thread), subscribed": LiveFanOut(None, busy),
+            "on (process), subscribed": LiveFanOut(None, proc),
         }
         feed(cases["off"], 200, args.rate_hz, 0)  # warm-up
         data: dict[str, dict[str, list[np.ndarray]]] = {
@@ -184,13 +197,12 @@ def main(argv: list[str]) -> int:
             print(f"round {r + 1}/{args.rounds} done", file=sys.stderr, flush=True)
         time.sleep(0.2)  # let the sender and the client finish
     finally:
-        client.stdin.close()
-        received = client.stdout.readline().strip()
-        client.wait(10)
-        idle_stats, busy_stats = idle.stats(), busy.stats()
+        counts = stop_client(client)
+        pcounts = stop_client(pclient)
+        idle_stats, busy_stats, proc_stats = idle.stats(), busy.stats(), proc.stats()
         idle.stop()
         busy.stop()
-    counts = json.loads(received) if received else {}
+        proc.stop()
 
     rows = {}
     base: dict[str, float] = {}
@@ -231,13 +243,18 @@ def main(argv: list[str]) -> int:
             f"{r['wake_late_p99_us']:.0f} | {r['wake_late_p99_minus_off_us']:+.0f} | "
             f"{r['cpu_per_reading_us']:.1f} | {r['cpu_minus_off_us']:+.1f} |"
         )
-    print(f"client received: {counts}")
+    print(f"client received (thread sink): {counts}; (process sink): {pcounts}")
     print(
-        f"subscribed sink: sent {busy_stats.sent}, dropped {busy_stats.dropped}, "
-        f"scene updates {busy_stats.scene_updates}; idle sink: not encoded "
-        f"{idle_stats.not_encoded}, sent {idle_stats.sent}"
+        f"subscribed thread sink: sent {busy_stats.sent}, decimated {busy_stats.decimated}, "
+        f"dropped {busy_stats.dropped}, scene updates {busy_stats.scene_updates}; process sink: "
+        f"sent {proc_stats.sent}, decimated {proc_stats.decimated}, dropped "
+        f"{proc_stats.dropped}; idle sink: not encoded {idle_stats.not_encoded}"
     )
-    daemon = bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz) if args.daemon else None
+    daemon = (
+        bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.with_thread)
+        if args.daemon
+        else None
+    )
     result = {
         "benchmark": "bench_live",
         "python": sys.version.split()[0],
@@ -247,9 +264,11 @@ def main(argv: list[str]) -> int:
         "readings_per_case_round": n,
         "cases": rows,
         "client_received": counts,
+        "client_received_process_sink": pcounts,
         "subscribed_sink": {
             "sent": busy_stats.sent,
             "dropped": busy_stats.dropped,
+            "decimated": busy_stats.decimated,
             "not_encoded": busy_stats.not_encoded,
             "scene_updates": busy_stats.scene_updates,
             "scene_points": busy_stats.scene_points,
@@ -265,10 +284,11 @@ def main(argv: list[str]) -> int:
 
 DAEMON_CASES: dict[str, tuple[bool, str, bool]] = {  # name: live enabled, sender, client
     "live off": (False, "process", False),
-    "live on (process), no client": (True, "process", False),
-    "live on (process), subscribed": (True, "process", True),
-    "live on (thread), subscribed": (True, "thread", True),
+    "live on, no client": (True, "process", False),
+    "live on, subscribed": (True, "process", True),
 }
+THREAD_CASE = ("live on (thread), subscribed", (True, "thread", True))
+"""With ``--with-thread``: the sender thread in the daemon (shares the reply path's GIL)."""
 
 
 def start_client(url: str) -> subprocess.Popen[str]:
@@ -295,34 +315,46 @@ def stop_client(client: subprocess.Popen[str]) -> dict[str, int]:
     return json.loads(line) if line else {}
 
 
-def bench_live_daemon(n: int, rounds: int, rate_hz: float) -> dict[str, Any] | None:
-    """The daemon's reply latency with the live view off / on idle / on with a client."""
+def _spread(values: list[float]) -> str:
+    a = np.array(values)
+    return f"{np.median(a):.3f} ({a.min():.3f}–{a.max():.3f})"
+
+
+def bench_live_daemon(
+    n: int, rounds: int, rate_hz: float, with_thread: bool = False
+) -> dict[str, Any] | None:
+    """The daemon's reply latency with the live view off / on idle / on with a client
+    subscribed to every channel: interleaved rounds (the order rotated each round), a new
+    daemon per case and round; per round p50/p99 and the ratio on/off of the same round."""
     import tempfile
     import uuid
 
     import can
-    from bench_daemon import config, interleaved, measure, readings
+    from bench_daemon import config, measure, pct, readings
 
     from cmm_comp.compensation.grid import CorrectionGrid
     from cmm_comp.compensation.machine import Machine
-    from cmm_comp.daemon.config import DaemonConfig
     from cmm_comp.daemon.service import DaemonService
     from cmm_comp.sim_controller.controller import CanController
 
-    if not hasattr(DaemonConfig(), "live"):
-        print("daemon: [live] is not wired into the daemon yet; skipped", file=sys.stderr)
-        return None
+    cases = dict(DAEMON_CASES)
+    if with_thread:
+        cases[THREAD_CASE[0]] = THREAD_CASE[1]
+    names = list(cases)
     machine = Machine.from_toml(ROOT / "examples" / "machines" / "npl-bridge.toml")
     rs = readings(n + 200, np.random.default_rng(1))
     received: dict[str, int] = {}
     live_stats: dict[str, dict[str, int]] = {}
+    per_round: dict[str, list[dict[str, float]]] = {name: [] for name in names}
+    pooled: dict[str, list[float]] = {name: [] for name in names}
+    lost: dict[str, int] = dict.fromkeys(names, 0)
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)
         grid = tmp / "npl.grid"
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
 
         def one_round(name: str) -> tuple[list[float], int]:
-            enabled, sender, subscribed = DAEMON_CASES[name]
+            enabled, sender, subscribed = cases[name]
             ch = f"bench-live-{uuid.uuid4().hex[:8]}"
             cfg = config(grid, "virtual", ch, str(tmp / f"{ch}.mcap"))
             cfg.live.enabled = enabled
@@ -342,12 +374,13 @@ def bench_live_daemon(n: int, rounds: int, rate_hz: float) -> dict[str, Any] | N
                         time.sleep(0.01)
                 try:
                     out = measure(ctl, rs, rate_hz)
-                    time.sleep(0.1)  # the last answers reach the client
+                    time.sleep(0.2)  # the last answers reach the client
                     if d.live is not None:
                         st = d.live.stats()
-                        acc = live_stats.setdefault(name, {"sent": 0, "dropped": 0})
-                        acc["sent"] += st.sent
-                        acc["dropped"] += st.dropped
+                        acc = live_stats.setdefault(name, {})
+                        for key in ("offered", "sent", "decimated", "dropped", "not_encoded"):
+                            acc[key] = acc.get(key, 0) + getattr(st, key)
+                        acc["up_at_end"] = acc.get("up_at_end", 0) + int(st.up)
                 finally:
                     if client is not None:
                         for topic, k in stop_client(client).items():
@@ -356,16 +389,36 @@ def bench_live_daemon(n: int, rounds: int, rate_hz: float) -> dict[str, Any] | N
             return out
 
         print("daemon rounds …", file=sys.stderr)
-        res = interleaved(list(DAEMON_CASES), rounds, one_round)
-    off = res["live off"]
+        for k in range(rounds):
+            shift = k % len(names)
+            for name in names[shift:] + names[:shift]:
+                values, n_lost = one_round(name)
+                pooled[name] += values
+                lost[name] += n_lost
+                per_round[name].append(pct(values))
+            print(f"daemon round {k + 1}/{rounds} done", file=sys.stderr, flush=True)
+    res: dict[str, Any] = {"rounds": rounds, "readings_per_case_round": n, "rate_hz": rate_hz}
+    for name in names:
+        res[name] = {**pct(pooled[name]), "lost": lost[name], "per_round": per_round[name]}
     print(f"\ndaemon reply latency (virtual CAN, {rate_hz:g} Hz, MCAP on), µs, {rounds} rounds")
-    print("| case | p50 | p99 | p50 − off | p99 − off | lost |")
+    print("per round (p50 / p99):")
+    print("| round | " + " | ".join(names) + " |")
+    print("|---|" + "---|" * len(names))
+    for k in range(rounds):
+        cells = [f"{per_round[c][k]['p50']:.0f} / {per_round[c][k]['p99']:.0f}" for c in names]
+        print(f"| {k + 1} | " + " | ".join(cells) + " |")
+    print("\npooled, and the ratio to live off of the same round: median (min–max over rounds)")
+    print("| case | p50 | p99 | p50 / off | p99 / off | lost |")
     print("|---|---|---|---|---|---|")
-    for name in DAEMON_CASES:
+    for name in names:
         r = res[name]
+        pairs = list(zip(per_round[name], per_round["live off"], strict=True))
+        r50 = [a["p50"] / b["p50"] for a, b in pairs]
+        r99 = [a["p99"] / b["p99"] for a, b in pairs]
+        r["ratio_p50_per_round"], r["ratio_p99_per_round"] = r50, r99
         print(
-            f"| {name} | {r['p50']:.0f} | {r['p99']:.0f} | {r['p50'] - off['p50']:+.0f} | "
-            f"{r['p99'] - off['p99']:+.0f} | {res[f'{name}_lost']} |"
+            f"| {name} | {r['p50']:.0f} | {r['p99']:.0f} | {_spread(r50)} | {_spread(r99)} | "
+            f"{r['lost']} |"
         )
     print(f"client received (all rounds): {received}")
     print(f"live view counters at the end of each case (all rounds): {live_stats}")

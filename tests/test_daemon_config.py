@@ -184,6 +184,8 @@ NUMERIC_KEYS: dict[str, tuple[str, bool]] = {
     "log.state_repeat_s": ("float", False),
     "live.port": ("int", True),  # 0 = any free port
     "live.queue": ("int", False),
+    "live.update_rate_hz": ("float", False),
+    "live.max_per_update": ("int", False),
     "live.scene_rate_hz": ("float", False),
     "live.scene_keep_arrows": ("int", False),
     "live.scene_max_new_arrows": ("int", False),

@@ -76,7 +76,13 @@ def wait_until(cond: Callable[[], bool], what: str, timeout_s: float = 5.0) -> N
 
 
 def settings(**kw: Any) -> LiveSection:
-    base: dict[str, Any] = {"enabled": True, "port": 0, "scene_rate_hz": 1000.0}
+    """Every message sent (no decimation) unless a test asks for it."""
+    base: dict[str, Any] = {
+        "enabled": True,
+        "port": 0,
+        "scene_rate_hz": 1000.0,
+        "max_per_update": 100_000,
+    }
     return LiveSection(**{**base, **kw})
 
 

@@ -33,6 +33,7 @@ def test_the_daemon_streams_its_answers_live() -> None:
     cfg = base_config(channel())
     cfg.live.enabled = True
     cfg.live.port = 0
+    cfg.live.max_per_update = 1000  # every answer (decimation: tests/test_live_decimate.py)
     cfg.metrics.period_s = 0.2
     events = io.StringIO()
     with daemon_and_controller(cfg, events_stream=events) as (d, ctl, _bus):
@@ -89,3 +90,66 @@ def test_a_live_view_that_cannot_listen_leaves_the_daemon_running() -> None:
     lines = [json.loads(line) for line in events.getvalue().splitlines()]
     errors = [e for e in lines if e.get("event") == "live_error"]
     assert len(errors) == 1 and "cannot listen on 127.0.0.1" in errors[0]["error"]
+
+
+def test_a_stopped_or_killed_live_process_never_stalls_the_answers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With a client watching every answer, SIGSTOP and then SIGKILL the live view's process
+    while the controller keeps asking: every reading is answered ``ok`` throughout, the stall
+    and the death are events (``live_error``) and the counters say ``live_up`` 0."""
+    import os
+    import signal
+
+    from cmm_comp.daemon.live import process
+
+    monkeypatch.setattr(process, "STALL_S", 0.5)
+    cfg = base_config(channel())
+    cfg.live.enabled = True
+    cfg.live.port = 0
+    cfg.metrics.period_s = 0.1  # the housekeeping asks for the counters: that checks the child
+    events = io.StringIO()
+
+    next_seq = [0]
+
+    def ask(n: int) -> list[str]:
+        """``n`` readings, one after the other (fresh seqs), their answers' statuses."""
+        first = next_seq[0]
+        next_seq[0] += n
+        return [
+            ctl.exchange(RawReading(i & 0xFFFF, (200.0 + i % 500, 300.0, 150.0))).status
+            for i in range(first, first + n)
+        ]
+
+    def live_errors() -> list[str]:
+        lines = [json.loads(line) for line in events.getvalue().splitlines()]
+        return [e["error"] for e in lines if e.get("event") == "live_error"]
+
+    with daemon_and_controller(cfg, events_stream=events) as (d, ctl, _bus):
+        assert d.live is not None
+        pid = d.live.child_pid
+        assert pid is not None
+        with FoxgloveClient(d.live.url) as client:
+            client.wait_for_channels(["/cmm/corrected"])
+            client.subscribe(["/cmm/corrected"])
+            send_temps(ctl)
+            time.sleep(0.05)
+            assert set(ask(20)) == {"ok"}
+            os.kill(pid, signal.SIGSTOP)
+            try:
+                statuses = ask(400)  # ~1 s with the child stopped: the stall is noticed
+                deadline = time.monotonic() + 10.0
+                while d.live.counters()["live_up"] and time.monotonic() < deadline:
+                    statuses += ask(20)
+                assert d.live.counters()["live_up"] == 0
+                assert any("has not run" in e for e in live_errors()), live_errors()
+            finally:
+                os.kill(pid, signal.SIGKILL)
+            statuses += ask(200)
+            deadline = time.monotonic() + 10.0
+            while not any("process ended" in e for e in live_errors()):
+                assert time.monotonic() < deadline, live_errors()
+                statuses += ask(10)
+        assert set(statuses) == {"ok"}  # every reading answered, none timed out
+        assert d.live.counters()["live_up"] == 0
+        assert d.metrics.snapshot()["counters"]["live_errors"] >= 2

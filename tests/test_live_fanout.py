@@ -55,7 +55,9 @@ def test_live_equals_the_engine_and_the_mcap_log(engine: CorrectionEngine, tmp_p
     answers = engine.correct_many(readings, NOW_S)
     assert {a.status.label for a in answers} == {"ok", "outside_volume"}
     path = tmp_path / "s.mcap"
-    live = LiveSink(LiveSection(enabled=True, port=0, scene_max_new_arrows=64)).start()
+    live = LiveSink(
+        LiveSection(enabled=True, port=0, scene_max_new_arrows=64, max_per_update=100_000)
+    ).start()
     fan = LiveFanOut(McapLogger(path), live)
     saved, engine.logger = engine.logger, fan
     try:

@@ -1,7 +1,8 @@
 """:class:`LiveProcessSink`: the live view's server and encoding in a child process. The same
 spec-written client checks what arrives; the daemon-side counters stay exact when the child is
-stopped (SIGSTOP: the pipe fills, the daemon's queue drops its oldest), killed (reported, the
-daemon goes on) or cannot listen (one line, nothing left running)."""
+stopped (SIGSTOP: the shared ring fills, the daemon drops what does not fit, never waits; the
+stall is reported), killed (reported, the daemon goes on) or cannot listen (one line, nothing
+left running)."""
 
 from __future__ import annotations
 
@@ -40,7 +41,8 @@ def _quiet_sdk_log() -> Iterator[None]:
 
 
 def settings(**kw: Any) -> LiveSection:
-    return LiveSection(**{"enabled": True, "port": 0, "scene_rate_hz": 1000.0, **kw})
+    base = {"enabled": True, "port": 0, "scene_rate_hz": 1000.0, "max_per_update": 100_000}
+    return LiveSection(**{**base, **kw})
 
 
 def test_the_setting_picks_the_sink() -> None:
@@ -84,37 +86,54 @@ def test_nothing_leaves_the_daemon_without_a_subscriber() -> None:
     assert (s.offered, s.not_encoded, s.sent) == (1000, 1000, 0)
 
 
-def test_a_stopped_child_makes_the_daemon_drop_its_oldest_counted() -> None:
-    """SIGSTOP the child: its pipe fills, the forwarder waits, the daemon's queue (10) drops
-    its oldest. Counters stay exact; after SIGCONT the newest message still arrives."""
-    with LiveProcessSink(settings(queue=10)).start() as sink:
+def test_a_stopped_child_is_reported_down_and_nothing_waits_for_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """SIGSTOP the child: the shared ring fills and the daemon drops what does not fit
+    (counted exactly, never blocking); the stall is reported once, ``up`` turns False and
+    nothing more is copied; after SIGCONT it runs again (reported) and the newest arrives."""
+    from cmm_comp.daemon.live import process
+
+    monkeypatch.setattr(process, "STALL_S", 0.3)
+    errors: list[BaseException] = []
+    with LiveProcessSink(settings(queue=10), on_error=errors.append).start() as sink:
         pid = sink.child_pid
         assert pid is not None
         with connect(sink, ["/cmm/raw"]) as client:
             wait_until(lambda: "/cmm/raw" in sink.wanted_topics, "the child's wanted set")
             os.kill(pid, signal.SIGSTOP)
             try:
-                seq = 0
-                while sink.stats().dropped == 0 or seq < 5000:  # until the daemon drops
+                seq, slowest = 0, 0.0
+                while sink.stats().dropped == 0:  # until the ring (64 KiB) is full
                     batch = [raw_rec(seq + i, 1.0, 2.0, 3.0) for i in range(50)]
-                    sink.log_many("/cmm/raw", batch, T0_NS + seq)
+                    t0 = time.perf_counter()
+                    assert sink.log_many("/cmm/raw", batch, T0_NS + seq) == 50
+                    slowest = max(slowest, time.perf_counter() - t0)
                     seq += 50
-                    time.sleep(0.0005)
-                    assert seq < 2_000_000, "the daemon never dropped"
+                    assert seq < 1_000_000, "the ring never filled"
+                full = sink.stats()
+                wait_until(lambda: not sink.stats().up, "the stall noticed", 10.0)
+                assert isinstance(errors[0], LiveChildError) and "has not run" in str(errors[0])
+                sink.log_many("/cmm/raw", [raw_rec(seq, 1.0, 2.0, 3.0)], T0_NS + seq)
+                seq += 1
+                down = sink.stats()
+                assert down.counters()["live_up"] == 0
+                assert down.not_encoded == full.not_encoded + 1  # not even pickled while down
             finally:
                 os.kill(pid, signal.SIGCONT)
-            last = seq - 1
+            wait_until(lambda: sink.stats().up, "the child running again", 20.0)
+            assert "runs again" in str(errors[-1])
+            last = seq
+            sink.log_many("/cmm/raw", [raw_rec(last, 1.0, 2.0, 3.0)], T0_NS + last)
+            seq += 1
             seen: set[int] = set()
-            while last not in seen:  # the newest arrives once the child runs again
+            while last not in seen:
                 seen.update(m.json()["seq"] for m in client.receive(1, timeout_s=20.0))
-            deadline = time.monotonic() + 5.0
-            while not client.statuses and time.monotonic() < deadline:
-                client.drain_text(0.05)
     s = sink.stats()
-    assert s.dropped > 0 and s.queue_len == 0
-    assert s.offered == seq == s.not_encoded + s.dropped + s.sent + s.encode_errors
-    assert len(seen) <= s.sent  # the SDK may drop more for a slow client, never invent
-    assert any("messages dropped" in st["message"] for st in client.statuses)
+    assert slowest < 0.05  # never waited for the stopped child
+    assert full.dropped > 0 and full.dropped == full.dropped_by_topic["/cmm/raw"]
+    assert s.queue_len == 0
+    assert s.offered == seq == s.not_encoded + s.decimated + s.dropped + s.sent + s.encode_errors
 
 
 def test_a_killed_child_is_reported_and_the_daemon_goes_on() -> None:
@@ -126,15 +145,17 @@ def test_a_killed_child_is_reported_and_the_daemon_goes_on() -> None:
         client = connect(sink, ["/cmm/raw"])
         client.close()
         os.kill(pid, signal.SIGKILL)
-        wait_until(lambda: bool(errors), "the death reported")
+        wait_until(lambda: not sink.stats().up, "the death noticed")
         assert isinstance(errors[0], LiveChildError) and "process ended" in str(errors[0])
         assert sink.log_many("/cmm/raw", [raw_rec(1, 0.0, 0.0, 0.0)], T0_NS) == 1
+        assert sink.counters()["live_up"] == 0
     finally:
         t0 = time.monotonic()
         sink.stop(2.0)
         assert time.monotonic() - t0 < 3.0
     s = sink.stats()
-    assert s.offered == s.not_encoded + s.dropped + s.sent + s.encode_errors + s.queue_len
+    assert s.offered == s.not_encoded + s.decimated + s.dropped + s.sent + s.encode_errors
+    assert s.queue_len == 0 and len(errors) == 1
 
 
 def test_a_busy_port_is_one_clear_error_from_the_child() -> None:

@@ -1,43 +1,47 @@
 """The child process of :class:`.process.LiveProcessSink`: the WebSocket server, the JSON
-encoding and the scene of the live view, in an interpreter of their own.
+encoding, the decimation and the scene of the live view, in an interpreter of their own.
 
 Started as ``python -c`` (a fresh interpreter, never ``fork``: the daemon has threads) with one
-end of a duplex pipe. Messages on it are pickled:
+end of a duplex pipe and the shared memory of :mod:`.ring`:
 
-* parent → child: first ``(LiveSection, server name, priority)``, then
-  ``([(topic, payloads, log_time_ns), …], dropped in the daemon so far)``, and finally
-  :data:`STOP`;
-* child → parent: ``("ready", port)`` or ``("start_error", text)`` once, then
-  ``("wanted", [topics])`` whenever the subscriptions change, ``("stats", LiveStats)`` every
-  0.1 s, ``("error", text)`` per problem, and ``("stopped", None)`` last.
+* pipe, parent → child: first ``(LiveSection, server name, priority)``, last :data:`STOP`;
+  child → parent: ``("ready", port)`` or ``("start_error", text)`` once, ``("stopped",
+  status)`` last. Nothing passes on the pipe while the view runs;
+* shared memory: the daemon's records (ring), and from the child the topics some client
+  watches, a heartbeat each loop, and every :data:`STATUS_PERIOD_S` its status
+  ``(LiveStats, errors so far, the newest error texts)``.
 
-The child lowers its CPU priority (``SCHED_IDLE``, else nice 19) before it starts any thread,
-so the sender thread and the SDK's server threads run only on CPU time nothing else wants; it
-ignores SIGINT/SIGTERM (the daemon's handler stops it through the pipe) and ends when the pipe
-closes (the daemon died).
+The child lowers its CPU priority (``SCHED_IDLE``, else nice 19) before it starts anything, so
+its loop and the SDK's server threads run only on CPU time nothing else wants. Its loop runs
+``update_rate_hz`` times a second: read the ring, hand the records to an ordinary
+:class:`LiveSink` (no thread of its own), :meth:`LiveSink.tick` (decimate, encode, send, scene).
+It ignores SIGINT/SIGTERM (the daemon stops it through the pipe) and ends when the pipe closes
+(the daemon died).
 """
 
 from __future__ import annotations
 
-import collections
 import logging
+import os
 import pickle
 import signal
 import sys
 import time
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import Any
 
 from ..osthread import lower_priority, name_os_thread
+from .process import STOP, TOPIC_BITS
+from .ring import SharedRing
 from .server import LiveStartError
 from .sink import LiveSink
 
-STOP = b"stop"
-"""The parent's last message."""
-STATS_PERIOD_S = 0.1
-POLL_S = 0.02
-
-
+STATUS_PERIOD_S = 0.1
+"""The child publishes its status this often, s."""
+ERROR_TEXTS = 8
+"""Newest error texts kept in the status (older ones are only counted)."""
+ERROR_TEXT_MAX = 300
 SDK_LOG_LINES_PER_S = 1.0
 """Lines of the SDK's own log the child writes per second at most (to stderr, the daemon's)."""
 
@@ -80,21 +84,24 @@ def limit_sdk_log(per_s: float = SDK_LOG_LINES_PER_S) -> None:
     logger.propagate = False
 
 
-def child_entry(fd: int) -> None:
-    """Child process entry (``python -c``); ``fd`` is its end of the pipe."""
+def child_entry(fd: int, shm_fd: int, capacity: int) -> None:
+    """Child process entry (``python -c``): ``fd`` is its end of the pipe, ``shm_fd`` the
+    shared memory (:mod:`.ring`, ``capacity`` ring bytes)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     name_os_thread("live-child")
     conn = Connection(fd)
+    ring = SharedRing(shm_fd, capacity)
+    os.close(shm_fd)
     try:
         settings, name, priority = pickle.loads(conn.recv_bytes())
     except (EOFError, OSError):
         conn.close()
         return
-    lower_priority(priority)  # before any thread: the sender and the SDK's threads inherit it
+    lower_priority(priority)  # before any thread: the SDK's threads inherit it
     limit_sdk_log()
     try:
-        child_main(conn, settings, name)
+        child_main(conn, ring, settings, name)
     finally:
         conn.close()
 
@@ -103,41 +110,84 @@ def _send(conn: Connection, kind: str, body: Any) -> None:
     conn.send_bytes(pickle.dumps((kind, body), protocol=pickle.HIGHEST_PROTOCOL))
 
 
-def child_main(conn: Connection, settings: Any, name: str) -> None:
-    """Run a :class:`LiveSink` fed from ``conn`` until :data:`STOP` or the pipe closes."""
-    errors: collections.deque[BaseException] = collections.deque()
+class _Feed:
+    """The child's side of the ring: records into the sink, its status out."""
+
+    def __init__(self, ring: SharedRing, sink: LiveSink) -> None:
+        self.ring = ring
+        self.sink = sink
+        self.taken = 0
+        self.bad = 0
+        self.errors = 0
+        self.texts: list[str] = []
+
+    def error(self, exc: BaseException) -> None:
+        self.errors += 1
+        self.texts = [*self.texts[-(ERROR_TEXTS - 1) :], str(exc)[:ERROR_TEXT_MAX]]
+
+    def read(self) -> None:
+        for n, data in self.ring.read():
+            self.taken += n
+            try:
+                topic, payloads, t_ns = pickle.loads(data)
+            except Exception as exc:  # cannot happen with the daemon's pickles; counted
+                self.bad += n
+                self.error(ValueError(f"live view: a record could not be read: {exc!r}"))
+                continue
+            self.sink.log_many(topic, payloads, t_ns)
+
+    def status(self) -> tuple[Any, int, list[str]]:
+        st = self.sink.stats()
+        st = replace(st, offered=self.taken, encode_errors=st.encode_errors + self.bad)
+        return st, self.errors, list(self.texts)
+
+    def publish(self) -> None:
+        status = self.status()
+        if not self.ring.set_status(pickle.dumps(status, protocol=pickle.HIGHEST_PROTOCOL)):
+            self.ring.set_status(pickle.dumps((status[0], status[1], [])))
+
+    def wanted(self) -> None:
+        mask = 0
+        for topic in self.sink.wanted_topics:
+            mask |= TOPIC_BITS.get(topic, 0)
+        self.ring.set_wanted(mask)
+
+
+def child_main(conn: Connection, ring: SharedRing, settings: Any, name: str) -> None:
+    """Run a :class:`LiveSink` fed from the ring until :data:`STOP` or the pipe closes."""
+    feed: _Feed
     try:
-        sink = LiveSink(settings, on_error=errors.append, name=name).start()
+        sink = LiveSink(settings, on_error=lambda exc: feed.error(exc), name=name)
+        feed = _Feed(ring, sink)
+        sink.start(thread=False)
     except LiveStartError as exc:
         _send(conn, "start_error", str(exc))
         return
+    period_s = 1.0 / settings.update_rate_hz
+    next_status = 0.0
+    ring.beat(time.monotonic_ns())
     _send(conn, "ready", sink.port)
-    wanted: frozenset[str] | None = None
-    next_stats = 0.0
+    parent_gone = False
     try:
         while True:
-            if sink.wanted_topics != wanted:
-                wanted = sink.wanted_topics
-                _send(conn, "wanted", sorted(wanted))
-            while errors:
-                _send(conn, "error", str(errors.popleft()))
-            now = time.monotonic()
-            if now >= next_stats:
-                next_stats = now + STATS_PERIOD_S
-                _send(conn, "stats", sink.stats())
-            if not conn.poll(POLL_S):
-                continue
-            data = conn.recv_bytes()
-            if data == STOP:
+            t0 = time.monotonic()
+            ring.beat(time.monotonic_ns())
+            feed.wanted()
+            feed.read()
+            sink.tick()
+            if t0 >= next_status:
+                next_status = t0 + STATUS_PERIOD_S
+                feed.publish()
+            if conn.poll(0) and conn.recv_bytes() == STOP:
                 break
-            batches, sink.upstream_dropped = pickle.loads(data)
-            for topic, payloads, t_ns in batches:
-                sink.log_many(topic, payloads, t_ns)
+            left = period_s - (time.monotonic() - t0)
+            if left > 0:
+                time.sleep(left)
     except (EOFError, OSError):
-        return  # the daemon is gone: nobody to report to
+        parent_gone = True  # the daemon is gone: nobody to report to
     finally:
+        if not parent_gone:
+            feed.read()  # what the daemon wrote before it asked to stop
         sink.stop(5.0)
-    while errors:
-        _send(conn, "error", str(errors.popleft()))
-    _send(conn, "stats", sink.stats())
-    _send(conn, "stopped", None)
+    feed.publish()
+    _send(conn, "stopped", feed.status())

@@ -1,27 +1,32 @@
-""":class:`LiveProcessSink`: the live view with its server, encoding and scene in a child process.
+""":class:`LiveProcessSink`: the live view with its server, encoding and scene in a child process,
+fed through shared memory: the daemon pays a copy, never a thread, a lock with another thread's
+long work, a system call or a wake-up.
 
-Measured with the daemon (``benchmarks/bench_live.py --daemon``, docs/live.md): a sender
-*thread* that builds JSON and feeds the SDK's server shares the daemon's GIL, and with a client
-subscribed it added ~0.8 ms to the reply latency's p99 at 1 kHz. As the session log does
-(``sessionlog.process_writer``), this sink keeps only the cheap front half in the daemon:
+Measured with the daemon (``benchmarks/bench_live.py --daemon``, docs/live.md). The first
+process sender had a forwarder thread in the daemon that took the queue every 10 ms, pickled it
+and wrote it to a pipe: that thread competed with the reply thread for the GIL (and, preempted
+by the kernel while holding it, made the reply thread wait), woke 100 times a second with a
+client or without, and the child it fed sent every one of 2000 messages a second to the
+client (Foxglove on the same two cores). Now:
 
-* the producers' side is :class:`.sink.LiveSink`'s own (a topic nobody watches is counted and
-  dropped at once; else one short lock and a bounded drop-oldest queue, exact counts);
-* a forwarder thread (``live-forwarder``) takes the queue every 10 ms, pickles the batches
-  (record tuples and small dicts: ~µs per batch) and sends them with one ``send_bytes`` over a
-  duplex pipe; it also receives the child's reports: which topics some client watches (so
-  the daemon keeps dropping the others at no cost), the counters, errors;
-* the child (:mod:`.child`, a fresh interpreter at ``SCHED_IDLE``) runs an ordinary
-  :class:`LiveSink`: its own GIL, and CPU time only when nothing else wants it.
-
-A child that is starved or stopped lets the pipe fill; the forwarder then waits and the queue
-in the daemon drops its oldest messages, counted. A child that dies is reported through
-``on_error``; the daemon goes on, what arrives afterwards is counted as not encoded.
+* the producers' side (:meth:`LiveProcessSink.log_many`, called in the daemon's bookkeeping
+  after the replies are sent) drops a topic nobody watches at once (one byte of shared memory
+  read: the process publishes which topics some client watches), else pickles the batch and
+  copies it into a shared-memory ring (:mod:`.ring`) under a lock only the producers take;
+  a full ring (the process stopped or starved) drops the batch, counted exactly;
+* the process (:mod:`.child`, a fresh interpreter at ``SCHED_IDLE``) polls the ring at
+  ``update_rate_hz`` on its own, decimates (:mod:`.decimate`), encodes and serves; it writes
+  its counters, its errors and a heartbeat into the same shared memory;
+* whoever asks for statistics (the daemon's housekeeping, once per ``metrics.period_s``)
+  reads them there and finds out whether the process died or stalled (no loop for
+  :data:`STALL_S`): reported once through ``on_error``, ``live_up`` 0 in the counters, and
+  nothing more is pickled or copied until it runs again. No answer of the daemon waits for it.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import pickle
 import subprocess
 import sys
@@ -33,22 +38,35 @@ from typing import Any, Self
 
 from cmm_comp.compensation.errors import CmmCompError
 
-from ..osthread import name_os_thread
-from .child import STOP
+from .ring import HEADER_BYTES, SharedRing, ring_bytes, shared_file
 from .server import LiveStartError
 from .settings import LiveSection
-from .sink import LATCHED_TOPICS, POLL_S, STREAMED_TOPICS, LiveSink, LiveStats
+from .sink import LATCHED_TOPICS, STREAMED_TOPICS, LiveSink, LiveStats
 
 START_TIMEOUT_S = 20.0
 """How long :meth:`LiveProcessSink.start` waits for the child's server, s."""
+STALL_S = 3.0
+"""A child that has not looped for this long is reported as stalled (stopped, or starved of
+CPU: it runs at ``SCHED_IDLE``), s."""
+STOP = b"stop"
+"""The parent's last message on the pipe."""
+TOPIC_BITS: dict[str, int] = {topic: 1 << i for i, topic in enumerate(STREAMED_TOPICS)}
+"""The bit of each streamed topic in the shared ``wanted`` mask."""
+_LATCHED_BITS = sum(TOPIC_BITS[t] for t in LATCHED_TOPICS)
 _CHILD_CODE = (
-    "import sys\nfrom cmm_comp.daemon.live.child import child_entry\nchild_entry(int(sys.argv[1]))"
+    "import sys\nfrom cmm_comp.daemon.live.child import child_entry\n"
+    "child_entry(int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]))"
 )
 _EMPTY = LiveStats(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
 
 
 class LiveChildError(CmmCompError, RuntimeError):
-    """A problem the live view's child process reported (its text), or its death."""
+    """A problem the live view's child process reported (its text), its death or a stall."""
+
+
+def topics_of(mask: int) -> frozenset[str]:
+    """The topics of a ``wanted`` bit mask."""
+    return frozenset(t for t, bit in TOPIC_BITS.items() if mask & bit)
 
 
 class LiveProcessSink(LiveSink):
@@ -70,31 +88,45 @@ class LiveProcessSink(LiveSink):
         self._priority = priority
         self._proc: subprocess.Popen[bytes] | None = None
         self._conn: Any = None
+        self._ring: SharedRing | None = None
         self._port = 0
         self._child: LiveStats = _EMPTY
         self._forwarded = 0
         self._parent_errors = 0
-        self._stop_deadline = float("inf")
-        self._child_stopped = False
+        self._down: str | None = None
+        self._dead = False
+        self._errors_seen = 0
+        self._check_lock = threading.Lock()
 
     # ------------------------------------------------------------------ lifecycle
-    def start(self) -> Self:
+    def start(self, thread: bool = True) -> Self:
         """Start the child and wait for its server; :class:`LiveStartError` (one line) when
-        it cannot listen or does not start. Nothing is left running then."""
+        it cannot listen or does not start. Nothing is left running then. (``thread`` is
+        :class:`LiveSink`'s; no thread runs in the daemon here.)"""
+        capacity = ring_bytes(self.settings.queue)
+        try:
+            shm_fd = shared_file(HEADER_BYTES + capacity)
+        except OSError as exc:
+            raise LiveStartError(f"live view: no shared memory ({exc})") from None
         self._conn, child_conn = multiprocessing.Pipe(duplex=True)
         fd = child_conn.fileno()
         try:
+            self._ring = SharedRing(shm_fd, capacity)
             self._proc = subprocess.Popen(
-                [sys.executable, "-c", _CHILD_CODE, str(fd)],
-                pass_fds=(fd,),
+                [sys.executable, "-c", _CHILD_CODE, str(fd), str(shm_fd), str(capacity)],
+                pass_fds=(fd, shm_fd),
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.DEVNULL,
             )
         except OSError as exc:
             self._conn.close()
+            if self._ring is not None:
+                self._ring.close()
+                self._ring = None
             raise LiveStartError(f"live view: cannot start its process ({exc})") from None
         finally:
             child_conn.close()
+            os.close(shm_fd)  # both mappings stay valid
         try:
             self._conn.send_bytes(pickle.dumps((self.settings, self._name, self._priority)))
             kind, body = self._first_reply()
@@ -105,10 +137,7 @@ class LiveProcessSink(LiveSink):
             self._abort()
             raise LiveStartError(str(body))
         self._port = int(body)
-        self._wanted = LATCHED_TOPICS  # the child keeps the newest of these for new clients
         self._topics = frozenset(STREAMED_TOPICS)
-        self._thread = threading.Thread(target=self._run, name="live-forwarder", daemon=True)
-        self._thread.start()
         return self
 
     def _first_reply(self) -> tuple[str, Any]:
@@ -126,13 +155,17 @@ class LiveProcessSink(LiveSink):
     def _abort(self) -> None:
         self._conn.close()
         self._reap(5.0)
+        self._stopped = True
+        if self._ring is not None:
+            self._ring.close()
+            self._ring = None
 
     def _reap(self, timeout_s: float) -> int | None:
         proc = self._proc
         if proc is None:
             return None
         try:
-            return proc.wait(timeout_s)
+            return proc.wait(max(0.0, timeout_s))
         except subprocess.TimeoutExpired:
             proc.kill()
             return proc.wait()
@@ -147,140 +180,175 @@ class LiveProcessSink(LiveSink):
         """The child process id (None before start)."""
         return self._proc.pid if self._proc is not None else None
 
+    @property
+    def wanted_topics(self) -> frozenset[str]:
+        """The topics some client watches, as the child last published them."""
+        ring = self._ring
+        if ring is None or self._stopped:
+            return frozenset()
+        return topics_of(ring.wanted())
+
     def stop(self, timeout_s: float = 2.0) -> bool:
-        """Forward what is queued, let the child send it and stop its server, reap it (killed
-        if it has not ended within ``timeout_s``, s). True when all of it was in time."""
-        if self._stopped:
-            return True
-        self._stopped = True
-        self._stop_deadline = time.monotonic() + timeout_s
-        self._stopping.set()
-        self._wake.set()
+        """Let the child send what it holds and stop its server; reap it (killed if it has
+        not ended within ``timeout_s``, s). True when all of it was in time. Idempotent."""
+        with self._lock:
+            if self._stopped:
+                return True
+            self._stopped = True  # no producer writes into the ring from now on
+        deadline = time.monotonic() + timeout_s
         ok = True
-        if self._thread is not None:
-            self._thread.join(max(0.0, self._stop_deadline - time.monotonic()))
-            ok = not self._thread.is_alive()
-        if self._proc is not None:
+        final: Any = None
+        if self._proc is not None and self._proc.poll() is None:
             try:
-                self._proc.wait(max(0.0, self._stop_deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                ok = False
-                self._proc.kill()
-                self._proc.wait()
-            ok &= self._child_stopped
-        if self._thread is not None:
-            self._thread.join(1.0)  # unblocked by the child's end
+                self._conn.send_bytes(STOP)
+                while final is None and self._conn.poll(max(0.0, deadline - time.monotonic())):
+                    kind, body = pickle.loads(self._conn.recv_bytes())
+                    if kind == "stopped":
+                        final = body
+            except (EOFError, OSError):
+                pass
+            ok = final is not None
+        code = self._reap(max(0.0, deadline - time.monotonic()) if ok else 0.0)
+        with self._check_lock:
+            if final is not None:
+                self._take_status(final)
+            elif not self._dead:
+                self._went_down(f"live view: its process did not stop in time (exit {code})")
+            self._dead = True
+            self._lose_in_flight()
         if self._conn is not None:
             self._conn.close()
+        if self._ring is not None:
+            self._ring.close()
+            self._ring = None
         return ok
 
-    # ------------------------------------------------------------------ statistics
+    # ------------------------------------------------------------------ producers
+    def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
+        """Offer ``payloads`` of ``topic`` (as :meth:`LiveSink.log_many`). A topic no client
+        watches is counted and dropped at once; else the batch is pickled and copied into the
+        shared ring (a full ring drops it, counted). Never blocks on the child."""
+        n = len(payloads)
+        bit = TOPIC_BITS.get(topic)
+        if bit is None or not n or self._ring is None:
+            return n if bit is None or self._ring is None else 0
+        if self._stopped:
+            return 0
+        if self._down is not None or not (bit & (_LATCHED_BITS | self._ring.wanted())):
+            with self._lock:
+                self._offered += n
+                self._idle += n
+            return n
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        try:
+            data = pickle.dumps((topic, payloads, log_time_ns), protocol=pickle.HIGHEST_PROTOCOL)
+            bad = 0
+        except Exception:  # something not plain data in a payload: find it, keep the rest
+            data, bad = self._picklable(topic, payloads, log_time_ns)
+        with self._lock:
+            self._offered += n
+            self._parent_errors += bad
+            if self._stopped or self._ring is None:
+                self._idle += n - bad
+            elif self._ring.write(data, n - bad):
+                self._forwarded += n - bad
+            else:
+                self._dropped += n - bad
+                self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n - bad
+        return n
+
+    def _picklable(self, topic: str, payloads: Sequence[Any], t_ns: int) -> tuple[bytes, int]:
+        keep: list[Any] = []
+        for p in payloads:
+            try:
+                pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception as exc:
+                self._report(ValueError(f"live view: {topic} message not sent: {exc}"))
+                continue
+            keep.append(p)
+        data = pickle.dumps((topic, keep, t_ns), protocol=pickle.HIGHEST_PROTOCOL)
+        return data, len(payloads) - len(keep)
+
+    def kick(self) -> None:
+        """Nothing to wake: the child polls the ring at its own rate."""
+
+    # ------------------------------------------------------------------ statistics, health
     def stats(self) -> LiveStats:
-        """The daemon's counters merged with the child's (the child's lag ≤ 0.1 s while it
-        runs; exact after :meth:`stop`). ``queue_len`` includes messages in the pipe."""
+        """The daemon's counters merged with the child's (which lag ≤ 0.1 s while it runs;
+        exact after :meth:`stop`). ``queue_len`` includes the ring. Also checks the child:
+        a death or a stall is reported once (``on_error``) and ``up`` turns False."""
+        self.check()
         with self._lock:
             offered, idle, dropped = self._offered, self._idle, self._dropped
-            queued, by_topic = self._queued, dict(self._dropped_by)
+            by_topic, forwarded = dict(self._dropped_by), self._forwarded
+            errors = self._parent_errors
         c = self._child
-        in_flight = max(0, self._forwarded - c.offered)
-        for topic, n in c.dropped_by_topic.items():
-            by_topic[topic] = by_topic.get(topic, 0) + n
+        for topic, k in c.dropped_by_topic.items():
+            by_topic[topic] = by_topic.get(topic, 0) + k
         return replace(
             c,
             offered=offered,
             not_encoded=idle + c.not_encoded,
             dropped=dropped + c.dropped,
-            encode_errors=self._parent_errors + c.encode_errors,
-            queue_len=queued + in_flight + c.queue_len,
+            encode_errors=errors + c.encode_errors,
+            queue_len=max(0, forwarded - c.offered) + c.queue_len,
             dropped_by_topic=by_topic,
+            up=self._down is None and self._ring is not None,
         )
 
-    # ------------------------------------------------------------------ forwarder thread
-    def _run(self) -> None:
-        name_os_thread()
+    def check(self) -> None:
+        """Read the child's status from shared memory and see whether it lives and loops."""
+        ring = self._ring
+        if ring is None or self._dead or not self._check_lock.acquire(blocking=False):
+            return
         try:
-            while True:
-                self._wake.wait(POLL_S)
-                self._wake.clear()
-                stopping = self._stopping.is_set()
-                self._receive()
-                self._forward()
-                if stopping:
-                    self._conn.send_bytes(STOP)
-                    self._await_stopped()
-                    return
-        except (OSError, EOFError, ValueError) as exc:  # the child died, the pipe closed
-            self._child_lost(exc)
-
-    def _receive(self, timeout_s: float = 0.0) -> None:
-        conn = self._conn
-        while conn.poll(timeout_s):
-            kind, body = pickle.loads(conn.recv_bytes())
-            if kind == "wanted":
-                self._wanted = frozenset(body) | LATCHED_TOPICS
-            elif kind == "stats":
-                self._child = body
-            elif kind == "error":
-                self._report(LiveChildError(body))
-            elif kind == "stopped":
-                self._child_stopped = True
-                return
-            timeout_s = 0.0
-
-    def _await_stopped(self) -> None:
-        while not self._child_stopped:
-            left = self._stop_deadline - time.monotonic()
-            if left <= 0:
-                return
-            self._receive(min(left, 0.1))
-
-    def _forward(self) -> None:
-        with self._lock:
-            if not self._batches:
-                return
-            batches, self._batches = list(self._batches), type(self._batches)()
-            self._queued = 0
-        try:
-            data = pickle.dumps((batches, self._dropped), protocol=pickle.HIGHEST_PROTOCOL)
-        except Exception:  # something not plain data in a payload: find it, keep the rest
-            batches = self._picklable(batches)
-            data = pickle.dumps((batches, self._dropped), protocol=pickle.HIGHEST_PROTOCOL)
-        self._conn.send_bytes(data)
-        self._forwarded += sum(len(p) for _, p, _ in batches)
-
-    def _picklable(
-        self, batches: list[tuple[str, Sequence[Any], int]]
-    ) -> list[tuple[str, Sequence[Any], int]]:
-        out: list[tuple[str, Sequence[Any], int]] = []
-        for topic, payloads, t_ns in batches:
-            keep: list[Any] = []
-            for p in payloads:
-                try:
-                    pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL)
-                except Exception as exc:
-                    self._parent_errors += 1
-                    self._report(ValueError(f"live view: {topic} message not sent: {exc}"))
-                    continue
-                keep.append(p)
-            if keep:
-                out.append((topic, keep, t_ns))
-        return out
-
-    def _child_lost(self, exc: BaseException) -> None:
-        """The child is gone: say so once, count what waits as dropped, stop taking more."""
-        self._wanted = frozenset()
-        if not self._stopping.is_set():
+            status = ring.status()
+            if status is not None:
+                self._take_status(status)
             code = self._proc.poll() if self._proc is not None else None
-            self._report(LiveChildError(f"live view: its process ended ({exc!r}, exit {code})"))
+            if code is not None:
+                self._dead = True
+                self._down = None  # a stall seen before is superseded: report the death
+                self._went_down(f"live view: its process ended (exit code {code})")
+                self._lose_in_flight()
+                return
+            age_s = (time.monotonic_ns() - ring.heartbeat_ns()) / 1e9
+            if age_s > STALL_S:
+                self._went_down(
+                    f"live view: its process has not run for {age_s:.1f} s (stopped, or "
+                    "starved of CPU at idle priority); nothing is sent to it meanwhile"
+                )
+            elif self._down is not None:
+                self._down = None
+                self._report(LiveChildError("live view: its process runs again"))
+        finally:
+            self._check_lock.release()
+
+    def _take_status(self, status: tuple[LiveStats, int, list[str]]) -> None:
+        stats, n_errors, texts = status
+        self._child = stats
+        new = n_errors - self._errors_seen
+        if new > len(texts):
+            self._report(
+                LiveChildError(f"live view: {new - len(texts)} more errors in its process")
+            )
+        for text in texts[max(0, len(texts) - new) :] if new > 0 else ():
+            self._report(LiveChildError(text))
+        self._errors_seen = n_errors
+
+    def _went_down(self, why: str) -> None:
+        if self._down is None:
+            self._down = why
+            self._report(LiveChildError(why))
+
+    def _lose_in_flight(self) -> None:
+        """The child is gone: what it never took from the ring is dropped (counted in
+        ``dropped``, not per topic: the ring's records are not read back)."""
         with self._lock:
-            for topic, payloads, _ in self._batches:
-                self._dropped += len(payloads)
-                self._dropped_by[topic] = self._dropped_by.get(topic, 0) + len(payloads)
-            self._batches.clear()
-            self._queued = 0
-        lost = max(0, self._forwarded - self._child.offered)
-        self._forwarded -= lost
-        self._dropped += lost
+            lost = max(0, self._forwarded - self._child.offered)
+            self._forwarded -= lost
+            self._dropped += lost
 
 
 def live_sink(

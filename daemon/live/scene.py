@@ -39,6 +39,8 @@ from foxglove.messages import (
 
 from cmm_comp.protocol.codes import Status, mm3_from_nm
 
+from .decimate import pick_evenly as pick_evenly
+
 FRAME_ID = "cmm"
 """Frame of every entity: the machine frame, metres."""
 APPLIED_STATUSES = frozenset(s.label for s in Status if s.geometric_correction_applied)
@@ -222,15 +224,6 @@ def probe_entity(point: ScenePoint) -> SceneEntity:
             )
         ],
     )
-
-
-def pick_evenly(count: int, k: int) -> list[int]:
-    """At most ``k`` indices of ``range(count)``, evenly spread, always ending with the last."""
-    if count <= k:
-        return list(range(count))
-    if k == 1:
-        return [count - 1]
-    return [round(i * (count - 1) / (k - 1)) for i in range(k)]
 
 
 def scene_update(

@@ -49,7 +49,17 @@ class LiveSection:
     """Allow a non-loopback ``host`` (the protocol has no authentication: anyone who reaches the
     port sees every reading)."""
     queue: int = 4096
-    """Messages waiting for the sender thread; when full the oldest are dropped (counted)."""
+    """Messages the live view holds between two updates (the sender's queue: when full the
+    oldest are dropped; with ``sender = "process"`` also the size of the shared-memory ring
+    between the daemon and the process, 256 bytes a message: when full the newest are
+    dropped); every drop is counted."""
+    update_rate_hz: float = 30.0
+    """Updates sent to clients per second, at most (what arrived in between goes out
+    together, the high-rate topics decimated)."""
+    max_per_update: int = 4
+    """``/cmm/raw`` and ``/cmm/corrected`` messages per update, at most (evenly picked, the
+    newest always included; answers not ``ok`` are kept besides): 120 a second each at the
+    defaults. The MCAP log is the full record."""
     scene_rate_hz: float = 20.0
     """At most this many ``/cmm/scene`` updates per second."""
     scene_keep_arrows: int = 256
@@ -61,14 +71,16 @@ class LiveSection:
     """Magnification of the correction arrows: drawn length, mm, per µm of correction."""
     sender: str = "process"
     """Where the JSON encoding, the scene and the WebSocket server run: ``process`` (a child
-    process at ``SCHED_IDLE``: its own GIL, only spare CPU; the daemon keeps the cheap queue)
-    or ``thread`` (a thread of the daemon: shares the reply path's GIL, adds to its p99;
-    docs/live.md)."""
+    process at ``SCHED_IDLE``: its own GIL, only spare CPU; the daemon only copies the records
+    of watched topics into shared memory, no thread, no system call) or ``thread`` (a thread
+    of the daemon: shares the reply path's GIL and costs it measurably; docs/live.md)."""
 
 
 LIVE_RULES: dict[str, Range] = {
     "port": Range(0, 65535),
     "queue": Range(1, 1_000_000, unit="messages"),
+    "update_rate_hz": Range(0.0, 1000.0, lo_open=True, unit="Hz"),
+    "max_per_update": Range(1, 100_000, unit="messages"),
     "scene_rate_hz": Range(0.0, 1000.0, lo_open=True, unit="Hz"),
     "scene_keep_arrows": Range(1, 100_000),
     "scene_max_new_arrows": Range(1, 10_000),

@@ -10,14 +10,18 @@ each call to the MCAP logger and to the sink. On the calling (reply) thread the 
   ``queue`` messages the **oldest** are dropped (a live view wants the newest), counted exactly
   per topic.
 
-A sender thread (``live-sender``) takes the queue, builds each JSON object (the same payload as
+A sender thread (``live-sender``) takes the queue at most ``update_rate_hz`` times a second,
+decimates the high-rate topics (:mod:`.decimate`: at most ``max_per_update`` messages of
+``/cmm/raw`` and of ``/cmm/corrected`` per update, counted ``decimated``), builds each JSON object (the same payload as
 the MCAP log, ``stamp = {sec, nsec}``, non-finite numbers as ``null``, counted), and hands it to
 the SDK's server (``foxglove-sdk``: a Rust WebSocket server on its own threads) with the log time
 as the message time; it also builds ``/cmm/scene`` (:mod:`.scene`) at most ``scene_rate_hz``
 times a second. It runs at normal priority: it shares the GIL with the reply path, and a thread
 of lower OS priority could be preempted while holding the GIL (priority inversion). Its work is
-sliced (the GIL is offered back every few messages); it wakes every 10 ms, or at once when a
-producer's ``kick`` finds the queue half full or a client subscribes.
+sliced (the GIL is offered back every few messages); it wakes once per update, or at once when
+a producer's ``kick`` finds the queue half full or a client subscribes. In the live view's
+process (:mod:`.child`) the same sink runs without its thread: the process's loop calls
+:meth:`LiveSink.tick`.
 
 Errors never stop the daemon: a message that cannot be encoded is counted and passed to
 ``on_error``, an unexpected error in the sender loop is reported and the loop goes on. A server
@@ -36,6 +40,7 @@ from typing import Any, Self
 
 from ..osthread import name_os_thread
 from ..sessionlog.fastjson import FAST_JSON
+from .decimate import kept
 from .payloads import encode_live, live_object
 from .server import LiveServer, LiveStartError, open_live_server
 from .settings import LiveSection, host_problem
@@ -57,8 +62,6 @@ LATCHED_TOPICS: frozenset[str] = frozenset({"/cmm/status", "/cmm/grid"})
 SCENE_TOPIC = "/cmm/scene"
 """The derived ``foxglove.SceneUpdate`` channel (protobuf) of the correction vectors."""
 CORRECTED = "/cmm/corrected"
-POLL_S = 0.01
-"""The sender wakes at least this often, s."""
 YIELD_EVERY = 16
 """The sender offers the GIL back after this many messages."""
 STATUS_PERIOD_S = 1.0
@@ -72,9 +75,12 @@ _PENDING_MAX = 4096
 class LiveStats:
     """Counters since start. For the streamed topics every message offered ends in exactly one
     of ``not_encoded`` (nobody subscribed to its topic when it was offered or sent: never
-    encoded), ``dropped`` (the queue was full: the oldest go), ``sent`` (encoded and handed to
-    the server) or ``encode_errors`` (could not be built or encoded), or still waits
-    (``queue_len``); so ``offered = not_encoded + dropped + sent + encode_errors + queue_len``.
+    encoded), ``decimated`` (left out of an update, :mod:`.decimate`), ``dropped`` (a queue
+    was full), ``sent`` (encoded and handed to the server) or ``encode_errors`` (could not be
+    built or encoded), or still waits (``queue_len``); so ``offered = not_encoded + decimated +
+    dropped + sent + encode_errors + queue_len``. ``up``: the view runs (with
+    ``sender = "process"``: its process is alive and has looped within
+    :data:`.process.STALL_S`).
     ``nulled``: non-finite numbers sent as ``null``. ``replayed``: latched messages sent again
     to new subscribers. Scene: ``scene_updates`` sent, ``scene_points`` drawn, ``scene_decimated``
     left out by the per-update limit, ``scene_skipped`` not drawable (a missing or non-finite
@@ -95,12 +101,16 @@ class LiveStats:
     clients: int
     subscriptions: int
     dropped_by_topic: Mapping[str, int] = field(default_factory=dict)
+    decimated: int = 0
+    up: bool = True
 
     def counters(self) -> dict[str, int]:
         """The counters the daemon publishes (``/cmm/counters``, Prometheus ``cmm_comp_…``)."""
         return {
             "live_sent": self.sent,
             "live_dropped": self.dropped,
+            "live_decimated": self.decimated,
+            "live_up": int(self.up),
             "live_not_encoded": self.not_encoded,
             "live_encode_errors": self.encode_errors,
             "live_nulled": self.nulled,
@@ -152,6 +162,7 @@ class LiveSink:
         self._dropped_by: dict[str, int] = {}
         # counters (sender thread only)
         self._unsent = 0
+        self._decimated = 0
         self._sent = 0
         self._errors = 0
         self._nulled = 0
@@ -180,10 +191,11 @@ class LiveSink:
         self._stopped = False
 
     # ------------------------------------------------------------------ lifecycle
-    def start(self) -> Self:
-        """Create the channels and the server, start the sender thread. Raises
-        :class:`LiveStartError` (one line) when ``foxglove-sdk`` is missing or the address
-        cannot be bound; nothing is left running then."""
+    def start(self, thread: bool = True) -> Self:
+        """Create the channels and the server, start the sender thread (``thread=False``: the
+        caller calls :meth:`tick` instead). Raises :class:`LiveStartError` (one line) when
+        ``foxglove-sdk`` is missing or the address cannot be bound; nothing is left running
+        then."""
         try:
             from . import scene
         except ImportError as exc:
@@ -203,8 +215,9 @@ class LiveSink:
         self._scene_channel = self._server.scene
         self._channels = self._server.channels
         self._topics = frozenset(STREAMED_TOPICS)  # producers start taking messages now
-        self._thread = threading.Thread(target=self._run, name="live-sender", daemon=True)
-        self._thread.start()
+        if thread:
+            self._thread = threading.Thread(target=self._run, name="live-sender", daemon=True)
+            self._thread.start()
         return self
 
     @property
@@ -232,6 +245,8 @@ class LiveSink:
         if self._thread is not None:
             self._thread.join(max(0.0, deadline - time.monotonic()))
             ok = not self._thread.is_alive()
+        elif self._server is not None:
+            self.tick(final=True)  # no thread: send what waits now
         if self._server is not None:
             try:
                 self._server.stop()
@@ -355,6 +370,7 @@ class LiveSink:
         return LiveStats(
             offered=offered,
             not_encoded=idle + self._unsent,
+            decimated=self._decimated,
             dropped=dropped,
             sent=self._sent,
             encode_errors=self._errors,
@@ -377,19 +393,25 @@ class LiveSink:
     # ------------------------------------------------------------------ sender thread
     def _run(self) -> None:
         name_os_thread()
+        period_s = 1.0 / self.settings.update_rate_hz
         while True:
-            self._wake.wait(POLL_S)
+            self._wake.wait(period_s)
             self._wake.clear()
             stopping = self._stopping.is_set()
-            try:
-                self._drain()
-                self._replay_latched()
-                self._scene_tick(time.monotonic(), force=stopping)
-                self._status_tick(time.monotonic())
-            except Exception as exc:  # a bug: reported, the loop goes on
-                self._report(exc)
+            self.tick(final=stopping)
             if stopping:
                 return
+
+    def tick(self, final: bool = False) -> None:
+        """One update: send what waits (decimated), greet new subscribers, the scene (forced
+        when ``final``), the drop warning. Never raises (a bug is reported)."""
+        try:
+            self._drain()
+            self._replay_latched()
+            self._scene_tick(time.monotonic(), force=final)
+            self._status_tick(time.monotonic())
+        except Exception as exc:  # a bug: reported, the loop goes on
+            self._report(exc)
 
     def _drain(self) -> None:
         with self._lock:
@@ -397,6 +419,8 @@ class LiveSink:
                 return
             batches, self._batches = self._batches, collections.deque()
             self._queued = 0
+        keep = self._decimation(batches)
+        index: dict[str, int] = dict.fromkeys(keep, 0)  # running index per decimated topic
         done = 0
         for topic, payloads, t_ns in batches:
             channel = self._channels[topic]
@@ -412,11 +436,35 @@ class LiveSink:
                 )
                 continue
             fast = FAST_JSON.get(topic) if live else None
+            chosen = keep.get(topic)
             for payload in payloads:
-                self._one(topic, channel, payload, t_ns, live, scene, fast)
+                send = live
+                if chosen is not None:
+                    send = live and index[topic] in chosen
+                    index[topic] += 1
+                    if live and not send:
+                        self._decimated += 1
+                        if not scene:
+                            continue
+                self._one(topic, channel, payload, t_ns, send, scene, fast, counted=live)
                 done += 1
                 if done % YIELD_EVERY == 0:
                     time.sleep(0)  # offer the GIL to the reply path
+
+    def _decimation(
+        self, batches: collections.deque[tuple[str, Sequence[Any], int]]
+    ) -> dict[str, set[int]]:
+        """Per decimated topic with more messages than an update takes: the indices (over
+        this update's messages of the topic, oldest first) to send."""
+        per_topic: dict[str, list[Any]] = {}
+        for topic, payloads, _ in batches:
+            per_topic.setdefault(topic, []).extend(payloads)
+        out: dict[str, set[int]] = {}
+        for topic, payloads in per_topic.items():
+            chosen = kept(topic, payloads, self.settings.max_per_update)
+            if chosen is not None:
+                out[topic] = chosen
+        return out
 
     def _one(
         self,
@@ -427,10 +475,12 @@ class LiveSink:
         live: bool,
         scene: bool,
         fast: Callable[[tuple[Any, ...], int], bytes | None] | None,
+        counted: bool = False,
     ) -> None:
-        """Send one message (``live``: its channel has a subscriber) and/or add it to the
-        scene. A record takes the session log's fast path (``sessionlog.fastjson``: the same
-        bytes) unless a field is not plain and finite; then the general path (NaN → null)."""
+        """Send one message (``live``: its channel has a subscriber and it was not decimated)
+        and/or add it to the scene. ``counted``: its fate is already counted (decimated). A
+        record takes the session log's fast path (``sessionlog.fastjson``: the same bytes)
+        unless a field is not plain and finite; then the general path (NaN → null)."""
         obj = None
         try:
             if live:
@@ -440,7 +490,7 @@ class LiveSink:
                     self._nulled += nulled
                 channel.log(data, log_time=t_ns)
                 self._sent += 1
-            else:
+            elif not counted:
                 self._unsent += 1
         except Exception as exc:  # malformed record, not JSON: counted, never fatal
             self._errors += 1
