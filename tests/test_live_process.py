@@ -86,6 +86,29 @@ def test_nothing_leaves_the_daemon_without_a_subscriber() -> None:
     assert (s.offered, s.not_encoded, s.sent) == (1000, 1000, 0)
 
 
+def test_the_daemon_hands_over_only_what_an_update_can_send() -> None:
+    """1000 answers 1 ms apart (log time); ``update_rate_hz = 30``, ``max_per_update = 4``:
+    the child sends at most 120 a second, so the daemon pickles a batch only when 1/120 s
+    (8.33 ms, i.e. 9 readings) has passed since the last one it took, and always an answer
+    not ok. By hand: seqs 0, 9, … 504 (57), the bad one at 505, then 514 … 991 (54): 112."""
+    with (
+        LiveProcessSink(settings(update_rate_hz=30.0, max_per_update=4)).start() as sink,
+        connect(sink, ["/cmm/corrected"]) as client,
+    ):
+        wait_until(lambda: "/cmm/corrected" in sink.wanted_topics, "the child's wanted set")
+        for k in range(1000):
+            status = "outside_volume" if k == 505 else "ok"
+            rec = corr_rec(k, (1, 2, 3), status, (0.5, 0.0, 0.0))
+            sink.log_many("/cmm/corrected", [rec], T0_NS + k * 10**6)
+        assert sink._forwarded == 112
+        seen: set[int] = set()
+        while 505 not in seen:  # the bad answer is never decimated away
+            seen.update(m.json()["seq"] for m in client.receive(1))
+    s = sink.stats()
+    assert s.offered == 1000 == s.decimated + s.sent + s.not_encoded + s.dropped
+    assert s.sent <= 112
+
+
 def test_a_stopped_child_is_reported_down_and_nothing_waits_for_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -107,7 +130,7 @@ def test_a_stopped_child_is_reported_down_and_nothing_waits_for_it(
                 while sink.stats().dropped == 0:  # until the ring (64 KiB) is full
                     batch = [raw_rec(seq + i, 1.0, 2.0, 3.0) for i in range(50)]
                     t0 = time.perf_counter()
-                    assert sink.log_many("/cmm/raw", batch, T0_NS + seq) == 50
+                    assert sink.log_many("/cmm/raw", batch, T0_NS + seq * 10**6) == 50
                     slowest = max(slowest, time.perf_counter() - t0)
                     seq += 50
                     assert seq < 1_000_000, "the ring never filled"

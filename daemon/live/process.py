@@ -38,10 +38,11 @@ from typing import Any, Self
 
 from cmm_comp.compensation.errors import CmmCompError
 
+from .decimate import DECIMATED_TOPICS, is_not_ok
 from .ring import HEADER_BYTES, SharedRing, ring_bytes, shared_file
 from .server import LiveStartError
 from .settings import LiveSection
-from .sink import LATCHED_TOPICS, STREAMED_TOPICS, LiveSink, LiveStats
+from .sink import CORRECTED, LATCHED_TOPICS, STREAMED_TOPICS, LiveSink, LiveStats
 
 START_TIMEOUT_S = 20.0
 """How long :meth:`LiveProcessSink.start` waits for the child's server, s."""
@@ -53,6 +54,7 @@ STOP = b"stop"
 TOPIC_BITS: dict[str, int] = {topic: 1 << i for i, topic in enumerate(STREAMED_TOPICS)}
 """The bit of each streamed topic in the shared ``wanted`` mask."""
 _LATCHED_BITS = sum(TOPIC_BITS[t] for t in LATCHED_TOPICS)
+_DECIMATED_BITS = sum(TOPIC_BITS[t] for t in DECIMATED_TOPICS)
 _CHILD_CODE = (
     "import sys\nfrom cmm_comp.daemon.live.child import child_entry\n"
     "child_entry(int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]))"
@@ -92,6 +94,9 @@ class LiveProcessSink(LiveSink):
         self._port = 0
         self._child: LiveStats = _EMPTY
         self._forwarded = 0
+        self._predecimated = 0
+        self._last_ns: dict[str, int] = {}
+        self._gap_ns = int(1e9 / (settings.update_rate_hz * settings.max_per_update))
         self._parent_errors = 0
         self._down: str | None = None
         self._dead = False
@@ -226,8 +231,11 @@ class LiveProcessSink(LiveSink):
     # ------------------------------------------------------------------ producers
     def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
         """Offer ``payloads`` of ``topic`` (as :meth:`LiveSink.log_many`). A topic no client
-        watches is counted and dropped at once; else the batch is pickled and copied into the
-        shared ring (a full ring drops it, counted). Never blocks on the child."""
+        watches is counted and dropped at once. A batch of ``/cmm/raw`` or ``/cmm/corrected``
+        less than ``1 / (update_rate_hz × max_per_update)`` after the last one taken (by log
+        time) is counted as decimated and dropped (unless it holds an answer not ``ok``): the
+        child could not send more. Else the batch is pickled and copied into the shared ring
+        (a full ring drops it, counted). Never blocks on the child."""
         n = len(payloads)
         bit = TOPIC_BITS.get(topic)
         if bit is None or not n or self._ring is None:
@@ -241,6 +249,16 @@ class LiveProcessSink(LiveSink):
             return n
         if log_time_ns is None:
             log_time_ns = time.time_ns()
+        if bit & _DECIMATED_BITS:
+            since = log_time_ns - self._last_ns.get(topic, 0)
+            if 0 < since < self._gap_ns and not (
+                topic == CORRECTED and any(map(is_not_ok, payloads))
+            ):
+                with self._lock:  # the child would decimate it: not even pickled
+                    self._offered += n
+                    self._predecimated += n
+                return n
+            self._last_ns[topic] = log_time_ns
         try:
             data = pickle.dumps((topic, payloads, log_time_ns), protocol=pickle.HIGHEST_PROTOCOL)
             bad = 0
@@ -282,7 +300,7 @@ class LiveProcessSink(LiveSink):
         with self._lock:
             offered, idle, dropped = self._offered, self._idle, self._dropped
             by_topic, forwarded = dict(self._dropped_by), self._forwarded
-            errors = self._parent_errors
+            errors, predecimated = self._parent_errors, self._predecimated
         c = self._child
         for topic, k in c.dropped_by_topic.items():
             by_topic[topic] = by_topic.get(topic, 0) + k
@@ -290,6 +308,7 @@ class LiveProcessSink(LiveSink):
             c,
             offered=offered,
             not_encoded=idle + c.not_encoded,
+            decimated=predecimated + c.decimated,
             dropped=dropped + c.dropped,
             encode_errors=errors + c.encode_errors,
             queue_len=max(0, forwarded - c.offered) + c.queue_len,
