@@ -477,6 +477,8 @@ UDP_CASES = {  # name: extra daemon config (TOML)
 }
 RELOADS = 10
 BEFORE_TREE = ""
+OTHER_TREES: dict[str, str] = {}
+"""``--other-tree NAME=DIR`` (with ``--only-before``): more trees' daemons, case ``NAME``."""
 """``--before-tree``: a ``cmm_comp`` package folder of an older tree (``git archive`` + links);
 adds the ``daemon_before`` case, that tree's daemon with MCAP on, to the udp_multicast rounds."""
 
@@ -507,7 +509,11 @@ def _udp_round(
     rate_hz: float,
     tmp: Path,
     extra: dict[str, str] | None,
+    cpu_us: list[float] | None = None,
 ) -> tuple[list[float], int]:
+    """One udp_multicast round of case ``name``: latencies (µs) and lost answers; with
+    ``cpu_us``, appends the CPU time the case's process (its threads, not its children: the
+    MCAP writer child is not counted) spent per measured reading, µs."""
     variants = {**UDP_CASES, **(extra or {})}
     port = 46000 + (uuid.uuid4().int % 2000)
     env = None
@@ -516,6 +522,9 @@ def _udp_round(
         env = {**os.environ, "PYTHONPATH": BEFORE_TREE}
         variants[name] = UDP_CASES["daemon"]
         trust = ""  # the older tree knows no grid trust settings
+    elif name in OTHER_TREES:  # a tree that knows the trust settings
+        env = {**os.environ, "PYTHONPATH": OTHER_TREES[name]}
+        variants[name] = UDP_CASES["daemon"]
     if name == "echo":
         cmd = [sys.executable, __file__, "--echo-server", str(port)]
     else:
@@ -563,7 +572,11 @@ def _udp_round(
                     raise RuntimeError("daemon sent no heartbeat within 60 s")
             if name.endswith("_reloads"):
                 return _measure_with_reloads(proc, ctl, rs, rate_hz)
-            return measure(ctl, rs, rate_hz)
+            cpu0 = process_cpu_s(proc.pid)
+            out = measure(ctl, rs, rate_hz)
+            if cpu_us is not None:
+                cpu_us.append((process_cpu_s(proc.pid) - cpu0) / len(rs) * 1e6)
+            return out
     finally:
         if name == "echo":
             assert proc.stdin is not None
@@ -578,6 +591,13 @@ def _udp_round(
             proc.wait(10)
         if proc.stdout is not None:
             proc.stdout.close()
+
+
+def process_cpu_s(pid: int) -> float:
+    """User + system CPU time of process ``pid`` (all its threads), s (``/proc/PID/stat``)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _measure_with_reloads(
@@ -745,23 +765,26 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
     daemon and the bare echo, ``--rounds`` interleaved rounds (order rotated); the p50 and p99
     ratio now / before of every round (the spread says what is noise), and of the pooled
     latencies. Table and ``results/daemon_before.json``."""
-    cases = ["echo", "daemon", "daemon_before"]
+    cases = ["echo", "daemon", "daemon_before", *OTHER_TREES]
     chunk = rs[: 200 + args.n]
     per_round: list[dict[str, dict[str, float]]] = []
     pooled: dict[str, list[float]] = {c: [] for c in cases}
     lost: dict[str, int] = dict.fromkeys(cases, 0)
+    cpu: dict[str, list[float]] = {c: [] for c in cases}
     for k in range(args.rounds):
         shift = k % len(cases)
         row: dict[str, dict[str, float]] = {}
         for name in cases[shift:] + cases[:shift]:
-            values, n_lost = _udp_round(name, grid, chunk, args.rate, tmp, None)
+            values, n_lost = _udp_round(name, grid, chunk, args.rate, tmp, None, cpu[name])
             pooled[name] += values
             lost[name] += n_lost
-            row[name] = pct(values)
+            row[name] = {**pct(values), "cpu_us_per_reading": cpu[name][-1]}
         per_round.append(row)
         print(
             f"round {k + 1}/{args.rounds}: p50 now {row['daemon']['p50']:.0f} before "
-            f"{row['daemon_before']['p50']:.0f} echo {row['echo']['p50']:.0f} µs",
+            f"{row['daemon_before']['p50']:.0f} echo {row['echo']['p50']:.0f} µs; CPU per "
+            f"reading now {row['daemon']['cpu_us_per_reading']:.0f} before "
+            f"{row['daemon_before']['cpu_us_per_reading']:.0f} µs",
             file=sys.stderr,
         )
     r50 = [r["daemon"]["p50"] / r["daemon_before"]["p50"] for r in per_round]
@@ -782,6 +805,21 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
         "p99_ratio_median": float(np.median(r99)),
         "p50_ratio_pooled": total["daemon"]["p50"] / total["daemon_before"]["p50"],
         "p99_ratio_pooled": total["daemon"]["p99"] / total["daemon_before"]["p99"],
+        "cpu_us_per_reading_median": {c: float(np.median(cpu[c])) for c in cases},
+        "other_trees": dict(OTHER_TREES),
+        **{
+            f"p50_ratio_per_round_{name}_over_before": [
+                r[name]["p50"] / r["daemon_before"]["p50"] for r in per_round
+            ]
+            for name in OTHER_TREES
+        },
+        **{
+            f"p50_ratio_per_round_now_over_{name}": [
+                r["daemon"]["p50"] / r[name]["p50"] for r in per_round
+            ]
+            for name in OTHER_TREES
+        },
+        "uptime_loadavg_at_end": os.getloadavg(),
     }
     path = RESULTS.with_name("daemon_before.json")
     path.write_text(json.dumps(out, indent=2) + "\n")
@@ -796,6 +834,18 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
     print(
         f"now / before p99: median {out['p99_ratio_median']:.3f}× "
         f"(min {min(r99):.3f}, max {max(r99):.3f}), pooled {out['p99_ratio_pooled']:.3f}×"
+    )
+    for name in OTHER_TREES:
+        rr = out[f"p50_ratio_per_round_now_over_{name}"]
+        print(
+            f"now / {name} p50: median {np.median(rr):.3f}× (min {min(rr):.3f}, max "
+            f"{max(rr):.3f}); {name} / before: median "
+            f"{np.median(out[f'p50_ratio_per_round_{name}_over_before']):.3f}×"
+        )
+    c = out["cpu_us_per_reading_median"]
+    print(
+        "CPU per reading of the process (median of rounds, µs): "
+        + ", ".join(f"{name} {v:.0f}" for name, v in c.items())
     )
     print(f"wrote {path}")
     return 0
@@ -829,6 +879,14 @@ def main() -> int:
         "rounds and floods on virtual; writes benchmarks/results/daemon_uncertainty.json",
     )
     ap.add_argument(
+        "--other-tree",
+        action="append",
+        default=[],
+        metavar="NAME=DIR",
+        help="with --only-before: also run the daemon of this tree (one that knows the grid "
+        "trust settings) as case NAME in the same rounds",
+    )
+    ap.add_argument(
         "--only-before",
         action="store_true",
         help="with --before-tree: only the udp_multicast daemon against that tree's daemon "
@@ -855,6 +913,9 @@ def main() -> int:
             if not args.before_tree:
                 ap.error("--only-before needs --before-tree")
             BEFORE_TREE = args.before_tree
+            for spec in args.other_tree:
+                name, _, folder = spec.partition("=")
+                OTHER_TREES[name] = folder
             return before_only(grid, rs, args, tmp)
         print("virtual …", file=sys.stderr)
         virt = bench_virtual(grid, rs, args.rate, tmp, args.rounds)

@@ -35,6 +35,7 @@ from .grid_slot import GridLoadError, GridReloader, GridSlot, LoadedGrid, load_g
 from .grid_trust import GridTrust
 from .grid_worker import ProcessGridLoader
 from .live import LiveFanOut, LiveSink, LiveStartError, live_sink
+from .memory import DAEMON_MMAP_THRESHOLD_BYTES, fix_mmap_threshold
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
 from .osthread import name_os_thread
@@ -214,7 +215,12 @@ class DaemonService:
         self.stop()
 
     def run_forever(self) -> int:
-        """Process main loop (main thread): signals drive stop and reload. Returns exit code."""
+        """Process main loop (main thread): signals drive stop and reload. Returns exit code.
+
+        Being the process's loop, it also fixes glibc's mmap threshold
+        (:func:`.memory.fix_mmap_threshold`): a reloaded grid's buffers are then given back
+        to the OS with the grid instead of staying in the heap."""
+        fix_mmap_threshold(DAEMON_MMAP_THRESHOLD_BYTES)
 
         def on_term(signum: int, frame: Any) -> None:
             self._stop.set()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import ctypes
 import dataclasses
 import logging
 import os
@@ -23,6 +22,7 @@ from typing import cast
 
 from cmm_comp.compensation.errors import CmmCompError
 
+from .. import memory
 from ..osthread import expected_priority, lower_priority, name_os_thread
 from .logger import LogSettings, QueuedMessage
 from .thread_writer import McapLogger
@@ -54,8 +54,7 @@ HELP_LOW = 1024
 """…until this many are left."""
 
 
-M_MMAP_THRESHOLD, M_ARENA_MAX = -3, -8  # glibc mallopt() parameters (malloc.h)
-MMAP_THRESHOLD_BYTES = 128 * 1024
+MMAP_THRESHOLD_BYTES = memory.MMAP_THRESHOLD_BYTES
 """Allocations of this size and more (chunk buffers, batches) are mapped and given back to the
 OS when freed. glibc's default raises the threshold after the first such free, and freed chunk
 buffers then stay in the heap: the writer child's RSS crept (~20 MiB/h at 1 kHz)."""
@@ -64,13 +63,7 @@ buffers then stay in the heap: the writer child's RSS crept (~20 MiB/h at 1 kHz)
 def tune_malloc() -> bool:
     """glibc only (else nothing, False): a fixed mmap threshold of
     :data:`MMAP_THRESHOLD_BYTES` and at most two malloc arenas (not one per thread)."""
-    try:
-        libc = ctypes.CDLL(None)
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
-        return False
-    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
-    return bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)) and bool(mallopt(M_ARENA_MAX, 2))
+    return memory.fix_mmap_threshold(MMAP_THRESHOLD_BYTES, None) and memory.limit_arenas(2)
 
 
 def child_entry(fd: int, parent_pid: int) -> None:
