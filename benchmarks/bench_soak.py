@@ -24,7 +24,10 @@ Checks, each against an oracle independent of the daemon's pipeline:
   are events, not readings);
 * memory: RSS of the daemon and of its MCAP writer child (``/proc``), sampled every 5 s; growth
   after the warm-up (the first half, at most 10 min) as a least-squares slope, MiB/h (a
-  few minutes' run still shows warm-up steps: the 1 h run is the figure).
+  few minutes' run still shows warm-up steps: the 1 h run is the figure). Also the slope of
+  the anonymous part alone (``RssAnon``: heap and allocator arenas, where a leak shows; the
+  rest of RSS is shared-library pages faulted in as code paths first run, e.g. the first
+  reload or Modbus flood).
 """
 
 from __future__ import annotations
@@ -73,12 +76,14 @@ def free_port(kind: int) -> int:
         return int(s.getsockname()[1])
 
 
-def rss_mib(pid: int) -> float:
-    """Resident set size of ``pid``, MiB (nan when it is gone)."""
+def rss_mib(pid: int, field: str = "VmRSS") -> float:
+    """A memory field of ``pid``'s ``/proc/PID/status``, MiB (nan when it is gone): ``VmRSS``
+    (resident set), ``RssAnon`` (its anonymous part: the heap, what a leak grows) or
+    ``RssFile`` (mapped files: shared libraries paged in as code paths first run)."""
     try:
         with open(f"/proc/{pid}/status") as f:
             for line in f:
-                if line.startswith("VmRSS:"):
+                if line.startswith(field + ":"):
                     return int(line.split()[1]) / 1024.0
     except OSError:
         pass
@@ -200,6 +205,7 @@ def run(duration_s: float, rate_hz: float, tmp: Path) -> dict[str, Any]:
     cmd += ["--log-level", "error"]
     daemon = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
     rss: dict[str, list[tuple[float, float]]] = {"daemon": [], "writer": []}
+    anon: dict[str, list[tuple[float, float]]] = {"daemon": [], "writer": []}
     answers: list[tuple[int, str, tuple[float, float, float] | None, tuple[float, ...]]] = []
     sent_temps: dict[str, float] = {}
     wrong_ok: list[dict[str, Any]] = []
@@ -224,6 +230,10 @@ def run(duration_s: float, rate_hz: float, tmp: Path) -> dict[str, Any]:
             if now >= next_rss:
                 rss["daemon"].append((now, rss_mib(daemon.pid)))
                 rss["writer"].append((now, rss_mib(writer_pid) if writer_pid else math.nan))
+                anon["daemon"].append((now, rss_mib(daemon.pid, "RssAnon")))
+                anon["writer"].append(
+                    (now, rss_mib(writer_pid, "RssAnon") if writer_pid else math.nan)
+                )
                 next_rss += 5.0
             if now >= next_stale:
                 stale_until, next_stale = now + STALE_S + 1.0, next_stale + 60.0
@@ -308,6 +318,9 @@ def run(duration_s: float, rate_hz: float, tmp: Path) -> dict[str, Any]:
         "daemon_exit_code": code,
         "rss_mib": {k: [round(v, 2) for _, v in s] for k, s in rss.items()},
         "rss_growth_mib_per_h": {k: slope_mib_per_h(s, warm) for k, s in rss.items()},
+        "rss_anon_mib": {k: [round(v, 2) for _, v in s] for k, s in anon.items()},
+        "rss_anon_growth_mib_per_h": {k: slope_mib_per_h(s, warm) for k, s in anon.items()},
+        "rss_sample_period_s": 5.0,
         "warmup_s": warm,
     }
 
@@ -351,6 +364,7 @@ def main() -> int:
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(r, indent=2) + "\n")
     g = r["rss_growth_mib_per_h"]
+    ga = r["rss_anon_growth_mib_per_h"]
     rows = [
         ("duration, s", f"{r['duration_s']:.0f}"),
         ("readings sent / answered", f"{r['readings']} / {r['answers']}"),
@@ -365,6 +379,8 @@ def main() -> int:
         ),
         ("daemon RSS growth after warm-up, MiB/h", f"{g['daemon']:+.2f}"),
         ("MCAP writer RSS growth after warm-up, MiB/h", f"{g['writer']:+.2f}"),
+        ("daemon anonymous RSS growth, MiB/h", f"{ga['daemon']:+.2f}"),
+        ("MCAP writer anonymous RSS growth, MiB/h", f"{ga['writer']:+.2f}"),
         ("daemon exit code after SIGTERM", str(r["daemon_exit_code"])),
     ]
     for name, value in rows:
