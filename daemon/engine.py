@@ -129,7 +129,10 @@ class CorrectionEngine:
         self.logger = logger
         self._stylus = np.asarray(config.grid.stylus_mm, dtype=float)
         self._stylus_t = tuple(float(v) for v in config.grid.stylus_mm)
-        self._applied_cache: dict[tuple[int, bool, bool, bool, bool], Applied] = {}
+        self._applied_cache: tuple[LoadedGrid | None, dict[tuple[bool, bool, bool, bool], Applied]]
+        self._applied_cache = (None, {})
+        """The grid the cache is for (held: its id can never be another grid's) and the cache;
+        one attribute, swapped whole, so two endpoint threads never mix two grids' flags."""
         self._warn_um = config.limits.warn_um
         self._error_um = config.limits.error_um
         self._geometry_only = config.temperatures.on_fault == "geometry_only"
@@ -308,16 +311,20 @@ class CorrectionEngine:
         st: Status,
         u_known: bool = False,
     ) -> Applied:
-        """Terms that went into the answer, and whether its U is known (cached per grid and
-        input pattern)."""
+        """Terms that went into the answer, and whether its U is known (cached per input
+        pattern for the current grid; a new grid starts an empty cache: keyed by ``id``, a
+        reloaded grid could take a freed grid's id and its flags)."""
+        grid, cache = self._applied_cache
+        if grid is not loaded:
+            cache = {}
+            self._applied_cache = (loaded, cache)
         key = (
-            id(loaded),
             bool(temps),
             has_dir and st != Status.MISSING_DIRECTION,
             has_probe,
             u_known,
         )
-        cached = self._applied_cache.get(key)
+        cached = cache.get(key)
         if cached is not None:
             return cached
         applied = Applied.UNCERTAINTY | Applied.GEOMETRY if u_known else Applied.GEOMETRY
@@ -328,13 +335,11 @@ class CorrectionEngine:
             if WORKPIECE in roles:
                 applied |= Applied.WORKPIECE_THERMAL
         needed = set(loaded.input_signals)
-        if key[2] and needed & set(_DIR_KEYS):
+        if key[1] and needed & set(_DIR_KEYS):
             applied |= Applied.REVERSAL
         if has_probe and needed & set(_PROBE_KEYS):
             applied |= Applied.PROBE_DIRECTION
-        if len(self._applied_cache) > 64:
-            self._applied_cache.clear()
-        self._applied_cache[key] = applied
+        cache[key] = applied  # at most 16 keys (four flags)
         return applied
 
     # ------------------------------------------------------------------ after the reply

@@ -68,3 +68,40 @@ def test_a_plain_batch_takes_the_vectorised_path(engine: CorrectionEngine, monke
 
     monkeypatch.setattr(loaded.grid, "correct_point", no_single)
     assert engine.correct_many(rs, NOW_S) == expected
+
+
+def test_applied_flags_follow_the_grid_after_swaps(engine: CorrectionEngine) -> None:
+    """The Applied flags are cached per input pattern for the current grid: after a swap they
+    are the new grid's, also when the new grid object takes a freed grid's memory (and id).
+    Oracle: the flags' definition from the temperature roles the grid declares. Grids alternate
+    with a period of 3 so that a reused address belongs to a grid declaring other roles."""
+    import dataclasses
+    import gc
+
+    from cmm_comp.protocol.codes import Applied
+
+    slot = engine.grids
+    original = slot.current
+    assert original is not None
+    roles = tuple(original.temperature_roles)
+    assert {"T_x", "T_wp"} <= set(roles)
+    declared = (roles, ("T_x",), ("T_wp",))
+    required = engine.config.temperatures.required
+    engine.config.temperatures.required = list(roles)  # the same temperatures every time
+    r = Reading(1, (300_000_000, 500_000_000, 200_000_000))
+    try:
+        for k in range(30):
+            slot._current = None  # the previous grid is freed: its address may be reused
+            gc.collect()
+            grid = dataclasses.replace(original, temperature_roles=declared[k % 3])
+            slot._current = grid
+            answer = engine.correct(r, NOW_S)
+            assert answer.status.label == "ok", answer
+            scale = bool(set(grid.temperature_roles) & {"T_x", "T_y", "T_z"})
+            assert bool(answer.applied & Applied.SCALE_THERMAL) == scale, (k, answer.applied)
+            wp = "T_wp" in grid.temperature_roles
+            assert bool(answer.applied & Applied.WORKPIECE_THERMAL) == wp, (k, answer.applied)
+            del grid, answer
+    finally:
+        slot._current = original
+        engine.config.temperatures.required = required
