@@ -20,15 +20,18 @@ waits, e.g. for the GIL held by the sender thread), plus the process CPU time pe
 (sender thread and the SDK's server threads included). Figures are p50/p99 over all rounds and
 differences against ``off`` of the same run.
 
-``--daemon`` (once ``[live]`` is wired into the daemon's configuration): the daemon's reply
-latency, as ``benchmarks/bench_daemon.py`` measures it (a simulated controller on a ``virtual``
-CAN bus in the same process, 1 kHz, last raw frame → status frame, MCAP on with the default
-writer), with ``[live]`` off, on with the default child-process sender (no client; the
-subscribed client in another process) and on with the sender thread (subscribed): the cases
-in interleaved rounds, a new daemon per round.
+``--daemon``: the daemon's reply latency, as ``benchmarks/bench_daemon.py`` measures it (a
+simulated controller on a ``virtual`` CAN bus in the same process, 1 kHz, last raw frame →
+status frame, MCAP on with the default writer), with ``[live]`` off, off again (an A/A case:
+the noise floor), on with the default process sender and no client, and on with a client
+subscribed to every channel in another process (``--with-thread``: also the sender thread):
+interleaved rounds, the order rotated each round, a new daemon per case and round; per round
+p50/p99 and the ratio to ``live off`` of the same round (median and range over the rounds).
+``--daemon-only`` runs only this part (``benchmarks/results/live_daemon.json``).
 
-The feeder cases above use :class:`LiveSink` (the sender thread) directly: they show what the
-thread costs the process that feeds it.
+The feeder cases above use :class:`LiveSink` (the sender thread) and
+:class:`LiveProcessSink` directly: they show what each costs the thread that feeds it (with
+this machine's cold caches after each 1 ms sleep, a call costs several times its hot cost).
 """
 
 from __future__ import annotations
@@ -284,6 +287,7 @@ def main(argv: list[str]) -> int:
 
 DAEMON_CASES: dict[str, tuple[bool, str, bool]] = {  # name: live enabled, sender, client
     "live off": (False, "process", False),
+    "live off again": (False, "process", False),  # A/A: the ratio's spread with no change
     "live on, no client": (True, "process", False),
     "live on, subscribed": (True, "process", True),
 }
@@ -325,7 +329,9 @@ def bench_live_daemon(
 ) -> dict[str, Any] | None:
     """The daemon's reply latency with the live view off / on idle / on with a client
     subscribed to every channel: interleaved rounds (the order rotated each round), a new
-    daemon per case and round; per round p50/p99 and the ratio on/off of the same round."""
+    daemon per case and round; per round p50/p99 and the ratio on/off of the same round. The
+    case ``live off again`` is ``live off`` once more: its ratio to ``live off`` is what the
+    machine's noise alone gives (an A/A comparison), the yardstick for the others."""
     import tempfile
     import uuid
 
