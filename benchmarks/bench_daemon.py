@@ -155,14 +155,23 @@ def pct(values: list[float]) -> dict[str, float]:
     }
 
 
-def measure(ctl: CanController, rs: list[RawReading], rate_hz: float) -> tuple[list[float], int]:
-    """Latencies (µs) of ``rs`` after a 200-reading warm-up, and how many got no answer."""
+def measure(
+    ctl: CanController,
+    rs: list[RawReading],
+    rate_hz: float,
+    internal_us: list[float] | None = None,
+) -> tuple[list[float], int]:
+    """Latencies (µs) of ``rs`` after a 200-reading warm-up, and how many got no answer;
+    with ``internal_us``, appends the latency each answer's status frame reports (the daemon's
+    own, from the frame completing the reading to the status frame's encoding, µs)."""
     ctl.send_temperatures(Environment().samples(0.0))
     time.sleep(0.02)
     warm = ctl.stream(rs[:200], rate_hz, in_flight=1)
     del warm
     answers = ctl.stream(rs[200:], rate_hz, in_flight=1)
     lost = sum(a.status == "timeout" for a in answers)
+    if internal_us is not None:
+        internal_us += [float(a.daemon_latency_us) for a in answers if a.status != "timeout"]
     return [a.latency_us for a in answers], lost
 
 
@@ -510,6 +519,7 @@ def _udp_round(
     tmp: Path,
     extra: dict[str, str] | None,
     cpu_us: list[float] | None = None,
+    internal_us: list[float] | None = None,
 ) -> tuple[list[float], int]:
     """One udp_multicast round of case ``name``: latencies (µs) and lost answers; with
     ``cpu_us``, appends the CPU time the case's process (its threads, not its children: the
@@ -573,7 +583,7 @@ def _udp_round(
             if name.endswith("_reloads"):
                 return _measure_with_reloads(proc, ctl, rs, rate_hz)
             cpu0 = process_cpu_s(proc.pid)
-            out = measure(ctl, rs, rate_hz)
+            out = measure(ctl, rs, rate_hz, internal_us)
             if cpu_us is not None:
                 cpu_us.append((process_cpu_s(proc.pid) - cpu0) / len(rs) * 1e6)
             return out
@@ -771,14 +781,20 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
     pooled: dict[str, list[float]] = {c: [] for c in cases}
     lost: dict[str, int] = dict.fromkeys(cases, 0)
     cpu: dict[str, list[float]] = {c: [] for c in cases}
+    internal: dict[str, list[float]] = {c: [] for c in cases if c != "echo"}
     for k in range(args.rounds):
         shift = k % len(cases)
         row: dict[str, dict[str, float]] = {}
         for name in cases[shift:] + cases[:shift]:
-            values, n_lost = _udp_round(name, grid, chunk, args.rate, tmp, None, cpu[name])
+            own: list[float] | None = None if name == "echo" else []
+            values, n_lost = _udp_round(name, grid, chunk, args.rate, tmp, None, cpu[name], own)
             pooled[name] += values
             lost[name] += n_lost
             row[name] = {**pct(values), "cpu_us_per_reading": cpu[name][-1]}
+            if own is not None:
+                internal[name] += own
+                row[name]["internal_p50"] = float(np.percentile(own, 50))
+                row[name]["internal_p90"] = float(np.percentile(own, 90))
         per_round.append(row)
         print(
             f"round {k + 1}/{args.rounds}: p50 now {row['daemon']['p50']:.0f} before "
@@ -807,6 +823,17 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
         "p99_ratio_pooled": total["daemon"]["p99"] / total["daemon_before"]["p99"],
         "cpu_us_per_reading_median": {c: float(np.median(cpu[c])) for c in cases},
         "other_trees": dict(OTHER_TREES),
+        "internal_us": {
+            c: {
+                "p50": float(np.percentile(v, 50)),
+                "p90": float(np.percentile(v, 90)),
+                "p99": float(np.percentile(v, 99)),
+            }
+            for c, v in internal.items()
+        },
+        "internal_p50_ratio_per_round": [
+            r["daemon"]["internal_p50"] / r["daemon_before"]["internal_p50"] for r in per_round
+        ],
         **{
             f"p50_ratio_per_round_{name}_over_before": [
                 r[name]["p50"] / r["daemon_before"]["p50"] for r in per_round
@@ -842,6 +869,16 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
             f"{max(rr):.3f}); {name} / before: median "
             f"{np.median(out[f'p50_ratio_per_round_{name}_over_before']):.3f}×"
         )
+    print(
+        "daemon-reported latency (frame completing the reading → status frame encoded), "
+        "pooled p50 / p90 µs: "
+        + ", ".join(f"{n} {v['p50']:.0f} / {v['p90']:.0f}" for n, v in out["internal_us"].items())
+    )
+    ri = out["internal_p50_ratio_per_round"]
+    print(
+        f"daemon-reported p50 now / before: median {np.median(ri):.3f}× (min {min(ri):.3f}, "
+        f"max {max(ri):.3f})"
+    )
     c = out["cpu_us_per_reading_median"]
     print(
         "CPU per reading of the process (median of rounds, µs): "
