@@ -7,10 +7,10 @@ blocks of that size come from the heap of the allocating thread's arena, and fre
 mostly stays in the process. In the daemon that is the grid reload: the prepared grid arrives
 from the reload worker as a pickle of a few MiB and becomes numpy arrays; after the first
 reload every later one left its buffers in the reload thread's arena, so the daemon's resident
-memory rose in steps with reloads (measured: 60 reloads, +29 MiB with glibc's default, +0.5 MiB
-with a fixed threshold; the 1 h soak's daemon grew ~2 MiB/h in such steps). Setting the
-threshold explicitly turns the dynamic adjustment off: grids and other big arrays live in their
-own mappings and leave with them.
+memory rose in steps with reloads (measured, 60 reloads from threads that come and go: +29 MiB
+with glibc's default; +2 MiB once, then flat, with the daemon's fixed thresholds; the 1 h
+soak's daemon grew ~2 MiB/h in such steps). Setting the threshold explicitly turns the dynamic
+adjustment off: grids and other big arrays live in their own mappings and leave with them.
 
 Process-wide: called by the process entry points (``DaemonService.run_forever``, the MCAP
 writer child), never at import. Only the threshold here: limiting the number of arenas (what the
