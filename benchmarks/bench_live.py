@@ -319,9 +319,9 @@ def stop_client(client: subprocess.Popen[str]) -> dict[str, int]:
     return json.loads(line) if line else {}
 
 
-def _spread(values: list[float]) -> str:
+def _spread(values: list[float], digits: int = 3) -> str:
     a = np.array(values)
-    return f"{np.median(a):.3f} ({a.min():.3f}–{a.max():.3f})"
+    return f"{np.median(a):.{digits}f} ({a.min():.{digits}f}–{a.max():.{digits}f})"
 
 
 def bench_live_daemon(
@@ -336,7 +336,7 @@ def bench_live_daemon(
     import uuid
 
     import can
-    from bench_daemon import config, measure, pct, readings
+    from bench_daemon import config, measure, pct, process_cpu_s, readings
 
     from cmm_comp.compensation.grid import CorrectionGrid
     from cmm_comp.compensation.machine import Machine
@@ -354,6 +354,8 @@ def bench_live_daemon(
     per_round: dict[str, list[dict[str, float]]] = {name: [] for name in names}
     pooled: dict[str, list[float]] = {name: [] for name in names}
     lost: dict[str, int] = dict.fromkeys(names, 0)
+    cpu_us: dict[str, list[float]] = {name: [] for name in names}
+    child_cpu_us: dict[str, list[float]] = {name: [] for name in names}
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)
         grid = tmp / "npl.grid"
@@ -379,7 +381,14 @@ def bench_live_daemon(
                     while d.live.stats().subscriptions < 7 and time.monotonic() < deadline:
                         time.sleep(0.01)
                 try:
+                    child = getattr(d.live, "child_pid", None)
+                    cpu0 = time.process_time()
+                    child0 = process_cpu_s(child) if child else 0.0
                     out = measure(ctl, rs, rate_hz)
+                    per = 1e6 / len(rs)
+                    cpu_us[name].append((time.process_time() - cpu0) * per)
+                    if child:
+                        child_cpu_us[name].append((process_cpu_s(child) - child0) * per)
                     time.sleep(0.2)  # the last answers reach the client
                     if d.live is not None:
                         st = d.live.stats()
@@ -405,7 +414,13 @@ def bench_live_daemon(
             print(f"daemon round {k + 1}/{rounds} done", file=sys.stderr, flush=True)
     res: dict[str, Any] = {"rounds": rounds, "readings_per_case_round": n, "rate_hz": rate_hz}
     for name in names:
-        res[name] = {**pct(pooled[name]), "lost": lost[name], "per_round": per_round[name]}
+        res[name] = {
+            **pct(pooled[name]),
+            "lost": lost[name],
+            "per_round": per_round[name],
+            "cpu_us_per_reading_daemon_process": cpu_us[name],
+            "cpu_us_per_reading_view_process": child_cpu_us[name],
+        }
     print(f"\ndaemon reply latency (virtual CAN, {rate_hz:g} Hz, MCAP on), µs, {rounds} rounds")
     print("per round (p50 / p99):")
     print("| round | " + " | ".join(names) + " |")
@@ -426,6 +441,11 @@ def bench_live_daemon(
             f"| {name} | {r['p50']:.0f} | {r['p99']:.0f} | {_spread(r50)} | {_spread(r99)} | "
             f"{r['lost']} |"
         )
+    print("\nCPU µs per reading, median over rounds (min–max): the daemon's process (controller")
+    print("thread included), the view's process")
+    for name in names:
+        view = _spread(child_cpu_us[name], 0) if child_cpu_us[name] else "-"
+        print(f"| {name} | {_spread(cpu_us[name], 0)} | {view} |")
     print(f"client received (all rounds): {received}")
     print(f"live view counters at the end of each case (all rounds): {live_stats}")
     return {**res, "client_received": received, "live_stats": live_stats}
