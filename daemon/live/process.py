@@ -116,7 +116,7 @@ class LiveProcessSink(LiveSink):
         self._conn, child_conn = multiprocessing.Pipe(duplex=True)
         fd = child_conn.fileno()
         try:
-            self._ring = SharedRing(shm_fd, capacity)
+            self._ring = SharedRing(shm_fd, capacity, populate=True)
             self._proc = subprocess.Popen(
                 [sys.executable, "-c", _CHILD_CODE, str(fd), str(shm_fd), str(capacity)],
                 pass_fds=(fd, shm_fd),

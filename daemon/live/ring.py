@@ -76,13 +76,20 @@ def ring_bytes(queue: int) -> int:
 
 class SharedRing:
     """One side's view of the mapping. ``fd``: from :func:`shared_file`; ``capacity``: ring
-    bytes (the mapping is :data:`HEADER_BYTES` + ``capacity``)."""
+    bytes (the mapping is :data:`HEADER_BYTES` + ``capacity``). ``populate``: map every page
+    now (the daemon's side), so that no write into the ring ever takes a page fault (one per
+    new 4 KiB page otherwise: measured at the writer's p99 until the ring had wrapped once)."""
 
-    def __init__(self, fd: int, capacity: int) -> None:
+    def __init__(self, fd: int, capacity: int, populate: bool = False) -> None:
         if capacity <= 0 or capacity % 16:
             raise ValueError(f"ring capacity {capacity} must be a positive multiple of 16")
         self.capacity = capacity
-        self.mm = mmap.mmap(fd, HEADER_BYTES + capacity)
+        size = HEADER_BYTES + capacity
+        flags = mmap.MAP_SHARED | (getattr(mmap, "MAP_POPULATE", 0) if populate else 0)
+        self.mm = mmap.mmap(fd, size, flags=flags)
+        if populate:  # and write each page once: a write fault is not left for later either
+            for off in range(0, size, mmap.PAGESIZE):
+                self.mm[off] = self.mm[off]
         self._head = _U64.unpack_from(self.mm, HEAD_OFF)[0]
         self._tail = _U64.unpack_from(self.mm, TAIL_OFF)[0]
         self._status_seq = 0
