@@ -34,7 +34,7 @@ from .events import EventLog
 from .grid_slot import GridLoadError, GridReloader, GridSlot, LoadedGrid, load_grid
 from .grid_trust import GridTrust
 from .grid_worker import ProcessGridLoader
-from .live import LiveFanOut, LiveSink, LiveStartError, live_sink
+from .live import LiveDownError, LiveFanOut, LiveSink, LiveStartError, live_sink
 from .memory import DAEMON_MMAP_THRESHOLD_BYTES, fix_mmap_threshold
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
@@ -257,6 +257,8 @@ class DaemonService:
     def _on_live_error(self, exc: BaseException) -> None:
         self.metrics.count("live_errors")
         self.events.emit("live_error", "warning", error=str(exc))
+        if isinstance(exc, LiveDownError):  # died, stalled, runs again: the daemon state stays
+            self._status_log(self.state.state, str(exc))
 
     # ------------------------------------------------------------------ grid
     def _load_grid(

@@ -11,11 +11,13 @@ import logging
 import socket
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from foxglove_ws_client import FoxgloveClient
 from test_daemon_support import base_config, channel, daemon_and_controller, send_temps
 
+from cmm_comp.daemon.sessionlog.reader import read_messages
 from cmm_comp.sim_controller.controller import RawReading
 
 
@@ -94,11 +96,12 @@ def test_a_live_view_that_cannot_listen_leaves_the_daemon_running() -> None:
 
 
 def test_a_stopped_or_killed_live_process_never_stalls_the_answers(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     """With a client watching every answer, SIGSTOP and then SIGKILL the live view's process
     while the controller keeps asking: every reading is answered ``ok`` throughout, the stall
-    and the death are events (``live_error``) and the counters say ``live_up`` 0."""
+    and the death are events (``live_error``) and ``/cmm/status`` lines (the daemon's state
+    unchanged), and the counters say ``live_up`` 0."""
     import os
     import signal
 
@@ -109,6 +112,7 @@ def test_a_stopped_or_killed_live_process_never_stalls_the_answers(
     cfg.live.enabled = True
     cfg.live.port = 0
     cfg.metrics.period_s = 0.1  # the housekeeping asks for the counters: that checks the child
+    cfg.mcap.path = str(tmp_path / "run.mcap")
     events = io.StringIO()
 
     next_seq = [0]
@@ -154,3 +158,10 @@ def test_a_stopped_or_killed_live_process_never_stalls_the_answers(
         assert set(statuses) == {"ok"}  # every reading answered, none timed out
         assert d.live.counters()["live_up"] == 0
         assert d.metrics.snapshot()["counters"]["live_errors"] >= 2
+        assert not [c for c in d.state.conditions() if "live" in c]  # not a daemon condition
+    status = [m.payload for m in read_messages(cfg.mcap.path, ["/cmm/status"]).messages]
+    lines = [st for st in status if st["detail"].startswith("live view: its process")]
+    assert any("has not run" in st["detail"] for st in lines), status
+    assert any("process ended" in st["detail"] for st in lines), status
+    counters = [m.payload for m in read_messages(cfg.mcap.path, ["/cmm/counters"]).messages]
+    assert counters[-1]["counters"]["live_up"] == 0

@@ -1,7 +1,7 @@
 """Public API of ``live`` (read by lazy_loader: names load on first use)."""
 
 from .fanout import LiveFanOut
-from .process import LiveChildError, LiveProcessSink, live_sink
+from .process import LiveChildError, LiveDownError, LiveProcessSink, live_sink
 from .server import SUBPROTOCOL, LiveServer, LiveStartError, open_live_server
 from .settings import (
     LIVE_RULES,
@@ -29,6 +29,7 @@ __all__ = [
     "SUBPROTOCOL",
     "LiveChildError",
     "LiveConfigError",
+    "LiveDownError",
     "LiveFanOut",
     "LiveProcessSink",
     "LiveSection",

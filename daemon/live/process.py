@@ -66,6 +66,11 @@ class LiveChildError(CmmCompError, RuntimeError):
     """A problem the live view's child process reported (its text), its death or a stall."""
 
 
+class LiveDownError(LiveChildError):
+    """The live view's process died, stalled, or runs again after a stall (a change of
+    ``live_up``; the daemon writes it to ``/cmm/status`` too)."""
+
+
 def topics_of(mask: int) -> frozenset[str]:
     """The topics of a ``wanted`` bit mask."""
     return frozenset(t for t, bit in TOPIC_BITS.items() if mask & bit)
@@ -340,7 +345,7 @@ class LiveProcessSink(LiveSink):
                 )
             elif self._down is not None:
                 self._down = None
-                self._report(LiveChildError("live view: its process runs again"))
+                self._report(LiveDownError("live view: its process runs again"))
         finally:
             self._check_lock.release()
 
@@ -359,7 +364,7 @@ class LiveProcessSink(LiveSink):
     def _went_down(self, why: str) -> None:
         if self._down is None:
             self._down = why
-            self._report(LiveChildError(why))
+            self._report(LiveDownError(why))
 
     def _lose_in_flight(self) -> None:
         """The child is gone: what it never took from the ring is dropped (counted in
