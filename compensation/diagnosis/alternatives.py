@@ -1,8 +1,9 @@
 """Explanations a session cannot tell apart, and the measurement that would separate them.
 
 After selection, each accepted cause is swapped in turn for every other candidate (the other
-accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit (at its default or its
-rich shape, each parameter beyond the named term's charged one noise variance) is worse by less
+accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit (at its default shape or, for a
+cause of the named one's kind, its rich shape, each parameter beyond the named term's charged one
+noise variance) is worse by less
 than the ``1 − alpha`` quantile of χ²(1) times the noise variance is an *alternative*: the data
 do not prefer the named cause over it. Typical case: with one stylus straight down, an angular
 error of Z and a straightness of Z have the same Abbe arm and act identically.
@@ -149,10 +150,13 @@ def find_alternatives(
     for root in pool:
         if root.identity in taken:
             continue
-        # the family at its default and its rich shape: a cause the session cannot tell from the
-        # named one may need its richer shape to act alike (a twist that sags along the other
-        # axis); each parameter beyond the named term's is charged the σ² it gains from noise
-        for cand in (root,) if root.rich is None else (root, root.rich):
+        # the family at its default and, for a cause of the named one's kind (a twist of
+        # another carriage, a table of another component), its rich shape: a cause the session
+        # cannot tell from the named one may need its richer shape to act alike (a twist that
+        # sags along the other axis); each parameter beyond the named term's is charged the σ²
+        # it gains from noise
+        same_kind = root.cause == term.candidate.cause and root.rich is not None
+        for cand in (root, root.rich) if same_kind and root.rich is not None else (root,):
             theta, rss, _ = best_theta(problem, others, cand)
             charged = rss + sigma2 * max(cand.n_params - n_named, 0)
             if charged - rss_after < threshold:

@@ -534,9 +534,10 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             (o1, w1), (o2, w2) = COUPLING_ORDERS
             if comp in LINEAR:
                 # a straightness that varies with b by the same amount all along a is a
-                # translation that depends on b alone: a straightness table of b (parametric),
-                # whatever the chain — only the part growing along a is a coupling
-                o1, o2 = tuple(k for k in o1 if k), tuple(k for k in o2 if k)
+                # translation that depends on b alone: a table of b, whatever the chain — not a
+                # coupling's default shape (a table of b competes with it as itself); the rich
+                # shape keeps it, so a coupling that has such a part is still one cause
+                o1 = tuple(k for k in o1 if k)
             n1, n2 = COUPLING_ALONG
             out.append(
                 Candidate(
