@@ -101,6 +101,7 @@ class LiveProcessSink(LiveSink):
         self._forwarded = 0
         self._predecimated = 0
         self._last_ns: dict[str, int] = {}
+        self._last_bad_ns = 0
         self._gap_ns = int(1e9 / (settings.update_rate_hz * settings.max_per_update))
         self._parent_errors = 0
         self._down: str | None = None
@@ -238,8 +239,8 @@ class LiveProcessSink(LiveSink):
         """Offer ``payloads`` of ``topic`` (as :meth:`LiveSink.log_many`). A topic no client
         watches is counted and dropped at once. A batch of ``/cmm/raw`` or ``/cmm/corrected``
         less than ``1 / (update_rate_hz × max_per_update)`` after the last one taken (by log
-        time) is counted as decimated and dropped (unless it holds an answer not ``ok``): the
-        child could not send more. Else the batch is pickled and copied into the shared ring
+        time) is counted as decimated and dropped (an answer not ``ok`` has a gate of its
+        own, :meth:`_gate`): the child could not send more. Else the batch is pickled and copied into the shared ring
         (a full ring drops it, counted). Never blocks on the child."""
         n = len(payloads)
         bit = TOPIC_BITS.get(topic)
@@ -254,16 +255,11 @@ class LiveProcessSink(LiveSink):
             return n
         if log_time_ns is None:
             log_time_ns = time.time_ns()
-        if bit & _DECIMATED_BITS:
-            since = log_time_ns - self._last_ns.get(topic, 0)
-            if 0 < since < self._gap_ns and not (
-                topic == CORRECTED and any(map(is_not_ok, payloads))
-            ):
-                with self._lock:  # the child would decimate it: not even pickled
-                    self._offered += n
-                    self._predecimated += n
-                return n
-            self._last_ns[topic] = log_time_ns
+        if bit & _DECIMATED_BITS and not self._gate(topic, payloads, log_time_ns):
+            with self._lock:  # the child would decimate it: not even pickled
+                self._offered += n
+                self._predecimated += n
+            return n
         try:
             data = pickle.dumps((topic, payloads, log_time_ns), protocol=pickle.HIGHEST_PROTOCOL)
             bad = 0
@@ -280,6 +276,22 @@ class LiveProcessSink(LiveSink):
                 self._dropped += n - bad
                 self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n - bad
         return n
+
+    def _gate(self, topic: str, payloads: Sequence[Any], t_ns: int) -> bool:
+        """True to hand over this batch of a decimated topic: the first one at least one gap
+        (``1 / (update_rate_hz × max_per_update)``, by log time) after the last one taken;
+        within a gap, a ``/cmm/corrected`` batch holding an answer not ok, if no such batch
+        was taken within a gap either (so a blip always passes, a flood at most doubles)."""
+        gap = self._gap_ns
+        if not 0 < t_ns - self._last_ns.get(topic, 0) < gap:
+            self._last_ns[topic] = t_ns
+            return True
+        if topic != CORRECTED or 0 < t_ns - self._last_bad_ns < gap:
+            return False
+        if any(map(is_not_ok, payloads)):
+            self._last_bad_ns = t_ns
+            return True
+        return False
 
     def _picklable(self, topic: str, payloads: Sequence[Any], t_ns: int) -> tuple[bytes, int]:
         keep: list[Any] = []
