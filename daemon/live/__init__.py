@@ -5,9 +5,13 @@ over the Foxglove WebSocket protocol (``foxglove-sdk``, optional extra ``live``;
 * :mod:`.payloads` - one logged message to the JSON the view sends (non-finite as ``null``);
 * :mod:`.scene` - the correction vectors as ``foxglove.SceneUpdate`` arrows;
 * :mod:`.server` - the ``foxglove-sdk`` side: its own context, the channels, the server;
-* :mod:`.sink` - :class:`LiveSink`: bounded queue, sender thread, WebSocket server;
-* :mod:`.process` - :class:`LiveProcessSink`: the same with the sender and the server in a
-  child process (:mod:`.child`), the daemon's default; :func:`live_sink` picks by setting;
+* :mod:`.decimate` - which messages of an update are sent (the high-rate topics decimated);
+* :mod:`.sink` - :class:`LiveSink`: bounded queue, updates (``tick``), sender thread,
+  WebSocket server;
+* :mod:`.ring` - the shared memory between the daemon and the view's process;
+* :mod:`.process` - :class:`LiveProcessSink`, the daemon's default: the daemon copies the
+  watched records into the ring (no thread, no system call), a child process
+  (:mod:`.child`) runs the rest; :func:`live_sink` picks by setting;
 * :mod:`.fanout` - :class:`LiveFanOut`: the MCAP logger and the sink behind one
   ``SessionLogger``.
 
