@@ -2,7 +2,7 @@
 
 After selection, each accepted cause is swapped in turn for every other candidate (the other
 accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit (at its default shape or, for a
-cause of the named one's kind, its rich shape, each parameter beyond the named term's charged one
+cause of the named one's kind — tables and couplings are one kind —, its rich shape, each parameter beyond the named term's charged one
 noise variance) is worse by less
 than the ``1 − alpha`` quantile of χ²(1) times the noise variance is an *alternative*: the data
 do not prefer the named cause over it. Typical case: with one stylus straight down, an angular
@@ -29,6 +29,15 @@ from .fitting import Problem, Term, best_theta
 from .residuals import FloatArray, Residuals
 
 __all__ = ["find_alternatives", "separating_measurement"]
+
+#: Causes of one kind: geometric shapes of the tables (a table of one carriage and a twist of
+#: another act alike through the chain); any other cause is a kind of its own.
+_GEOMETRIC = frozenset({"parametric", "coupling"})
+
+
+def _kind(cause: str) -> str:
+    return "geometric" if cause in _GEOMETRIC else cause
+
 
 #: Above this relative misfit in a hypothetical session, the measurement separates the two.
 SEPARATES = 0.3
@@ -155,7 +164,7 @@ def find_alternatives(
         # cannot tell from the named one may need its richer shape to act alike (a twist that
         # sags along the other axis); each parameter beyond the named term's is charged the σ²
         # it gains from noise
-        same_kind = root.cause == term.candidate.cause and root.rich is not None
+        same_kind = _kind(root.cause) == _kind(term.candidate.cause) and root.rich is not None
         for cand in (root, root.rich) if same_kind and root.rich is not None else (root,):
             theta, rss, _ = best_theta(problem, others, cand)
             charged = rss + sigma2 * max(cand.n_params - n_named, 0)
