@@ -531,7 +531,8 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 continue
             sa, sb = _span(res, comp[-1]), _span(res, other)
             keys = {"component": comp, "varies_with": other}
-            (o1, w1), (o2, w2) = COUPLING_ORDERS
+            (o1_all, w1), (o2, w2) = COUPLING_ORDERS
+            o1: tuple[int, ...] = o1_all
             if comp in LINEAR:
                 # a straightness that varies with b by the same amount all along a is a
                 # translation that depends on b alone: a table of b, whatever the chain — not a
