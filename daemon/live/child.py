@@ -39,6 +39,9 @@ from .sink import LiveSink
 
 STATUS_PERIOD_S = 0.1
 """The child publishes its status this often, s."""
+IDLE_PERIOD_S = 0.1
+"""The child's loop period while no client watches anything (else ``1 / update_rate_hz``), s:
+fewer wake-ups beside the daemon; a new subscriber is seen within it."""
 ERROR_TEXTS = 8
 """Newest error texts kept in the status (older ones are only counted)."""
 ERROR_TEXT_MAX = 300
@@ -180,7 +183,8 @@ def child_main(conn: Connection, ring: SharedRing, settings: Any, name: str) -> 
                 feed.publish()
             if conn.poll(0) and conn.recv_bytes() == STOP:
                 break
-            left = period_s - (time.monotonic() - t0)
+            wait_s = period_s if sink.wanted_topics else max(period_s, IDLE_PERIOD_S)
+            left = wait_s - (time.monotonic() - t0)
             if left > 0:
                 time.sleep(left)
     except (EOFError, OSError):
