@@ -25,7 +25,12 @@ transport, so read the differences and ratios, not absolute numbers (the machine
   answers, answers missing from the MCAP file and the log's drops per topic (read from the
   log's own exact counters once it has stopped); ratios daemon/echo in the same process.
 * ``--before-tree``: the udp_multicast rounds also run an older tree's daemon (MCAP on): the
-  reply latency now against before, same run, interleaved.
+  reply latency now against before, same run, interleaved. ``--only-before`` runs just that
+  (echo, now, before, and ``--other-tree NAME=DIR`` daemons) for ``--rounds`` rounds of ``--n``
+  readings and reports per-round ratios (their spread is the noise), the latency each daemon
+  reports in its status frames (reading complete → status encoded: no transport, steadier) and
+  CPU per reading; ``benchmarks/results/daemon_before.json``. A tree folder holds
+  ``cmm_comp/<package>`` links to a ``git worktree`` of the commit.
 * Uncertainty (issue 13): ``daemon_mcap_u`` is ``daemon_mcap`` with the grid carrying U (the
   same grid plus the virtual CMM's covariances) and ``[can] send_uncertainty`` on (U computed
   per reading, a fifth frame sent), in the same interleaved rounds, for latency and for the
