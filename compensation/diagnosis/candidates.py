@@ -585,18 +585,25 @@ def all_candidates(res: Residuals) -> list[Candidate]:
         if not moved[a]:
             continue
         if res.has("T_top", "T_bottom"):
-            out.append(
-                _imaged(
-                    Candidate(
-                        "thermal_gradient",
-                        {"axis": a},
-                        5,
-                        gradient_builder(a),
-                        drivers=("T_top", "T_bottom"),
-                    ).with_rich(n_params=8),
-                    res,
-                )
+            gradient = _imaged(
+                Candidate(
+                    "thermal_gradient",
+                    {"axis": a},
+                    5,
+                    gradient_builder(a),
+                    drivers=("T_top", "T_bottom"),
+                ).with_rich(n_params=8),
+                res,
             )
+            out.append(gradient)
+            # a beam calibrated on site, in another gradient than the session's mean: its
+            # bend then is in the tables (several of them: a straightness, its carriage's
+            # tilt, the Abbe term of the scale), and what the session sees is mostly that
+            # image; the default shape with its image competes as a second shape of the same
+            # cause (its image must not be all it explains: the static-part test applies)
+            on_site = with_static_image(gradient, res)
+            on_site.rich = gradient.rich
+            out.append(on_site)
         if res.has(f"T_{a}"):
             # the scale expands about the reference (one parameter) or about a free fixing
             # point (a scale clamped at one end): both shapes compete; rich: plus the image
