@@ -14,7 +14,9 @@ The cases below were missed by an earlier diagnosis, each for a physical reason 
 * a coupling on ISO 10360 length lines with five styli, where each half of the volume sees other
   styli: the "same law across the volume" test must not extrapolate what a half cannot pin down;
 * a straightness table change whose reference line was fitted on the session's points: the
-  line is part of the table change, not a second cause (a squareness).
+  line is part of the table change, not a second cause (a squareness);
+* a thermal gradient calibrated on site: the session sees mostly the static image of the bend
+  in the tables, beside its variation with T_top − T_bottom.
 
 The full rate table is benchmarks/bench_discovery_heldout.py (not in the suite: minutes).
 """
@@ -69,6 +71,10 @@ CASES = [
     # MH2, five styli: a smooth random change of the Y straightness of Z (line removed on the
     # session's points)
     (("parametric",), (3.0,), 1, "parametric-3x-s1"),
+    # the outside check's design: a Y guideway on Bessel supports bending with T_top − T_bottom,
+    # calibrated on site in another gradient (what the session sees is mostly the image of the
+    # bend in the tables), beside an S-shaped change of the X pitch table
+    (("thermal_gradient", "parametric"), (3.0, 0.5), 0, "thermal_gradient+parametric-3x0.5x-s0"),
 ]
 
 
