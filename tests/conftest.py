@@ -55,6 +55,21 @@ def _no_leaked_processes() -> Iterator[None]:
     assert not leaked, f"test leaked child processes: {sorted(leaked)}"
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _quiet_foxglove_log() -> Iterator[None]:
+    """foxglove-sdk forwards its Rust log records to Python ``logging`` from the server's own
+    threads (pyo3-log); making a record registers that thread as a ``threading._DummyThread``,
+    which the leak check below would report although it is the SDK's runtime thread, alive for
+    the process. The SDK's log is switched off for the suite (tests read its effects instead)."""
+    import logging
+
+    logger = logging.getLogger("foxglove")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    yield
+    logger.setLevel(level)
+
+
 @pytest.fixture(autouse=True)
 def _no_leaked_threads() -> Iterator[None]:
     before = {t.ident for t in threading.enumerate()}

@@ -10,7 +10,6 @@ never stop the sink."""
 from __future__ import annotations
 
 import json
-import logging
 import math
 import os
 import socket
@@ -37,19 +36,6 @@ from cmm_comp.daemon.sessionlog.encoding import encode_message, json_encoder
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message
 
 T0_NS = 1_700_000_000_123_456_789
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _quiet_sdk_log() -> Iterator[None]:
-    """foxglove-sdk forwards its Rust log records to Python ``logging`` from the server's own
-    threads (pyo3-log); making a record registers that thread as a ``threading._DummyThread``,
-    which the suite's leak check would report although it is the SDK's runtime thread, alive
-    for the process. The SDK's log is switched off here (the tests read its effects instead)."""
-    logger = logging.getLogger("foxglove")
-    level = logger.level
-    logger.setLevel(logging.CRITICAL + 1)
-    yield
-    logger.setLevel(level)
 
 
 def raw_rec(seq: int, x: float, y: float, z: float) -> tuple[Any, ...]:

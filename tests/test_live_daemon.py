@@ -7,10 +7,8 @@ from __future__ import annotations
 
 import io
 import json
-import logging
 import socket
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,16 +17,6 @@ from test_daemon_support import base_config, channel, daemon_and_controller, sen
 
 from cmm_comp.daemon.sessionlog.reader import read_messages
 from cmm_comp.sim_controller.controller import RawReading
-
-
-@pytest.fixture(autouse=True)
-def _quiet_sdk_log() -> Iterator[None]:
-    """See tests/test_live.py: the SDK's log records would register its threads as dummies."""
-    logger = logging.getLogger("foxglove")
-    level = logger.level
-    logger.setLevel(logging.CRITICAL + 1)
-    yield
-    logger.setLevel(level)
 
 
 def test_the_daemon_streams_its_answers_live() -> None:

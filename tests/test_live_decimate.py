@@ -6,24 +6,11 @@ properties of the picks, and seqs worked out by hand for one update seen by a cl
 from __future__ import annotations
 
 import itertools
-import logging
-from collections.abc import Iterator
 
-import pytest
 from test_live import T0_NS, connect, corr_rec, raw_rec, settings
 
 from cmm_comp.daemon.live import LiveSink
 from cmm_comp.daemon.live.decimate import is_not_ok, kept, pick_evenly
-
-
-@pytest.fixture(autouse=True)
-def _quiet_sdk_log() -> Iterator[None]:
-    """See tests/test_live.py."""
-    logger = logging.getLogger("foxglove")
-    level = logger.level
-    logger.setLevel(logging.CRITICAL + 1)
-    yield
-    logger.setLevel(level)
 
 
 def test_pick_evenly_is_even_and_keeps_the_newest() -> None:

@@ -4,7 +4,6 @@ for message, what the MCAP session log wrote in the same run (payload and log ti
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -34,16 +33,6 @@ def engine() -> Iterator[CorrectionEngine]:
         for sensor, temp in enumerate((20.7, 21.1, 19.6, 20.3)):
             d.temperatures.update(sensor, temp, 1, True, NOW_S)
         yield d.engine
-
-
-@pytest.fixture(autouse=True)
-def _quiet_sdk_log() -> Iterator[None]:
-    """See tests/test_live.py: the SDK's log records would register its threads as dummies."""
-    logger = logging.getLogger("foxglove")
-    level = logger.level
-    logger.setLevel(logging.CRITICAL + 1)
-    yield
-    logger.setLevel(level)
 
 
 def test_live_equals_the_engine_and_the_mcap_log(engine: CorrectionEngine, tmp_path: Path) -> None:

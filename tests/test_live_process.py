@@ -11,7 +11,6 @@ import os
 import signal
 import socket
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -28,16 +27,6 @@ from cmm_comp.daemon.live import (
     live_section_from_table,
     live_sink,
 )
-
-
-@pytest.fixture(autouse=True)
-def _quiet_sdk_log() -> Iterator[None]:
-    """See tests/test_live.py (the child's SDK logs to its own stderr, not here)."""
-    logger = logging.getLogger("foxglove")
-    level = logger.level
-    logger.setLevel(logging.CRITICAL + 1)
-    yield
-    logger.setLevel(level)
 
 
 def settings(**kw: Any) -> LiveSection:
