@@ -204,12 +204,17 @@ def finish_writer(writer: Writer) -> None:
             if crcs:
                 crc = zlib.crc32(data, crc)
 
-    def group(opcode: int, records: Any) -> None:
-        start = written
+    def encoded(records: Any) -> list[bytes]:
         rb = RecordBuilder()
         for record in records:
             record.write(rb)
-        emit(rb.end())
+        return [rb.end()]
+
+    def group(opcode: int, blocks: Any) -> None:
+        """One summary group from its encoded blocks, and its offset record."""
+        start = written
+        for block in blocks:
+            emit(block)
         offsets.append(
             SummaryOffset(
                 group_opcode=opcode,
@@ -220,39 +225,22 @@ def finish_writer(writer: Writer) -> None:
 
     index_types = w["index_types"]
     if w["repeat_schemas"]:
-        group(Opcode.SCHEMA, w["schemas"].values())
+        group(Opcode.SCHEMA, encoded(w["schemas"].values()))
     if w["repeat_channels"]:
-        group(Opcode.CHANNEL, w["channels"].values())
+        group(Opcode.CHANNEL, encoded(w["channels"].values()))
     if w["use_statistics"]:
-        group(Opcode.STATISTICS, [w["statistics"]])
+        group(Opcode.STATISTICS, encoded([w["statistics"]]))
     if index_types & IndexType.CHUNK:
         chunk_indices = w["chunk_indices"]
-        start = written
-        if isinstance(chunk_indices, ChunkIndexSpool):
-            for block in chunk_indices.blocks():
-                emit(block)
-        else:
-            rb = RecordBuilder()
-            for index in chunk_indices:
-                index.write(rb)
-            emit(rb.end())
-        offsets.append(
-            SummaryOffset(
-                group_opcode=Opcode.CHUNK_INDEX,
-                group_start=summary_start + start,
-                group_length=written - start,
-            )
-        )
+        spooled = isinstance(chunk_indices, ChunkIndexSpool)
+        group(Opcode.CHUNK_INDEX, chunk_indices.blocks() if spooled else encoded(chunk_indices))
     if index_types & IndexType.ATTACHMENT:
-        group(Opcode.ATTACHMENT_INDEX, w["attachment_indexes"])
+        group(Opcode.ATTACHMENT_INDEX, encoded(w["attachment_indexes"]))
     if index_types & IndexType.METADATA:
-        group(Opcode.METADATA_INDEX, w["metadata_indexes"])
+        group(Opcode.METADATA_INDEX, encoded(w["metadata_indexes"]))
     summary_offset_start = summary_start + written if w["use_summary_offsets"] else 0
     if w["use_summary_offsets"]:
-        rb = RecordBuilder()
-        for offset in offsets:
-            offset.write(rb)
-        emit(rb.end())
+        emit(encoded(offsets)[0])
     summary_crc = 0
     if crcs:
         footer_head = struct.pack(
