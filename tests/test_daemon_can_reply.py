@@ -57,10 +57,11 @@ class CaptureBus(can.BusABC):
         return None, False
 
 
-def endpoint(node_id: int = 0) -> tuple[CanEndpoint, CaptureBus]:
+def endpoint(node_id: int = 0, send_uncertainty: bool = False) -> tuple[CanEndpoint, CaptureBus]:
     """An endpoint whose bus is open (no thread started: the test calls the reply path)."""
     bus = CaptureBus()
     cfg = CanSection(interface="virtual", channel="capture", node_id=node_id, log_frames=False)
+    cfg.send_uncertainty = send_uncertainty
     ep = CanEndpoint(
         cfg,
         engine=None,  # type: ignore[arg-type]  # the reply path does not correct

@@ -17,6 +17,7 @@ import math
 import struct
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import can
@@ -27,7 +28,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
-from test_daemon_can_reply import CaptureBus
+from test_daemon_can_reply import endpoint
 from test_daemon_support import (
     STYLUS,
     _workdir,
@@ -48,15 +49,10 @@ from cmm_comp.compensation.grid.uncertainty import (
     GridUncertainty,
     ThermalUncertainty,
 )
-from cmm_comp.daemon.can_endpoint import CanEndpoint
-from cmm_comp.daemon.config import CanSection
 from cmm_comp.daemon.engine import U_UNKNOWN, Answer, CorrectionEngine, Reading
-from cmm_comp.daemon.events import EventLog
-from cmm_comp.daemon.metrics import Metrics
 from cmm_comp.daemon.service import DaemonService
 from cmm_comp.daemon.sessionlog.replay import replay_offline
-from cmm_comp.daemon.state import StateBoard
-from cmm_comp.protocol import Applied, Axis, CanIds, DaemonState, Heartbeat, Status, dbc_text
+from cmm_comp.protocol import Applied, Axis, CanIds, Heartbeat, Status, dbc_text
 from cmm_comp.protocol.codes import NM_PER_MM
 from cmm_comp.sim_controller.controller import RawReading
 
@@ -243,19 +239,7 @@ def test_endpoint_u_frame_is_byte_exact_against_cantools(
 ) -> None:
     """The endpoint's reply path with hypothesis U values: its five frames equal cantools
     encoding the DBC from the raw values of the rounding rule, and decode to U or more."""
-    bus = CaptureBus()
-    cfg = CanSection(interface="virtual", channel="capture", log_frames=False)
-    cfg.send_uncertainty = True
-    ep = CanEndpoint(
-        cfg,
-        engine=None,  # type: ignore[arg-type]  # the reply path does not correct
-        state=StateBoard(lambda *_: None),
-        heartbeat=lambda: Heartbeat(DaemonState.READY),
-        metrics=Metrics(),
-        events=EventLog(None),
-        bus_factory=lambda c, i: bus,
-    )
-    assert ep._open()
+    ep, bus = endpoint(send_uncertainty=True)
     try:
         pos = (123_456_789, -5, 400_000_000)
         answer = Answer(seq, status, pos, Applied.GEOMETRY, (0.0, 1.0, 0.0), "", (ux, uy, uz))
@@ -372,8 +356,11 @@ def _int64_words(v: int) -> list[int]:
     return list(struct.unpack(">4H", struct.pack(">q", v)))
 
 
-def test_modbus_raw_socket_reads_U_in_one_read_of_300_to_326() -> None:
-    cfg = base_config(channel(), u_grid_path())
+@contextmanager
+def _modbus_only(grid_path: Path) -> Iterator[RawClient]:
+    """A daemon serving Modbus only on ``grid_path``, a raw client connected, the four
+    temperatures written (FC16 at 200, acknowledged)."""
+    cfg = base_config(channel(), grid_path)
     cfg.can.enabled = False
     cfg.metrics.enabled = False
     cfg.modbus.enabled = True
@@ -385,47 +372,41 @@ def test_modbus_raw_socket_reads_U_in_one_read_of_300_to_326() -> None:
             for _ in range(4):
                 temps += [*struct.unpack(">2H", struct.pack(">i", round(TEMP_C * 1000))), 1, 1]
             assert raw.request(_fc16(200, temps)) == struct.pack(">BHH", 16, 200, 16)
-            for seq, p in ((7, (450.0, 575.0, 200.0)), (8, (-30.0, 575.0, 200.0))):
-                words = [w for c in nm(p) for w in _int64_words(c)] + [0, 0, 0, 0, 0, 0, 7, seq]
-                assert raw.request(_fc16(100, words)) == struct.pack(">BHH", 16, 100, 20)
-                resp = raw.request(struct.pack(">BHH", 3, 300, 27))
-                assert resp[:2] == bytes([3, 54])
-                regs = struct.unpack(">27H", resp[2:])
-                assert regs[0] == seq
-                ux, uy, uz = regs[24:27]
-                if seq == 7:
-                    assert regs[1] == 0 and regs[14] & U_BIT
-                    for got, want in zip((ux, uy, uz), u_oracle(p), strict=True):
-                        check_u(got / 100, want)
-                else:
-                    assert regs[1] == Status.OUTSIDE_VOLUME and not regs[14] & U_BIT
-                    assert (ux, uy, uz) == (0xFFFF, 0xFFFF, 0xFFFF)
-            # the new range as docs/modbus.md says: readable alone, read-only, nothing past it
-            assert raw.request(struct.pack(">BHH", 4, 324, 3))[:2] == bytes([4, 6])
-            assert raw.request(struct.pack(">BHH", 3, 324, 4)) == bytes([0x83, 0x02])
-            assert raw.request(struct.pack(">BHH", 3, 327, 1)) == bytes([0x83, 0x02])
-            assert raw.request(struct.pack(">BHH", 6, 325, 1)) == bytes([0x86, 0x02])
-            assert raw.request(_fc16(320, [0] * 7)) == bytes([0x90, 0x02])
-            version = raw.request(struct.pack(">BHH", 3, 0, 1))
-            assert version == bytes([3, 2, 0, 2])  # MAP_VERSION 2
+            yield raw
+
+
+def test_modbus_raw_socket_reads_U_in_one_read_of_300_to_326() -> None:
+    with _modbus_only(u_grid_path()) as raw:
+        for seq, p in ((7, (450.0, 575.0, 200.0)), (8, (-30.0, 575.0, 200.0))):
+            words = [w for c in nm(p) for w in _int64_words(c)] + [0, 0, 0, 0, 0, 0, 7, seq]
+            assert raw.request(_fc16(100, words)) == struct.pack(">BHH", 16, 100, 20)
+            resp = raw.request(struct.pack(">BHH", 3, 300, 27))
+            assert resp[:2] == bytes([3, 54])
+            regs = struct.unpack(">27H", resp[2:])
+            assert regs[0] == seq
+            ux, uy, uz = regs[24:27]
+            if seq == 7:
+                assert regs[1] == 0 and regs[14] & U_BIT
+                for got, want in zip((ux, uy, uz), u_oracle(p), strict=True):
+                    check_u(got / 100, want)
+            else:
+                assert regs[1] == Status.OUTSIDE_VOLUME and not regs[14] & U_BIT
+                assert (ux, uy, uz) == (0xFFFF, 0xFFFF, 0xFFFF)
+        # the new range as docs/modbus.md says: readable alone, read-only, nothing past it
+        assert raw.request(struct.pack(">BHH", 4, 324, 3))[:2] == bytes([4, 6])
+        assert raw.request(struct.pack(">BHH", 3, 324, 4)) == bytes([0x83, 0x02])
+        assert raw.request(struct.pack(">BHH", 3, 327, 1)) == bytes([0x83, 0x02])
+        assert raw.request(struct.pack(">BHH", 6, 325, 1)) == bytes([0x86, 0x02])
+        assert raw.request(_fc16(320, [0] * 7)) == bytes([0x90, 0x02])
+        version = raw.request(struct.pack(">BHH", 3, 0, 1))
+        assert version == bytes([3, 2, 0, 2])  # MAP_VERSION 2
 
 
 def test_modbus_registers_read_unknown_with_a_grid_without_U() -> None:
-    cfg = base_config(channel(), npl_grid_path())
-    cfg.can.enabled = False
-    cfg.metrics.enabled = False
-    cfg.modbus.enabled = True
-    cfg.modbus.port = 0
-    with DaemonService(cfg.check(), events_stream=None) as d:
-        assert d.modbus is not None
-        with RawClient(d.modbus.port) as raw:
-            temps: list[int] = []
-            for _ in range(4):
-                temps += [*struct.unpack(">2H", struct.pack(">i", round(TEMP_C * 1000))), 1, 1]
-            raw.request(_fc16(200, temps))
-            words = [w for c in nm((450.0, 575.0, 200.0)) for w in _int64_words(c)]
-            raw.request(_fc16(100, [*words, 0, 0, 0, 0, 0, 0, 7, 5]))
-            regs = struct.unpack(">27H", raw.request(struct.pack(">BHH", 3, 300, 27))[2:])
+    with _modbus_only(npl_grid_path()) as raw:
+        words = [w for c in nm((450.0, 575.0, 200.0)) for w in _int64_words(c)]
+        raw.request(_fc16(100, [*words, 0, 0, 0, 0, 0, 0, 7, 5]))
+        regs = struct.unpack(">27H", raw.request(struct.pack(">BHH", 3, 300, 27))[2:])
     assert (
         regs[0] == 5 and regs[1] == 0 and regs[14] == 0x07
     )  # geometry, scale + workpiece thermal; no U bit
