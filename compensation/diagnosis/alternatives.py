@@ -1,9 +1,9 @@
 """Explanations a session cannot tell apart, and the measurement that would separate them.
 
 After selection, each accepted cause is swapped in turn for every other candidate (the other
-accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit (at its default shape or, for a
-cause of the named one's kind — tables and couplings are one kind —, its rich shape, each parameter beyond the named term's charged one
-noise variance) is worse by less
+accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit — at its default
+shape or, for a cause of the named one's kind (tables and couplings are one kind), its rich
+shape, each parameter beyond the named term's charged one noise variance — is worse by less
 than the ``1 − alpha`` quantile of χ²(1) times the noise variance is an *alternative*: the data
 do not prefer the named cause over it. Typical case: with one stylus straight down, an angular
 error of Z and a straightness of Z have the same Abbe arm and act identically.
@@ -164,8 +164,8 @@ def find_alternatives(
         # cannot tell from the named one may need its richer shape to act alike (a twist that
         # sags along the other axis); each parameter beyond the named term's is charged the σ²
         # it gains from noise
-        same_kind = _kind(root.cause) == _kind(term.candidate.cause) and root.rich is not None
-        for cand in (root, root.rich) if same_kind and root.rich is not None else (root,):
+        rich = root.rich if _kind(root.cause) == _kind(term.candidate.cause) else None
+        for cand in (root,) if rich is None else (root, rich):
             theta, rss, _ = best_theta(problem, others, cand)
             charged = rss + sigma2 * max(cand.n_params - n_named, 0)
             if charged - rss_after < threshold:

@@ -223,20 +223,14 @@ class CouplingEffect(Effect):
         b = AXIS_INDEX[self.varies_with]
         total = np.full(ctx.n, self.offset)
         for k, c in enumerate(self.along, start=1):
-            if c:
-                total += c * legendre_shape(
-                    ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k
-                )
-        n_k = len(self.orders)
-        for jj, j in enumerate(self.with_orders):
-            row = self.coefficients[jj * n_k : (jj + 1) * n_k]
-            if not any(row):  # zero terms add nothing (designs evaluate one column at a time)
-                continue
+            total += c * legendre_shape(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
+        i = 0
+        for j in self.with_orders:
             sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
-            for k, c in zip(self.orders, row, strict=True):
-                if c:
-                    sa = _shape_or_one(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
-                    total += c * sb * sa
+            for k in self.orders:
+                sa = _shape_or_one(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
+                total += self.coefficients[i] * sb * sa
+                i += 1
         add_to_component(ctx, self.component, total)
 
     def _names(self) -> list[str]:
