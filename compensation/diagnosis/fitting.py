@@ -299,10 +299,12 @@ def best_theta(
     cand: Candidate,
     rows: Any = None,
     near: Any = None,
+    refine: bool = True,
 ) -> tuple[Any, float, int]:
     """Profile ``cand``'s nonlinear parameter with ``base`` fitted jointly: (theta, rss, rank).
     With ``near``, only the grid values within a few steps of it are scanned (a local re-profile,
-    e.g. inside a cross-validation fold) before the continuous refinement."""
+    e.g. inside a cross-validation fold) before the continuous refinement; ``refine=False``
+    stops at the best grid value (a quick screen: the refined RSS is never higher)."""
     r = _rows_index(rows)
     y = problem.y[r].reshape(-1)
     q = problem.projector(base, r)
@@ -313,7 +315,7 @@ def best_theta(
     rss_all, rank_all = profile_rss(problem, cand, thetas, r, q, y)
     i = int(np.argmin(rss_all))
     theta, rss, rank = thetas[i], float(rss_all[i]), int(rank_all[i])
-    if isinstance(theta, float):
+    if refine and isinstance(theta, float):
         lo = thetas[max(i - 1, 0)]
         hi = thetas[min(i + 1, len(thetas) - 1)]
         lo, hi = min(lo, hi), max(lo, hi)

@@ -39,6 +39,7 @@ from .fitting import (
     predictions,
     split_coefficients,
 )
+from .merge import one_for_several
 from .residuals import Residuals, compute_residuals, length_error_e0_um, rms3d
 from .unexplained import (
     is_local,
@@ -278,6 +279,42 @@ def _backward(
     return dropped
 
 
+def _merge_causes(
+    problem: Problem,
+    slots: list[_Slot],
+    pool: list[Candidate],
+    alpha: float,
+    min_cv_gain: float,
+    say: Callable[[str], None],
+) -> bool:
+    """Replace groups of accepted causes by one cause that does their work (:mod:`.merge`),
+    as long as one does; True when anything changed. The new cause must pass the volume
+    consistency test like any accepted cause."""
+    changed = False
+    while True:  # each merge names fewer causes: this ends
+        causes = [i for i, s in enumerate(slots) if not is_local(s.root)]
+        named = {slots[i].root.identity for i in causes}
+        free = [c for c in pool if not is_local(c) and c.identity not in named]
+        keep = [slots[i].term for i in range(len(slots)) if i not in causes]
+        merge = one_for_several(
+            problem, [slots[i].term for i in causes], free, alpha, SIMPLER_WITHIN, keep
+        )
+        if merge is None:
+            return changed
+        group = [causes[i] for i in merge.indices]
+        kept = [s for i, s in enumerate(slots) if i not in group]
+        if spatial_consistency(problem, [*_terms(kept), merge.term], len(kept)).local:
+            return changed
+        say(
+            f"  one cause for several: {merge.term.candidate.label} replaces "
+            + ", ".join(slots[i].root.label for i in group)
+        )
+        slots[:] = [*kept, _Slot(merge.term.candidate, merge.term)]
+        _reprofile(problem, slots)
+        _choose_variants(problem, slots, alpha, min_cv_gain)
+        changed = True
+
+
 def _one_blas_thread(fn: Callable[..., Diagnosis]) -> Callable[..., Diagnosis]:
     """Run ``fn`` with BLAS on one thread: the matrices are a few thousand rows by tens of
     columns, where threads only cost (measured on a busy 2-core machine: an SVD of 2100 × 132
@@ -358,6 +395,8 @@ def diagnose(
             say(f"  dropped {s.root.label}: not needed given the others")
         if dropped:  # what a dropped cause carried may need the others' rich shapes now
             _choose_variants(problem, slots, alpha, min_cv_gain)
+        cv_history.append(cv_mse(problem, _terms(slots)))
+    if _merge_causes(problem, slots, pool, alpha, min_cv_gain, say):
         cv_history.append(cv_mse(problem, _terms(slots)))
 
     accepted = _terms(slots)
