@@ -16,7 +16,9 @@ The cases below were missed by an earlier diagnosis, each for a physical reason 
 * a straightness table change whose reference line was fitted on the session's points: the
   line is part of the table change, not a second cause (a squareness);
 * a thermal gradient calibrated on site: the session sees mostly the static image of the bend
-  in the tables, beside its variation with T_top − T_bottom.
+  in the tables, beside its variation with T_top − T_bottom;
+* structure refused as local in an early round is re-tested against the causes finally named
+  before it is reported as ``unexplained``.
 
 The full rate table is benchmarks/bench_discovery_heldout.py (not in the suite: minutes).
 """
@@ -75,6 +77,10 @@ CASES = [
     # calibrated on site in another gradient (what the session sees is mostly the image of the
     # bend in the tables), beside an S-shaped change of the X pitch table
     (("thermal_gradient", "parametric"), (3.0, 0.5), 0, "thermal_gradient+parametric-3x0.5x-s0"),
+    # MH2, 2000 random points, five styli: a squareness that drifts; an early round fitted it
+    # by a coupling in one half of the volume (refused as local), and that stale refusal was
+    # reported as `unexplained` although the squareness drift named later explains it
+    (("squareness_drift",), (1.0,), 3, "squareness_drift-1x-s3"),
 ]
 
 

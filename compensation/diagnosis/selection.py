@@ -279,6 +279,38 @@ def _backward(
     return dropped
 
 
+def _still_significant(
+    problem: Problem,
+    slots: list[_Slot],
+    hits: list[dict[str, Any]],
+    n_tried: int,
+    alpha: float,
+    min_cv_gain: float,
+    cv_now: float,
+) -> list[dict[str, Any]]:
+    """The local hits (candidates refused by the volume consistency test in some round) that are
+    still significant and still predict held-out points better given the causes finally named:
+    a hit from an early round is often what a cause accepted later explains (a squareness
+    drift first fitted by a coupling in one half of the volume) and is then no structure left."""
+    base = _terms(slots, rich=True)
+    current = _terms(slots)
+    n_obs = problem.y.size
+    _, rss0, rank0 = fit(problem, base)
+    out: list[dict[str, Any]] = []
+    for h in hits:
+        cand = h["candidate"]
+        theta, rss1, extra = best_theta(problem, base, cand)
+        p = f_test_p(rss0, rss1, extra, n_obs, rank0 + extra)
+        p_adj = min(1.0, p * n_tried * cand.look_elsewhere)
+        if p_adj >= alpha:
+            continue
+        cv = cv_mse(problem, [*current, Term(cand, theta)])
+        gain = (cv_now - cv) / cv_now if cv_now > 0 else 0.0
+        if gain >= min_cv_gain:
+            out.append({**h, "theta": theta, "p_adj": p_adj, "cv_gain": gain})
+    return out
+
+
 def _merge_causes(
     problem: Problem,
     slots: list[_Slot],
@@ -445,8 +477,11 @@ def diagnose(
         unexplained = unexplained_candidate(
             problem, accepted, alpha, min_cv_gain, cv_history[-1], _terms(slots, rich=True)
         )
-        if unexplained is None and local_hits:
-            unexplained = local_unexplained(problem, accepted, local_hits)
+        hits = _still_significant(
+            problem, slots, local_hits, n_tried, alpha, min_cv_gain, cv_history[-1]
+        )
+        if unexplained is None and hits:
+            unexplained = local_unexplained(problem, accepted, hits)
         if unexplained is not None:
             unexplained["parameters"].update(locate(res, r_after))
             entries.append(unexplained)
