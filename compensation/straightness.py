@@ -88,12 +88,15 @@ def _half_hull(s: NDArray[np.float64], e: NDArray[np.float64], sign: float) -> N
 def _hull_edge_slopes(s: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.float64]:
     order = np.lexsort((e, s))
     s_sorted, e_sorted = s[order], e[order]
+    # positions closer than 1e-12 of the span are one position (a gap of 1e-308 mm would
+    # give a slope of 1e308 µm/mm: no reference line, an overflow)
+    tol = 1e-12 * max(float(s_sorted[-1] - s_sorted[0]), 1e-300)
     slopes = []
     for sign in (1.0, -1.0):
         idx = _half_hull(s_sorted, e_sorted, sign)
         ds = np.diff(s_sorted[idx])
         de = np.diff(e_sorted[idx])
-        keep = ds > 0.0  # vertical edges (equal positions) carry no slope breakpoint
+        keep = ds > tol  # vertical edges (equal positions) carry no slope breakpoint
         slopes.append(de[keep] / ds[keep])
     return np.unique(np.concatenate(slopes))
 

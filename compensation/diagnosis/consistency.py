@@ -120,6 +120,9 @@ def spatial_consistency(
     ratios: dict[str, float] = {}
     q = problem.res.q_mm
     own = sorted(own_axes(term))
+    # a drift is a function of time alone: its own coordinate is time, never extrapolated
+    # (artefact lines measured one after another put each half of the volume in other hours)
+    t = problem.res.signals.get("t") if term.candidate.hold_time else None
     p = x_full.shape[1]
     for k in range(3):
         if k in own or float(np.ptp(q[:, k])) <= 1e-6:
@@ -139,6 +142,8 @@ def spatial_consistency(
             for a in own:
                 lo, hi = float(np.min(q[train, a])), float(np.max(q[train, a]))
                 inside &= (q[test, a] >= lo) & (q[test, a] <= hi)
+            if t is not None:
+                inside &= (t[test] >= np.min(t[train])) & (t[test] <= np.max(t[train]))
             test = test[inside]
             if len(test) * n_axes < p:
                 continue
