@@ -438,7 +438,7 @@ def diagnose(
     heldout_pred = cv_predictions(problem, accepted)
     coefs = split_coefficients(problem, accepted, beta)
     local = [i for i, t in enumerate(accepted) if is_local(t.candidate)]
-    local_entries = [local_entry(problem, accepted, i, beta) for i in local]
+    local_entries = [local_entry(problem, accepted, local, beta)] if local else []
     causes = [i for i in range(len(accepted)) if i not in local]
     effects = [accepted[i].candidate.build(coefs[i], accepted[i].theta) for i in causes]
     rss_before = float(np.sum(problem.y**2))

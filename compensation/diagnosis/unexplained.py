@@ -140,15 +140,17 @@ def is_local(cand: Candidate) -> bool:
 
 
 def local_entry(
-    problem: Problem, accepted: list[Term], index: int, beta: FloatArray
+    problem: Problem, accepted: list[Term], indices: list[int], beta: FloatArray
 ) -> dict[str, Any]:
-    """The ``unexplained`` entry of an accepted local candidate: where its bump sits."""
-    term = accepted[index]
-    start = problem.n_nuisance + sum(t.candidate.n_params for t in accepted[:index])
-    coef = beta[start : start + term.candidate.n_params]
+    """The one ``unexplained`` entry of the accepted local candidates at ``indices`` (a bump is
+    fitted per error component; one entry says where their sum sits)."""
     contrib = np.zeros((problem.res.n, 3))
-    contrib[:, problem.axes] = (problem.design(term) @ coef).reshape(problem.res.n, -1)
-    _, rss0, _ = fit(problem, accepted[:index] + accepted[index + 1 :])
+    for index in indices:
+        term = accepted[index]
+        start = problem.n_nuisance + sum(t.candidate.n_params for t in accepted[:index])
+        coef = beta[start : start + term.candidate.n_params]
+        contrib[:, problem.axes] += (problem.design(term) @ coef).reshape(problem.res.n, -1)
+    _, rss0, _ = fit(problem, [t for i, t in enumerate(accepted) if i not in indices])
     _, rss1, _ = fit(problem, accepted)
     total = float(np.sum(problem.y**2))
     params: dict[str, Any] = {"varies_mostly_with": "position", "local": True}
