@@ -29,8 +29,14 @@ transport, so read the differences and ratios, not absolute numbers (the machine
   (echo, now, before, and ``--other-tree NAME=DIR`` daemons) for ``--rounds`` rounds of ``--n``
   readings and reports per-round ratios (their spread is the noise), the latency each daemon
   reports in its status frames (reading complete → status encoded: no transport, steadier) and
-  CPU per reading; ``benchmarks/results/daemon_before.json``. A tree folder holds
-  ``cmm_comp/<package>`` links to a ``git worktree`` of the commit.
+  CPU per reading (of the daemon process, and with its children);
+  ``benchmarks/results/daemon_before.json``. A tree folder holds ``cmm_comp/<package>`` links
+  to a ``git worktree`` of the commit.
+* Every udp_multicast daemon case measures its steady state: after the first heartbeat it waits
+  (``--settle-max-s``, 20 s at most) until the daemon and its children use < 5 % of a core over
+  two 0.3 s windows. A daemon's first seconds are start-up (the grid-reload worker imports the
+  grid code at SCHED_IDLE, ~0.6 s of CPU), not its reply path: measured right after the
+  heartbeat they raised the reply p50 ~1.5× (``--settle-max-s 0`` measures them).
 * Uncertainty (issue 13): ``daemon_mcap_u`` is ``daemon_mcap`` with the grid carrying U (the
   same grid plus the virtual CMM's covariances) and ``[can] send_uncertainty`` on (U computed
   per reading, a fifth frame sent), in the same interleaved rounds, for latency and for the
@@ -585,12 +591,17 @@ def _udp_round(
                     time.sleep(0.05)
                 if ctl.heartbeat is None:
                     raise RuntimeError("daemon sent no heartbeat within 60 s")
+                if SETTLE_MAX_S > 0:
+                    SETTLE_S.setdefault(name, []).append(wait_quiet(proc.pid, SETTLE_MAX_S))
             if name.endswith("_reloads"):
                 return _measure_with_reloads(proc, ctl, rs, rate_hz)
-            cpu0 = process_cpu_s(proc.pid)
+            cpu0, tree0 = process_cpu_s(proc.pid), tree_cpu_s(proc.pid)
             out = measure(ctl, rs, rate_hz, internal_us)
             if cpu_us is not None:
                 cpu_us.append((process_cpu_s(proc.pid) - cpu0) / len(rs) * 1e6)
+                TREE_CPU_US.setdefault(name, []).append(
+                    (tree_cpu_s(proc.pid) - tree0) / len(rs) * 1e6
+                )
             return out
     finally:
         if name == "echo":
@@ -606,6 +617,50 @@ def _udp_round(
             proc.wait(10)
         if proc.stdout is not None:
             proc.stdout.close()
+
+
+SETTLE_MAX_S = 20.0
+"""Before measuring, a udp_multicast daemon case waits (at most this long, s; 0: not at all)
+until its process and its children have finished starting (:func:`wait_quiet`)."""
+SETTLE_S: dict[str, list[float]] = {}
+"""How long each case's daemon took to settle, per round, s (reported in the JSON)."""
+TREE_CPU_US: dict[str, list[float]] = {}
+"""CPU per reading of each case's daemon with its children (MCAP writer…), per round, µs."""
+QUIET_WINDOW_S = 0.3
+QUIET_CPU_FRACTION = 0.05
+
+
+def tree_cpu_s(pid: int) -> float:
+    """CPU time of process ``pid`` and all its descendants (alive ones), s."""
+    total, todo = 0.0, [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            total += process_cpu_s(p)
+            for task in os.listdir(f"/proc/{p}/task"):
+                with open(f"/proc/{p}/task/{task}/children") as f:
+                    todo += [int(c) for c in f.read().split()]
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+    return total
+
+
+def wait_quiet(pid: int, max_s: float) -> float:
+    """Wait until daemon ``pid`` and its children (MCAP writer, grid worker importing its
+    modules at start) use less than :data:`QUIET_CPU_FRACTION` of a core over
+    :data:`QUIET_WINDOW_S`: its start-up is over, what follows is the steady state. Gives up
+    after ``max_s`` (s, with a warning). Returns the time waited, s."""
+    t0 = time.monotonic()
+    cpu, quiet = tree_cpu_s(pid), 0
+    while time.monotonic() - t0 < max_s:
+        time.sleep(QUIET_WINDOW_S)
+        now = tree_cpu_s(pid)
+        quiet = quiet + 1 if now - cpu < QUIET_CPU_FRACTION * QUIET_WINDOW_S else 0
+        if quiet >= 2:  # two windows in a row
+            return time.monotonic() - t0
+        cpu = now
+    print(f"warning: daemon {pid} still busy {max_s:.0f} s after start", file=sys.stderr)
+    return time.monotonic() - t0
 
 
 def process_cpu_s(pid: int) -> float:
@@ -781,6 +836,7 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
     ratio now / before of every round (the spread says what is noise), and of the pooled
     latencies. Table and ``results/daemon_before.json``."""
     cases = ["echo", "daemon", "daemon_before", *OTHER_TREES]
+    load_start = os.getloadavg()
     chunk = rs[: 200 + args.n]
     per_round: list[dict[str, dict[str, float]]] = []
     pooled: dict[str, list[float]] = {c: [] for c in cases}
@@ -851,6 +907,12 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
             ]
             for name in OTHER_TREES
         },
+        "cpu_us_per_reading_with_children_median": {
+            c: float(np.median(v)) for c, v in TREE_CPU_US.items()
+        },
+        "settle_max_s": SETTLE_MAX_S,
+        "settle_s_median": {c: float(np.median(v)) for c, v in SETTLE_S.items()},
+        "uptime_loadavg_at_start": load_start,
         "uptime_loadavg_at_end": os.getloadavg(),
     }
     path = RESULTS.with_name("daemon_before.json")
@@ -889,11 +951,23 @@ def before_only(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> int:
         "CPU per reading of the process (median of rounds, µs): "
         + ", ".join(f"{name} {v:.0f}" for name, v in c.items())
     )
+    c = out["cpu_us_per_reading_with_children_median"]
+    print(
+        "… with its children (MCAP writer, grid worker), µs: "
+        + ", ".join(f"{name} {v:.0f}" for name, v in c.items())
+    )
+    st = out["settle_s_median"]
+    print(
+        f"settled before measuring (≤ {SETTLE_MAX_S:.0f} s; median s): "
+        + ", ".join(f"{name} {v:.1f}" for name, v in st.items())
+        + f"; load average at start {load_start[0]:.2f}, at end {os.getloadavg()[0]:.2f}"
+    )
     print(f"wrote {path}")
     return 0
 
 
 def main() -> int:
+    global BEFORE_TREE, SETTLE_MAX_S
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=6000, help="paced readings per latency case")
     ap.add_argument("--rate", type=float, default=1000.0, help="pace of latency cases, Hz")
@@ -903,6 +977,14 @@ def main() -> int:
     ap.add_argument("--sustain-n", type=int, default=100_000, help="readings of that case")
     ap.add_argument("--modbus-n", type=int, default=2000)
     ap.add_argument("--echo-server", type=int, help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--settle-max-s",
+        type=float,
+        default=SETTLE_MAX_S,
+        help="udp_multicast: wait (at most this long, s) until the daemon and its children "
+        "are quiet before measuring (its start-up over); 0 measures right after the first "
+        "heartbeat",
+    )
     ap.add_argument(
         "--before-tree",
         default="",
@@ -936,7 +1018,7 @@ def main() -> int:
         "writes benchmarks/results/daemon_before.json",
     )
     args = ap.parse_args()
-    global BEFORE_TREE
+    SETTLE_MAX_S = args.settle_max_s
     if args.echo_server:
         echo_main(args.echo_server)
         return 0

@@ -1,12 +1,13 @@
 """The daemon's CAN side: receive raw axis frames and temperatures, answer each reading at once.
 
-One supervised thread owns the bus: on each wake-up it drains every frame already waiting (up
-to ``_DRAIN_MAX``), assembles X/Y/Z triplets (:class:`protocol.TripletAssembler`), corrects the
-completed readings together (:meth:`daemon.engine.CorrectionEngine.correct_many`: one
-vectorised grid call for a batch, the same answers bit for bit as one at a time), sends the
-three corrected axis frames, the uncertainty frame (``[can] send_uncertainty``) and the
-correction-status frame of each in one batch
-(:func:`daemon.can_send.send_batch`) and counts the answers. A temperature frame or an
+One supervised thread owns the bus: it assembles X/Y/Z triplets
+(:class:`protocol.TripletAssembler`); a received frame that completes a reading gets it
+answered at once, then every frame already waiting (up to ``_DRAIN_MAX``) is taken and the
+readings they complete are corrected together
+(:meth:`daemon.engine.CorrectionEngine.correct_many`: one vectorised grid call for a batch,
+the same answers bit for bit as one at a time). The answers' frames (three corrected axes,
+the uncertainty frame with ``[can] send_uncertainty``, the correction status, per reading) go
+out in one batch (:func:`daemon.can_send.send_batch`), then are counted. A temperature frame or an
 ``incomplete_reading`` answer first answers the readings completed before it, so the order of
 the wire is kept.
 Everything else about an answered reading (events, MCAP records of the reading, the answer
@@ -279,8 +280,15 @@ class CanEndpoint(can.Listener):
                 if msg is not None:
                     t_rx = time.perf_counter()
                     self._handle(msg, t_rx)
-                    self._drain(bus)
-                    self._answer_ready()
+                    if self._ready:
+                        # the reading it completed is answered before anything else is taken
+                        # from the bus (a receive call there gives the GIL away, and an empty
+                        # one is all it finds while readings come one at a time); then every
+                        # frame already waiting is taken and what it completes is answered as
+                        # one batch (under load: most readings)
+                        self._answer_ready()
+                        self._drain(bus)
+                        self._answer_ready()
                     if len(self._deferred) >= _DEFER_MAX:
                         self._bookkeeping()
                     if t_rx >= self._next_housekeeping_s:
