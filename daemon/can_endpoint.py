@@ -417,6 +417,15 @@ class CanEndpoint(can.Listener):
         if not ready:
             return
         self._ready = []
+        if len(ready) == 1:  # one reading (the paced case): no batch bookkeeping on its path
+            reading = ready[0]
+            answer = self.engine.correct(reading)  # = correct_many([reading])
+            one: list[can.Message] = []
+            latency_us = self._answer_frames(answer, reading.received_s, one)
+            self._send_msgs(one)
+            self.engine.count(answer, latency_us)
+            self._deferred.append((reading, answer, latency_us))
+            return
         answers = self.engine.correct_many(ready)
         msgs: list[can.Message] = []
         latencies = [
