@@ -106,3 +106,24 @@ def test_a_start_up_transient_is_extrapolated_back_at_most_twofold(problem) -> N
     np.testing.assert_array_equal(held[:, problem.n_nuisance + 3], plain[:, problem.n_nuisance + 3])
     inside = _held_out_design(problem, [term], early, late[: len(late) // 2])
     np.testing.assert_array_equal(inside, problem.stacked([term], late[: len(late) // 2]))
+
+
+def test_time_folds_never_hide_a_position_of_a_repeated_cycle() -> None:
+    """An ISO 230-2 run repeats one cycle of positions (9 targets out and back, 5 cycles: 90
+    points in time order). Time blocks dealt to the folds in turn would give each fold the
+    same phase of every cycle — targets no training fold ever saw. Brute force: every position
+    of every time fold is measured somewhere in the other folds."""
+    m = Machine.from_toml(NPL)
+    _, data = simulate(m, [], [], seed=5, n_points=150)
+    data = data.subset(np.arange(90))
+    targets = np.linspace(100.0, 900.0, 9)
+    cycle = np.concatenate([targets, targets[::-1]])
+    x = np.tile(cycle, 5)
+    for arr in (data.indicated_mm, data.reference_mm):
+        arr[:, 0] = x
+    data.t_s = np.arange(90, dtype=float) * 20.0
+    problem = make_problem(compute_residuals(m, data))
+    assert problem.time_folds is not None
+    for fold in problem.time_folds:
+        train = np.setdiff1d(np.arange(90), fold)
+        assert set(np.round(x[fold], 6)) <= set(np.round(x[train], 6))

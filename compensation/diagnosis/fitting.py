@@ -89,7 +89,8 @@ class Problem:
         return np.hstack(cols) if cols else np.zeros((n_rows * len(self.axes), 0))
 
 
-#: Blocks of time per fold in :attr:`Problem.time_folds` (5 folds → 25 blocks).
+#: Blocks of time per fold in :attr:`Problem.time_folds` (5 folds → 25 blocks, dealt to the
+#: folds in a seeded shuffled order).
 TIME_BLOCKS_PER_FOLD = 5
 
 
@@ -117,8 +118,13 @@ def make_problem(res: Residuals, n_folds: int = 5, seed: int = 0) -> Problem:
     time_folds = None
     if data.t_s is not None and float(np.ptp(data.t_s)) > 0:
         rank = np.argsort(np.argsort(data.t_s, kind="stable"), kind="stable")
-        block = rank * (n_folds * TIME_BLOCKS_PER_FOLD) // max(n, 1)
-        tf = [np.flatnonzero(block % n_folds == j) for j in range(n_folds)]
+        n_blocks = n_folds * TIME_BLOCKS_PER_FOLD
+        block = rank * n_blocks // max(n, 1)
+        # blocks dealt to the folds in a shuffled order, not in turn: a session that repeats
+        # a cycle of positions (ISO 230-2 runs: 5 blocks per cycle) would otherwise give each
+        # fold the same positions of every cycle, never seen in training
+        deal = np.random.default_rng(seed + 1).permutation(n_blocks) % n_folds
+        tf = [np.flatnonzero(deal[block] == j) for j in range(n_folds)]
         time_folds = [f for f in tf if len(f)]
     return Problem(
         res=res, axes=axes or (0,), folds=[f for f in folds if len(f)], time_folds=time_folds

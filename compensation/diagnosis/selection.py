@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..effects import Effect
 from ..formats.measurements import Measurements
@@ -140,11 +141,19 @@ def _round(
     # out-of-sample gain against the model as it stands (the rich shapes only absorb leftovers
     # in the significance test: with few points they would overfit the comparison)
     current = _terms(slots)
+    folds = _folds(problem, current)
+    if folds is not None:
+        cv_base = cv_mse(problem, current, folds=folds)
     for r in eligible:
         with_it = [*current, Term(r["candidate"], r["theta"])]
-        r["cv_mse"] = cv_mse(problem, with_it)
+        r["cv_mse"] = cv_mse(problem, with_it, folds=folds)
         r["cv_gain"] = (cv_base - r["cv_mse"]) / cv_base if cv_base > 0 else 0.0
-        timed = _time_gain(problem, current, with_it) if _timed(r["candidate"]) else None
+        if not _timed(r["candidate"]):
+            timed = None
+        elif folds is None:
+            timed = _time_gain(problem, current, with_it)
+        else:  # a second cause of time: also judged on the grouped folds, as the first was
+            timed = _grouped_gain(problem, current, with_it)
         if timed is not None and timed > r["cv_gain"]:
             # a drift or a start-up transient may also be judged between neighbours in time
             r["cv_gain"] = timed
@@ -156,7 +165,7 @@ def _round(
         pick = min(close, key=lambda r: (r["candidate"].n_params, r["cv_mse"]))
         term = Term(pick["candidate"], pick["theta"])
         if is_local(term.candidate):
-            family = _family_rather_than_bump(problem, current, eligible, pick["cv_mse"])
+            family = _family_rather_than_bump(problem, current, eligible, pick["cv_mse"], folds)
             return family or term, rows
         check = spatial_consistency(problem, [*current, term], len(current))
         if not check.local:
@@ -167,6 +176,28 @@ def _round(
         local_hits.append(pick)
         eligible = [r for r in eligible if r is not pick]
     return None, rows
+
+
+def _folds(problem: Problem, terms: Sequence[Term]) -> Sequence[NDArray[np.intp]] | None:
+    """The folds a model is judged on held out: the time blocks once it holds a cause of time
+    (a drift, a start-up transient), else the grouped folds (None). Grouped folds would ask a
+    drift to predict whole artefact lines measured in hours it never saw, which no drift can:
+    on length lines a drift judged that way predicted 4× worse than no model at all, and every
+    candidate after it was scored against that noise."""
+    if problem.time_folds is not None and any(_timed(t.candidate) for t in terms):
+        return problem.time_folds
+    return None
+
+
+def _grouped_gain(problem: Problem, base: list[Term], with_term: list[Term]) -> float:
+    """Relative held-out gain of ``with_term`` over ``base`` on the grouped folds."""
+    cv0 = cv_mse(problem, base)
+    return (cv0 - cv_mse(problem, with_term)) / cv0 if cv0 > 0 else 0.0
+
+
+def _model_cv(problem: Problem, terms: Sequence[Term]) -> float:
+    """The model's held-out MSE on the folds it is judged on (:func:`_folds`)."""
+    return cv_mse(problem, terms, folds=_folds(problem, terms))
 
 
 def _timed(cand: Candidate) -> bool:
@@ -190,7 +221,11 @@ RICH_CHALLENGERS = 3
 
 
 def _family_rather_than_bump(
-    problem: Problem, current: list[Term], eligible: list[dict[str, Any]], bump_cv: float
+    problem: Problem,
+    current: list[Term],
+    eligible: list[dict[str, Any]],
+    bump_cv: float,
+    folds: Sequence[NDArray[np.intp]] | None = None,
 ) -> Term | None:
     """A local bump beat every cause at its default shape. Before structure is called
     ``unexplained``, the best few causes get their rich shape (a table of order 8 rather than 4,
@@ -205,7 +240,7 @@ def _family_rather_than_bump(
     best: tuple[float, dict[str, Any]] | None = None
     for r in globals_:
         cand = r["candidate"]
-        cv = cv_mse(problem, [*current, Term(cand.rich, r["theta"])])
+        cv = cv_mse(problem, [*current, Term(cand.rich, r["theta"])], folds=folds)
         if cv <= bump_cv * (1.0 + SIMPLER_WITHIN) and (best is None or cv < best[0]):
             best = (cv, r)
     return None if best is None else Term(best[1]["candidate"], best[1]["theta"])
@@ -235,8 +270,11 @@ def _choose_variants(
         p = f_test_p(rss0, rss1, rank1 - rank0, n_obs, rank1)
         use_rich = p * len(slots) < alpha
         if use_rich:
-            cv0 = cv_mse(problem, [*others, plain])
-            cv1 = cv_mse(problem, [*others, rich])
+            # a drift's shape is judged between neighbours in time, any other on the grouped
+            # folds (the shape of a table is a question of where, not when)
+            folds = _folds(problem, [plain])
+            cv0 = cv_mse(problem, [*others, plain], folds=folds)
+            cv1 = cv_mse(problem, [*others, rich], folds=folds)
             use_rich = cv0 > 0 and (cv0 - cv1) / cv0 >= min_cv_gain
         s.term = rich if use_rich else plain
 
@@ -252,7 +290,8 @@ def _backward(
     while len(slots) > 1:
         worst: tuple[float, int] | None = None
         full = _terms(slots)
-        cv_full = cv_mse(problem, full)
+        folds = _folds(problem, full)
+        cv_full = cv_mse(problem, full, folds=folds)
         for i, s in enumerate(slots):
             # significance against the others at their rich shapes, as when a cause is added:
             # a cause taken early that is only the leftover of a later one's richer shape (a
@@ -265,11 +304,12 @@ def _backward(
             others = full[:i] + full[i + 1 :]
             p = f_test_p(rss0, rss1, rank1 - rank0, n_obs, rank1)
             p_adj = min(1.0, p * n_tried * s.root.look_elsewhere)
-            cv0 = cv_mse(problem, others)
+            cv0 = cv_mse(problem, others, folds=folds)
+            # (a drift in the model: both on the time blocks, :func:`_folds`)
             gain = (cv0 - cv_full) / cv0 if cv0 > 0 else 0.0
-            timed = _time_gain(problem, others, full) if _timed(s.root) else None
-            if timed is not None:
-                gain = max(gain, timed)
+            if folds is not None and _timed(s.root):
+                # a cause of time is kept on either test, as it was added
+                gain = max(gain, _grouped_gain(problem, others, full))
             if (p_adj >= alpha or gain < min_cv_gain) and (worst is None or -gain > worst[0]):
                 worst = (-gain, i)
         if worst is None:
@@ -294,6 +334,7 @@ def _still_significant(
     drift first fitted by a coupling in one half of the volume) and is then no structure left."""
     base = _terms(slots, rich=True)
     current = _terms(slots)
+    folds = _folds(problem, current)
     n_obs = problem.y.size
     _, rss0, rank0 = fit(problem, base)
     out: list[dict[str, Any]] = []
@@ -304,7 +345,7 @@ def _still_significant(
         p_adj = min(1.0, p * n_tried * cand.look_elsewhere)
         if p_adj >= alpha:
             continue
-        cv = cv_mse(problem, [*current, Term(cand, theta)])
+        cv = cv_mse(problem, [*current, Term(cand, theta)], folds=folds)
         gain = (cv_now - cv) / cv_now if cv_now > 0 else 0.0
         if gain >= min_cv_gain:
             out.append({**h, "theta": theta, "p_adj": p_adj, "cv_gain": gain})
@@ -427,15 +468,16 @@ def diagnose(
             say(f"  dropped {s.root.label}: not needed given the others")
         if dropped:  # what a dropped cause carried may need the others' rich shapes now
             _choose_variants(problem, slots, alpha, min_cv_gain)
-        cv_history.append(cv_mse(problem, _terms(slots)))
+        cv_history.append(_model_cv(problem, _terms(slots)))
     if _merge_causes(problem, slots, pool, alpha, min_cv_gain, say):
-        cv_history.append(cv_mse(problem, _terms(slots)))
+        cv_history.append(_model_cv(problem, _terms(slots)))
 
     accepted = _terms(slots)
     beta, rss_after, rank_after = fit(problem, accepted, ridge=True)
     fitted = predictions(problem, accepted, beta)
     say("held-out predictions")
-    heldout_pred = cv_predictions(problem, accepted)
+    held_folds = _folds(problem, accepted)
+    heldout_pred = cv_predictions(problem, accepted, folds=held_folds)
     coefs = split_coefficients(problem, accepted, beta)
     local = [i for i, t in enumerate(accepted) if is_local(t.candidate)]
     local_entries = [local_entry(problem, accepted, local, beta)] if local else []
@@ -475,7 +517,13 @@ def diagnose(
         entries.extend(local_entries)
     else:
         unexplained = unexplained_candidate(
-            problem, accepted, alpha, min_cv_gain, cv_history[-1], _terms(slots, rich=True)
+            problem,
+            accepted,
+            alpha,
+            min_cv_gain,
+            cv_history[-1],
+            _terms(slots, rich=True),
+            held_folds,
         )
         hits = _still_significant(
             problem, slots, local_hits, n_tried, alpha, min_cv_gain, cv_history[-1]
@@ -490,7 +538,7 @@ def diagnose(
     # held out), so before/after differ by the effects found and nothing else
     beta0, _, _ = fit(problem, [])
     r_before_in = r_before - predictions(problem, [], beta0)
-    r_before_out = r_before - cv_predictions(problem, [])
+    r_before_out = r_before - cv_predictions(problem, [], folds=held_folds)
     sigma = float(np.sqrt(sigma2))
     summary = {
         "residual_rms_um": {"before": rms3d(r_before_in), "after": rms3d(r_after)},
@@ -510,8 +558,14 @@ def diagnose(
         "n_points_given": int(n_given),
         "measured_axes": ["xyz"[k] for k in problem.axes],
         "folds": len(problem.folds),
-        "heldout_method": "grouped cross-validation: each fold predicted by the effects fitted "
-        "on the other folds (nonlinear parameters re-profiled near the full-data value)",
+        "heldout_method": (
+            "grouped cross-validation: each fold predicted by the effects fitted on the other "
+            "folds (nonlinear parameters re-profiled near the full-data value)"
+            if held_folds is None
+            else "cross-validation on short blocks of time dealt out to the folds (a drift or a "
+            "start-up transient is named: no cause of time predicts hours it never saw); each "
+            "fold predicted by the effects fitted on the others"
+        ),
         "cv_mse_um2": cv_history,
         "alpha": alpha,
         "min_cv_gain": min_cv_gain,

@@ -10,12 +10,13 @@ that carries most of it, never as an effect of the model.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from itertools import product
 from typing import Any
 
 import numpy as np
 from numpy.polynomial import legendre
+from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from .candidates import Candidate
@@ -169,6 +170,7 @@ def unexplained_candidate(
     min_cv_gain: float,
     cv_current: float,
     accepted_rich: list[Term] | None = None,
+    folds: Sequence[NDArray[np.intp]] | None = None,
 ) -> dict[str, Any] | None:
     """The ``unexplained`` entry (docs/formats.md §4) when a generic model still pays, else None.
 
@@ -185,7 +187,7 @@ def unexplained_candidate(
         return None
     _, rss0, rank0 = fit(problem, accepted)
     _, rss1, rank1 = fit(problem, [*accepted, *terms])
-    cv1 = cv_mse(problem, [*accepted, *terms], rescan=False)
+    cv1 = cv_mse(problem, [*accepted, *terms], rescan=False, folds=folds)
     gain = (cv_current - cv1) / cv_current if cv_current > 0 else 0.0
     if gain < min_cv_gain:
         return None
