@@ -11,7 +11,8 @@ reload (the old grid stays) and replaced on the next one; it exits when its stdi
 daemon stopped or died).
 
 Protocol on the worker's stdin/stdout: frames of an 8-byte little-endian length and a pickle;
-requests ``(path, GridTrust | None)``, answers ``("ok", LoadedGrid)`` or ``("refused", message)``.
+requests ``(path, GridTrust | None)``, answers ``("ok", LoadedGrid)`` or ``("refused", message)``;
+the request ``None`` (a ping) is answered ``("ready", None)``: the worker's imports are done.
 """
 
 from __future__ import annotations
@@ -80,6 +81,8 @@ class ProcessGridLoader:
         self._proc: subprocess.Popen[bytes] | None = None
         self._priority = "idle"
         self._stopped = False
+        self._ready = False  # the worker answered a ping: its imports are done
+        self._ping_sent = False  # a ping is unanswered (its answer precedes any other)
         self.idle_grace_s = idle_grace_s
         self.escalations = 0
         """Reloads that had to be redone at normal priority (the machine was saturated)."""
@@ -95,14 +98,34 @@ class ProcessGridLoader:
                 stdout=subprocess.PIPE,
             )
             self._priority = priority
+            self._ready = self._ping_sent = False
         return self._proc
 
-    def prewarm(self) -> None:
+    def prewarm(self, wait_s: float = 0.0) -> bool:
         """Start the worker now (it imports the grid code at low priority, so the first reload
-        does not wait for that)."""
+        does not wait for that). With ``wait_s`` > 0, wait (at most that long, s) until its
+        imports are done — before the daemon serves, so that ~0.6 s of CPU never runs beside
+        the first answers. True when the worker is known ready."""
         with self._lock:
-            if not self._stopped:
-                self._worker("idle")
+            if self._stopped:
+                return False
+            proc = self._worker("idle")
+            if wait_s <= 0.0 or self._ready:
+                return self._ready
+            assert proc.stdin is not None and proc.stdout is not None
+            try:
+                if not self._ping_sent:
+                    _send(proc.stdin, None)
+                    self._ping_sent = True
+                ready, _, _ = select.select([proc.stdout], [], [], wait_s)
+                if ready:
+                    self._ready = _recv(proc.stdout)[0] == "ready"
+                    self._ping_sent = False
+            except (OSError, EOFError, pickle.UnpicklingError, ValueError):
+                self._end(proc, 1.0)
+                self._proc = None
+                self._ping_sent = False
+            return self._ready
 
     def __call__(self, path: str | Path, trust: GridTrust | None) -> LoadedGrid:
         with self._lock:
@@ -127,6 +150,11 @@ class ProcessGridLoader:
         assert proc.stdin is not None and proc.stdout is not None
         try:
             _send(proc.stdin, (str(path), trust))
+            if self._ping_sent:  # first the answer to a ping prewarm() stopped waiting for
+                if grace_s is not None and not select.select([proc.stdout], [], [], grace_s)[0]:
+                    return "starved", None
+                _recv(proc.stdout)
+                self._ping_sent = False
             if grace_s is not None:
                 ready, _, _ = select.select([proc.stdout], [], [], grace_s)
                 if not ready:
@@ -172,9 +200,13 @@ def main() -> int:
     sys.stdout = sys.stderr  # a stray print must not corrupt the answer stream
     while True:
         try:
-            path, trust = _recv(requests)
+            request = _recv(requests)
         except EOFError:
             return 0
+        if request is None:  # a ping: the imports are done
+            _send(answers, ("ready", None))
+            continue
+        path, trust = request
         try:
             answer: tuple[str, Any] = ("ok", load_grid(path, trust))
         except GridLoadError as exc:

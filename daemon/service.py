@@ -214,6 +214,14 @@ class DaemonService:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
+    def prewarm_reload_worker(self, wait_s: float) -> bool:
+        """Start the grid-reload worker and wait (at most ``wait_s``, s) until its imports are
+        done: called before :meth:`start`, so they never run beside the first answers. True
+        when it is ready (always True with an in-process loader)."""
+        if self._process_loader is None:
+            return True
+        return self._process_loader.prewarm(wait_s)
+
     def run_forever(self) -> int:
         """Process main loop (main thread): signals drive stop and reload. Returns exit code.
 

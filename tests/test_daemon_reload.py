@@ -186,3 +186,27 @@ def test_a_starved_idle_worker_is_replaced_by_one_at_normal_priority() -> None:
             assert _wait(lambda: _policy(pid) == os.SCHED_IDLE, 60)
     finally:
         loader.stop(10.0)
+
+
+def test_prewarmed_worker_is_ready_and_its_ping_never_shifts_the_answers() -> None:
+    """The daemon waits at start until the reload worker has imported the grid code (a ping
+    answered ``ready``); a ping prewarm() stopped waiting for (a wait of ~0) is drained before
+    the first reload's answer, which is then the grid asked for, not the ping's ``ready``."""
+    from cmm_comp.daemon.grid_worker import ProcessGridLoader
+
+    want = CorrectionGrid.load(npl_grid_path()).sha256
+    waited = ProcessGridLoader(idle_grace_s=120.0)
+    try:
+        # a machine saturated by the other tests may starve the SCHED_IDLE worker: retried
+        assert _wait(lambda: waited.prewarm(5.0), 120)
+        assert waited(npl_grid_path(), None).sha256 == want
+        assert waited(npl_grid_path(), None).sha256 == want
+    finally:
+        waited.stop(10.0)
+    hurried = ProcessGridLoader(idle_grace_s=120.0)
+    try:
+        assert hurried.prewarm(1e-6) in (False, True)  # the ping is most likely still pending
+        assert hurried(npl_grid_path(), None).sha256 == want
+        assert hurried(npl_grid_path(), None).sha256 == want
+    finally:
+        hurried.stop(10.0)
