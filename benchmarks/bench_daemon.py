@@ -260,21 +260,31 @@ def _virtual_round(
 
 
 def interleaved(
-    cases: list[str], rounds: int, one_round: Callable[[str], tuple[list[float], int]]
+    cases: list[str],
+    rounds: int,
+    one_round: Callable[[str], tuple[list[float], int]],
+    progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Run every case in ``rounds`` interleaved rounds (order rotated every round, so a drift
-    of the machine's load hits every case alike); percentiles over the pooled latencies."""
+    of the machine's load hits every case alike); percentiles over the pooled latencies
+    (``name``), per round (``name_per_round``), answers lost (``name_lost``). ``progress``
+    (optional) is told each round's number when it is done."""
     lat: dict[str, list[float]] = {name: [] for name in cases}
+    per_round: dict[str, list[dict[str, float]]] = {name: [] for name in cases}
     lost: dict[str, int] = dict.fromkeys(cases, 0)
     for k in range(rounds):
         shift = k % len(cases)
         for name in cases[shift:] + cases[:shift]:
             values, n_lost = one_round(name)
             lat[name] += values
+            per_round[name].append(pct(values))
             lost[name] += n_lost
+        if progress is not None:
+            progress(k + 1)
     out: dict[str, Any] = {"rounds": rounds}
     for name in cases:
         out[name] = pct(lat[name])
+        out[f"{name}_per_round"] = per_round[name]
         out[f"{name}_lost"] = lost[name]
     return out
 

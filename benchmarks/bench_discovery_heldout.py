@@ -57,12 +57,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from discovery_heldout_report import Outcome, report  # noqa: E402
 from heldout_generator import (  # noqa: E402
     CAUSES,
+    DESIGN_REDRAWS,
     SIZES,
-    SessionDesign,
     UnreachableCase,
-    default_design,
-    make_case,
-    random_design,
+    draw_case,
     score_diagnosis,
     write_case,
 )
@@ -79,7 +77,6 @@ PAIRS: tuple[tuple[str, str], ...] = (
     ("scale_expansion", "probe_lobing"),
     ("unexplained", "reversal"),
 )
-DESIGN_REDRAWS = 8
 RESULTS = ROOT / "benchmarks" / "results" / "discovery_heldout.json"
 
 
@@ -97,13 +94,6 @@ class Plan:
 
 def _key(*parts: object) -> int:
     return zlib.crc32("|".join(map(str, parts)).encode())
-
-
-def _design(plan: Plan, attempt: int) -> SessionDesign:
-    if plan.design_rule == "default" and attempt == 0:
-        return default_design()
-    rng = np.random.default_rng([plan.seed, _key(plan.case_id), attempt])
-    return random_design(rng)
 
 
 def build_plans(args: argparse.Namespace) -> list[Plan]:
@@ -175,21 +165,16 @@ def run_one(plan: Plan, args: argparse.Namespace, cli: str, env: dict[str, str])
     outcome = Outcome(plan)
     outcome.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
     outcome.code = code_fingerprint()
-    case = None
-    for attempt in range(DESIGN_REDRAWS):
-        try:
-            case = make_case(
-                plan.causes,
-                plan.sizes,
-                seed=plan.seed,
-                design=_design(plan, attempt),
-                case_id=plan.case_id,
-            )
-            outcome.design_redraws = attempt
-            break
-        except UnreachableCase:
-            continue
-    if case is None:
+    try:
+        case, outcome.design_redraws = draw_case(
+            plan.causes,
+            plan.sizes,
+            plan.seed,
+            plan.case_id,
+            default_first=plan.design_rule == "default",
+            redraws=DESIGN_REDRAWS,
+        )
+    except UnreachableCase:
         outcome.error = "no design shows this cause beyond a static table change"
         return outcome
     outcome.summary = case.summary()

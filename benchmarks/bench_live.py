@@ -344,7 +344,14 @@ def bench_live_daemon(
     import uuid
 
     import can
-    from bench_daemon import config, measure, pct, process_cpu_s, readings, wait_quiet
+    from bench_daemon import (
+        config,
+        interleaved,
+        measure,
+        process_cpu_s,
+        readings,
+        wait_quiet,
+    )
 
     from cmm_comp.compensation.grid import CorrectionGrid
     from cmm_comp.compensation.machine import Machine
@@ -359,9 +366,6 @@ def bench_live_daemon(
     rs = readings(n + 200, np.random.default_rng(1))
     received: dict[str, int] = {}
     live_stats: dict[str, dict[str, int]] = {}
-    per_round: dict[str, list[dict[str, float]]] = {name: [] for name in names}
-    pooled: dict[str, list[float]] = {name: [] for name in names}
-    lost: dict[str, int] = dict.fromkeys(names, 0)
     cpu_us: dict[str, list[float]] = {name: [] for name in names}
     child_cpu_us: dict[str, list[float]] = {name: [] for name in names}
     settle_s: dict[str, list[float]] = {}
@@ -416,14 +420,13 @@ def bench_live_daemon(
             return out
 
         print("daemon rounds …", file=sys.stderr)
-        for k in range(rounds):
-            shift = k % len(names)
-            for name in names[shift:] + names[:shift]:
-                values, n_lost = one_round(name)
-                pooled[name] += values
-                lost[name] += n_lost
-                per_round[name].append(pct(values))
-            print(f"daemon round {k + 1}/{rounds} done", file=sys.stderr, flush=True)
+        runs = interleaved(
+            names,
+            rounds,
+            one_round,
+            lambda k: print(f"daemon round {k}/{rounds} done", file=sys.stderr, flush=True),
+        )
+    per_round = {name: runs[f"{name}_per_round"] for name in names}
     res: dict[str, Any] = {
         "rounds": rounds,
         "readings_per_case_round": n,
@@ -432,8 +435,8 @@ def bench_live_daemon(
     }
     for name in names:
         res[name] = {
-            **pct(pooled[name]),
-            "lost": lost[name],
+            **runs[name],
+            "lost": runs[f"{name}_lost"],
             "per_round": per_round[name],
             "cpu_us_per_reading_daemon_process": cpu_us[name],
             "cpu_us_per_reading_view_process": child_cpu_us[name],

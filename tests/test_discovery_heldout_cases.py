@@ -25,20 +25,10 @@ The full rate table is benchmarks/bench_discovery_heldout.py (not in the suite: 
 
 from __future__ import annotations
 
-import zlib
 from pathlib import Path
 
-import numpy as np
 import pytest
-from heldout_generator import (
-    SessionDesign,
-    UnreachableCase,
-    default_design,
-    make_case,
-    random_design,
-    score_diagnosis,
-    write_case,
-)
+from heldout_generator import UnreachableCase, draw_case, score_diagnosis, write_case
 
 from cmm_comp.compensation import Machine, read_measurements
 from cmm_comp.compensation.diagnosis import diagnose
@@ -47,18 +37,10 @@ from cmm_comp.compensation.diagnosis import diagnose
 def _case(causes: tuple[str, ...], sizes: tuple[float, ...], seed: int, case_id: str):
     """The case exactly as benchmarks/bench_discovery_heldout.py draws it: seed 0 on the
     default design, other seeds on a random design (redrawn while the cause is unreachable)."""
-    for attempt in range(8):
-        design: SessionDesign
-        if seed == 0 and attempt == 0:
-            design = default_design()
-        else:
-            rng = np.random.default_rng([seed, zlib.crc32(case_id.encode()), attempt])
-            design = random_design(rng)
-        try:
-            return make_case(causes, sizes, seed=seed, design=design, case_id=case_id)
-        except UnreachableCase:
-            continue
-    pytest.skip(f"{case_id}: no reachable design")
+    try:
+        return draw_case(causes, sizes, seed, case_id, default_first=seed == 0)[0]
+    except UnreachableCase:
+        pytest.skip(f"{case_id}: no reachable design")
 
 
 CASES = [

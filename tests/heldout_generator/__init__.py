@@ -6,7 +6,16 @@ or the other generators (see README.md here). It shares only the contract: the f
 the nominal kinematic model (checked in tests/test_heldout_generator.py).
 """
 
-from .case import DRAWERS, MIN_NONTABLE_CHI2, SIZES, Case, UnreachableCase, make_case
+from .case import (
+    DESIGN_REDRAWS,
+    DRAWERS,
+    MIN_NONTABLE_CHI2,
+    SIZES,
+    Case,
+    UnreachableCase,
+    draw_case,
+    make_case,
+)
 from .chain import MODEL_AXES, TABLE_NAMES, stylus_error_um
 from .design import Session, SessionDesign, default_design, random_design
 from .files import write_case, write_machine, write_measurements
@@ -17,6 +26,7 @@ from .truth import effect_signal_um, rms3d_um
 
 __all__ = [
     "CAUSES",
+    "DESIGN_REDRAWS",
     "DRAWERS",
     "IDENTITY_KEYS",
     "MIN_NONTABLE_CHI2",
@@ -32,6 +42,7 @@ __all__ = [
     "SessionDesign",
     "UnreachableCase",
     "default_design",
+    "draw_case",
     "effect_signal_um",
     "identity_from_entry",
     "make_case",

@@ -20,7 +20,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .design import Session, SessionDesign, default_design, make_session, with_environment
+from .design import (
+    Session,
+    SessionDesign,
+    default_design,
+    make_session,
+    random_design,
+    with_environment,
+)
 from .effect_base import Contribution, HiddenEffect
 from .effects_geometric import (
     draw_coupling,
@@ -282,3 +289,32 @@ def make_case(
         noise_um=noise,
         extra={"thermal_activity": activity},
     )
+
+
+#: Designs drawn for one case id before it is given up as unreachable.
+DESIGN_REDRAWS = 8
+
+
+def draw_case(
+    causes: Sequence[str],
+    sizes: Sequence[float],
+    seed: int,
+    case_id: str,
+    default_first: bool,
+    redraws: int = DESIGN_REDRAWS,
+) -> tuple[Case, int]:
+    """The case ``case_id`` on its design: the default design first when ``default_first``,
+    else (and on every redraw) a random design seeded by ``(seed, crc32(case_id), attempt)``,
+    redrawn while the hidden cause cannot show beyond a static table change. Returns the case
+    and the number of redraws; raises :class:`UnreachableCase` when no design shows it."""
+    for attempt in range(redraws):
+        if default_first and attempt == 0:
+            design = default_design()
+        else:
+            rng = np.random.default_rng([seed, zlib.crc32(case_id.encode()), attempt])
+            design = random_design(rng)
+        try:
+            return make_case(causes, sizes, seed=seed, design=design, case_id=case_id), attempt
+        except UnreachableCase:
+            continue
+    raise UnreachableCase(f"{case_id}: no design of {redraws} shows it")
