@@ -135,6 +135,12 @@ class Candidate:
         return bool(self.transient_columns)
 
     @property
+    def timed(self) -> bool:
+        """A cause of time: a drift (no law beyond its session) or a term with the session's
+        start-up state. Judged between neighbours in time as well (``Problem.judged_folds``)."""
+        return self.hold_time or self.start_state
+
+    @property
     def identity(self) -> tuple[Any, ...]:
         """(cause, component, axis, varies_with): what the diagnosis names (formats.md §4)."""
         k = self.keys

@@ -16,7 +16,8 @@ replaces the group when
   ``1 − alpha`` quantile of χ²(1) times the noise variance, each parameter it has beyond the
   group's charged one noise variance (the test :mod:`.alternatives` uses for "the session
   cannot tell them apart"), and
-* it predicts held-out points as well: grouped CV MSE within ``SIMPLER_WITHIN`` of the group's.
+* it predicts held-out points as well: CV MSE within ``SIMPLER_WITHIN`` of the group's, both
+  on the folds either model is judged on (time blocks once a cause of time is in it).
 
 One cause that does the work of several is the simpler explanation (Occam), so it is named and the
 group's members are not. The step only ever removes named causes: it cannot raise a false alarm
@@ -69,10 +70,15 @@ def one_for_several(
     _, rss_full, rank_full = fit(problem, full)
     sigma2 = rss_full / max(n_obs - rank_full, 1)
     threshold = float(stats.chi2.ppf(1.0 - alpha, 1)) * sigma2
-    cv_full = cv_mse(problem, full)
-    cv_full_time = (
-        None if problem.time_folds is None else cv_mse(problem, full, folds=problem.time_folds)
-    )
+    cv_full: dict[bool, float] = {}  # the full model's CV MSE, on time blocks or not
+
+    def ratio_on(on_time: bool, new: list[Term]) -> float:
+        folds = problem.time_folds if on_time else None
+        if on_time not in cv_full:
+            cv_full[on_time] = cv_mse(problem, full, folds=folds)
+        ref = cv_full[on_time]
+        return cv_mse(problem, new, folds=folds) / ref if ref > 0 else 1.0
+
     best: Merge | None = None
     for size in range(2, min(MAX_GROUP, len(accepted)) + 1):
         for group in itertools.combinations(range(len(accepted)), size):
@@ -90,12 +96,13 @@ def one_for_several(
                 if charged - rss_full >= threshold:
                     continue
                 term = Term(cand, theta)
-                ratio = cv_mse(problem, [*others, term]) / cv_full if cv_full > 0 else 1.0
-                if (cand.hold_time or cand.start_state) and cv_full_time:
-                    # a drift or a start-up transient may instead predict as well between
-                    # neighbours in time (as when it is added: :func:`.selection._time_gain`)
-                    cv_t = cv_mse(problem, [*others, term], folds=problem.time_folds)
-                    ratio = min(ratio, cv_t / cv_full_time)
+                # both models on the folds either is judged on (``Problem.judged_folds``); a
+                # cause of time also on the other kind, kept on either, as when it is added
+                on_time = problem.judged_folds([*full, term]) is not None
+                kinds = [on_time]
+                if cand.timed and problem.time_folds is not None:
+                    kinds.append(not on_time)
+                ratio = min(ratio_on(k, [*others, term]) for k in kinds)
                 if ratio > 1.0 + simpler_within:
                     continue
                 if best is None or (len(group), -ratio) > (len(best.indices), -best.cv_ratio):

@@ -32,6 +32,7 @@ from .fitting import (
     Problem,
     Term,
     best_theta,
+    cv_gain,
     cv_mse,
     cv_predictions,
     f_test_p,
@@ -141,19 +142,14 @@ def _round(
     # out-of-sample gain against the model as it stands (the rich shapes only absorb leftovers
     # in the significance test: with few points they would overfit the comparison)
     current = _terms(slots)
-    folds = _folds(problem, current)
+    folds = problem.judged_folds(current)
     if folds is not None:
         cv_base = cv_mse(problem, current, folds=folds)
     for r in eligible:
         with_it = [*current, Term(r["candidate"], r["theta"])]
         r["cv_mse"] = cv_mse(problem, with_it, folds=folds)
         r["cv_gain"] = (cv_base - r["cv_mse"]) / cv_base if cv_base > 0 else 0.0
-        if not _timed(r["candidate"]):
-            timed = None
-        elif folds is None:
-            timed = _time_gain(problem, current, with_it)
-        else:  # a second cause of time: also judged on the grouped folds, as the first was
-            timed = _grouped_gain(problem, current, with_it)
+        timed = _other_gain(problem, current, with_it, folds) if r["candidate"].timed else None
         if timed is not None and timed > r["cv_gain"]:
             # a drift or a start-up transient may also be judged between neighbours in time
             r["cv_gain"] = timed
@@ -178,42 +174,27 @@ def _round(
     return None, rows
 
 
-def _folds(problem: Problem, terms: Sequence[Term]) -> Sequence[NDArray[np.intp]] | None:
-    """The folds a model is judged on held out: the time blocks once it holds a cause of time
-    (a drift, a start-up transient), else the grouped folds (None). Grouped folds would ask a
-    drift to predict whole artefact lines measured in hours it never saw, which no drift can:
-    on length lines a drift judged that way predicted 4× worse than no model at all, and every
-    candidate after it was scored against that noise."""
-    if problem.time_folds is not None and any(_timed(t.candidate) for t in terms):
-        return problem.time_folds
-    return None
-
-
-def _grouped_gain(problem: Problem, base: list[Term], with_term: list[Term]) -> float:
-    """Relative held-out gain of ``with_term`` over ``base`` on the grouped folds."""
-    cv0 = cv_mse(problem, base)
-    return (cv0 - cv_mse(problem, with_term)) / cv0 if cv0 > 0 else 0.0
+def _other_gain(
+    problem: Problem,
+    base: list[Term],
+    with_term: list[Term],
+    folds: Sequence[NDArray[np.intp]] | None,
+) -> float | None:
+    """A cause of time is judged on both kinds of folds and kept on either: its gain on the
+    kind ``folds`` is not (time blocks when ``folds`` is None, else the main folds); None when
+    the session has no time blocks."""
+    if folds is None:
+        return (
+            None
+            if problem.time_folds is None
+            else cv_gain(problem, base, with_term, problem.time_folds)
+        )
+    return cv_gain(problem, base, with_term)
 
 
 def _model_cv(problem: Problem, terms: Sequence[Term]) -> float:
-    """The model's held-out MSE on the folds it is judged on (:func:`_folds`)."""
-    return cv_mse(problem, terms, folds=_folds(problem, terms))
-
-
-def _timed(cand: Candidate) -> bool:
-    """A cause judged also between its neighbours in time: a drift (no law beyond its session)
-    or a term with the session's start-up state (the start is in one block only)."""
-    return cand.hold_time or cand.start_state
-
-
-def _time_gain(problem: Problem, base: list[Term], with_term: list[Term]) -> float | None:
-    """Relative out-of-fold gain of ``with_term`` over ``base`` on the problem's time folds
-    (None when the session has no times): the test for a cause of time alone (a drift)."""
-    if problem.time_folds is None:
-        return None
-    cv0 = cv_mse(problem, base, folds=problem.time_folds)
-    cv1 = cv_mse(problem, with_term, folds=problem.time_folds)
-    return (cv0 - cv1) / cv0 if cv0 > 0 else 0.0
+    """The model's held-out MSE on the folds it is judged on (``Problem.judged_folds``)."""
+    return cv_mse(problem, terms, folds=problem.judged_folds(terms))
 
 
 #: How many of the best global families are tried at their rich shape against a local bump.
@@ -272,7 +253,7 @@ def _choose_variants(
         if use_rich:
             # a drift's shape is judged between neighbours in time, any other on the grouped
             # folds (the shape of a table is a question of where, not when)
-            folds = _folds(problem, [plain])
+            folds = problem.judged_folds([plain])
             cv0 = cv_mse(problem, [*others, plain], folds=folds)
             cv1 = cv_mse(problem, [*others, rich], folds=folds)
             use_rich = cv0 > 0 and (cv0 - cv1) / cv0 >= min_cv_gain
@@ -290,7 +271,7 @@ def _backward(
     while len(slots) > 1:
         worst: tuple[float, int] | None = None
         full = _terms(slots)
-        folds = _folds(problem, full)
+        folds = problem.judged_folds(full)
         cv_full = cv_mse(problem, full, folds=folds)
         for i, s in enumerate(slots):
             # significance against the others at their rich shapes, as when a cause is added:
@@ -305,11 +286,11 @@ def _backward(
             p = f_test_p(rss0, rss1, rank1 - rank0, n_obs, rank1)
             p_adj = min(1.0, p * n_tried * s.root.look_elsewhere)
             cv0 = cv_mse(problem, others, folds=folds)
-            # (a drift in the model: both on the time blocks, :func:`_folds`)
+            # (a drift in the model: both on the time blocks, ``Problem.judged_folds``)
             gain = (cv0 - cv_full) / cv0 if cv0 > 0 else 0.0
-            if folds is not None and _timed(s.root):
-                # a cause of time is kept on either test, as it was added
-                gain = max(gain, _grouped_gain(problem, others, full))
+            other = _other_gain(problem, others, full, folds) if s.root.timed else None
+            if other is not None:  # a cause of time is kept on either test, as it was added
+                gain = max(gain, other)
             if (p_adj >= alpha or gain < min_cv_gain) and (worst is None or -gain > worst[0]):
                 worst = (-gain, i)
         if worst is None:
@@ -334,7 +315,7 @@ def _still_significant(
     drift first fitted by a coupling in one half of the volume) and is then no structure left."""
     base = _terms(slots, rich=True)
     current = _terms(slots)
-    folds = _folds(problem, current)
+    folds = problem.judged_folds(current)
     n_obs = problem.y.size
     _, rss0, rank0 = fit(problem, base)
     out: list[dict[str, Any]] = []
@@ -476,7 +457,7 @@ def diagnose(
     beta, rss_after, rank_after = fit(problem, accepted, ridge=True)
     fitted = predictions(problem, accepted, beta)
     say("held-out predictions")
-    held_folds = _folds(problem, accepted)
+    held_folds = problem.judged_folds(accepted)
     heldout_pred = cv_predictions(problem, accepted, folds=held_folds)
     coefs = split_coefficients(problem, accepted, beta)
     local = [i for i, t in enumerate(accepted) if is_local(t.candidate)]
@@ -525,11 +506,12 @@ def diagnose(
             _terms(slots, rich=True),
             held_folds,
         )
-        hits = _still_significant(
-            problem, slots, local_hits, n_tried, alpha, min_cv_gain, cv_history[-1]
-        )
-        if unexplained is None and hits:
-            unexplained = local_unexplained(problem, accepted, hits)
+        if unexplained is None and local_hits:
+            hits = _still_significant(
+                problem, slots, local_hits, n_tried, alpha, min_cv_gain, cv_history[-1]
+            )
+            if hits:
+                unexplained = local_unexplained(problem, accepted, hits)
         if unexplained is not None:
             unexplained["parameters"].update(locate(res, r_after))
             entries.append(unexplained)
