@@ -23,10 +23,14 @@ differences against ``off`` of the same run.
 ``--daemon``: the daemon's reply latency, as ``benchmarks/bench_daemon.py`` measures it (a
 simulated controller on a ``virtual`` CAN bus in the same process, 1 kHz, last raw frame →
 status frame, MCAP on with the default writer), with ``[live]`` off, off again (an A/A case:
-the noise floor), on with the default process sender and no client, and on with a client
-subscribed to every channel in another process (``--with-thread``: also the sender thread):
-interleaved rounds, the order rotated each round, a new daemon per case and round; per round
-p50/p99 and the ratio to ``live off`` of the same round (median and range over the rounds).
+the noise floor), on with the default process sender and no client, on with a client
+subscribed to every channel in another process (at the defaults; with the view at the old
+30 Hz defaults; with the client at ``SCHED_IDLE``, so that only the daemon's and the view's
+own cost remains) and, with ``--with-thread``, the sender thread: interleaved rounds, the
+order rotated each round, a new daemon per case and round; per round p50/p99, the ratio to
+``live off`` of the same round (median and range over the rounds) and the difference to the
+mean of the two ``off`` cases of the same round (median, its 95 % bootstrap interval, rounds
+higher).
 ``--daemon-only`` runs only this part (``benchmarks/results/live_daemon.json``).
 
 The feeder cases above use :class:`LiveSink` (the sender thread) and
@@ -43,6 +47,7 @@ import platform
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -62,15 +67,20 @@ class NullLogger:
         pass
 
 
-def client_main(url: str) -> None:
+def client_main(url: str, priority: str = "normal") -> None:
     """The subscribed client (run in a child process): subscribe to every advertised channel,
-    count Message Data frames until stdin closes, print the counts as JSON."""
+    count Message Data frames until stdin closes, print the counts as JSON. ``priority``
+    ``idle``: Linux ``SCHED_IDLE`` for this process, taken before any thread starts."""
     import json as _json
     import select
     import struct
 
     from websockets.sync.client import connect
 
+    if priority != "normal":
+        from cmm_comp.daemon.osthread import lower_priority
+
+        lower_priority(priority)
     counts: dict[str, int] = {}
     with connect(url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"]) as ws:
         channels: dict[int, str] = {}
@@ -143,6 +153,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--rate-hz", type=float, default=1000.0)
     parser.add_argument("--client", help=argparse.SUPPRESS)
+    parser.add_argument("--client-priority", default="normal", help=argparse.SUPPRESS)
     parser.add_argument("--daemon", action="store_true", help="also the daemon's reply latency")
     parser.add_argument("--daemon-n", type=int, default=3000, help="readings per daemon case")
     parser.add_argument(
@@ -153,7 +164,7 @@ def main(argv: list[str]) -> int:
     )
     args = parser.parse_args(argv)
     if args.client:
-        client_main(args.client)
+        client_main(args.client, args.client_priority)
         return 0
 
     from cmm_comp.daemon.live import LiveFanOut, LiveProcessSink, LiveSection, LiveSink
@@ -286,31 +297,46 @@ def main(argv: list[str]) -> int:
     return 0
 
 
-DAEMON_CASES: dict[str, tuple[bool, str, int | None]] = {
-    # name: live enabled, sender, client (None: no client; else its nice level)
-    "live off": (False, "process", None),
-    "live off again": (False, "process", None),  # A/A: the ratio's spread with no change
-    "live on, no client": (True, "process", None),
-    "live on, subscribed": (True, "process", 0),
-    # the viewer is another program (a browser, Foxglove): on a 2-core machine shared with the
-    # daemon it takes CPU from everything at normal priority; at nice 19 what remains is the
-    # daemon's own cost of serving it
-    "live on, subscribed, client at nice 19": (True, "process", 19),
+@dataclass(frozen=True)
+class DaemonCase:
+    """One case of the daemon part: ``[live]`` on or off, its sender, the client (None: no
+    client; ``normal``: at normal CPU priority, like a Foxglove app or a browser started by
+    hand; ``idle``: the same client at Linux ``SCHED_IDLE``, so its own CPU never competes with
+    the daemon and what remains is what the daemon and its view's process cost), and
+    ``[live]`` keys changed from their defaults."""
+
+    enabled: bool
+    sender: str = "process"
+    client: str | None = None
+    live: tuple[tuple[str, float], ...] = ()
+
+
+DAEMON_CASES: dict[str, DaemonCase] = {
+    "live off": DaemonCase(False),
+    "live off again": DaemonCase(False),  # A/A: what the machine's noise alone gives
+    "live on, no client": DaemonCase(True),
+    "live on, subscribed": DaemonCase(True, client="normal"),
+    # the view at the rates it had by default before (30 and 20 Hz, against 10 and 10 now):
+    # ~3x the client's messages and wake-ups
+    "live on, subscribed, view at 30 Hz": DaemonCase(
+        True, client="normal", live=(("update_rate_hz", 30.0), ("scene_rate_hz", 20.0))
+    ),
+    # the same client where its own CPU cannot compete: the view's cost alone
+    "live on, subscribed, client at idle priority": DaemonCase(True, client="idle"),
 }
-THREAD_CASE = ("live on (thread), subscribed", (True, "thread", 0))
+THREAD_CASE = ("live on (thread), subscribed", DaemonCase(True, "thread", "normal"))
 """With ``--with-thread``: the sender thread in the daemon (shares the reply path's GIL)."""
+BASELINES = ("live off", "live off again")
+"""A case's paired difference is taken against the mean of these two, round by round."""
 
 
-def start_client(url: str, nice: int = 0) -> subprocess.Popen[str]:
-    """The subscribed client in its own process (at ``nice``); returns once it has subscribed."""
-    client = subprocess.Popen(
-        ["nice", "-n", str(nice), sys.executable, __file__, "--client", url]
-        if nice
-        else [sys.executable, __file__, "--client", url],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+def start_client(url: str, priority: str = "normal") -> subprocess.Popen[str]:
+    """The subscribed client in its own process (``priority``: ``normal`` or ``idle``, which it
+    takes itself before it connects); returns once it has subscribed."""
+    cmd = [sys.executable, __file__, "--client", url]
+    if priority != "normal":
+        cmd += ["--client-priority", priority]
+    client = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     assert client.stdout is not None
     line = client.stdout.readline().strip()
     if line != "subscribed":
@@ -325,6 +351,16 @@ def stop_client(client: subprocess.Popen[str]) -> dict[str, int]:
     line = client.stdout.readline().strip()
     client.wait(10)
     return json.loads(line) if line else {}
+
+
+def median_interval(values: list[float], draws: int = 5000, seed: int = 0) -> tuple[float, float]:
+    """95 % bootstrap interval of the median of ``values`` (resampled with replacement,
+    seeded: the same data give the same interval)."""
+    a = np.asarray(values, dtype=float)
+    rng = np.random.default_rng(seed)
+    medians = np.median(a[rng.integers(0, a.size, (draws, a.size))], axis=1)
+    lo, hi = np.percentile(medians, [2.5, 97.5])
+    return float(lo), float(hi)
 
 
 def _spread(values: list[float], digits: int = 3) -> str:
@@ -375,21 +411,23 @@ def bench_live_daemon(
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
 
         def one_round(name: str) -> tuple[list[float], int]:
-            enabled, sender, subscribed = cases[name]
+            case = cases[name]
             ch = f"bench-live-{uuid.uuid4().hex[:8]}"
             cfg = config(grid, "virtual", ch, str(tmp / f"{ch}.mcap"))
-            cfg.live.enabled = enabled
-            cfg.live.sender = sender
+            cfg.live.enabled = case.enabled
+            cfg.live.sender = case.sender
             cfg.live.port = 0
+            for key, value in case.live:
+                setattr(cfg.live, key, value)
             with (
                 DaemonService(cfg, events_stream=None) as d,
                 can.Bus(interface="virtual", channel=ch) as bus,
                 CanController(bus) as ctl,
             ):
                 client = None
-                if subscribed is not None:
+                if case.client is not None:
                     assert d.live is not None
-                    client = start_client(d.live.url, subscribed)
+                    client = start_client(d.live.url, case.client)
                     deadline = time.monotonic() + 5.0
                     while d.live.stats().subscriptions < 7 and time.monotonic() < deadline:
                         time.sleep(0.01)
@@ -461,6 +499,28 @@ def bench_live_daemon(
             f"| {name} | {r['p50']:.0f} | {r['p99']:.0f} | {_spread(r50)} | {_spread(r99)} | "
             f"{r['lost']} |"
         )
+    print("\npaired, round by round: the case minus the mean of live off and live off again of the")
+    print("same round, µs: median over rounds (95 % bootstrap interval of the median), and in how")
+    print("many rounds the case was higher")
+    print("| case | p50 − baseline | rounds higher | p99 − baseline | rounds higher |")
+    print("|---|---|---|---|---|")
+    for name in names:
+        r = res[name]
+        for q in ("p50", "p99"):
+            base = [np.mean([per_round[b][k][q] for b in BASELINES]) for k in range(rounds)]
+            diff = [per_round[name][k][q] - base[k] for k in range(rounds)]
+            r[f"{q}_minus_baseline_per_round"] = diff
+            r[f"{q}_minus_baseline_median"] = float(np.median(diff))
+            r[f"{q}_minus_baseline_median_ci95"] = median_interval(diff)
+            r[f"{q}_rounds_higher"] = int(sum(d > 0 for d in diff))
+        cells = []
+        for q in ("p50", "p99"):
+            lo, hi = r[f"{q}_minus_baseline_median_ci95"]
+            cells.append(
+                f"{r[f'{q}_minus_baseline_median']:+.0f} ({lo:+.0f} … {hi:+.0f}) | "
+                f"{r[f'{q}_rounds_higher']}/{rounds}"
+            )
+        print(f"| {name} | " + " | ".join(cells) + " |")
     print("\nCPU µs per reading, median over rounds (min–max): the daemon's process (controller")
     print("thread included), the view's process")
     for name in names:

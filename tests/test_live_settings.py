@@ -21,12 +21,13 @@ from cmm_comp.daemon.live import (
 def test_defaults_are_off_and_loopback() -> None:
     s = live_section_from_table(None)
     assert s == LiveSection()
-    assert (s.enabled, s.host, s.port, s.queue, s.scene_rate_hz) == (
+    assert (s.enabled, s.host, s.port, s.queue, s.update_rate_hz, s.scene_rate_hz) == (
         False,
         "127.0.0.1",
         8765,
         4096,
-        20.0,
+        10.0,
+        10.0,
     )
     assert live_problems(s, "x") == []
 

@@ -53,14 +53,16 @@ class LiveSection:
     oldest are dropped; with ``sender = "process"`` also the size of the shared-memory ring
     between the daemon and the process, 256 bytes a message: when full the newest are
     dropped); every drop is counted."""
-    update_rate_hz: float = 30.0
+    update_rate_hz: float = 10.0
     """Updates sent to clients per second, at most (what arrived in between goes out
-    together, the high-rate topics decimated)."""
+    together, the high-rate topics decimated). 10 by default: a viewer on the daemon's host
+    competes with the reply path for CPU in proportion to what it receives; at 30 it cost the
+    reply's p99 +36 µs on a 2-core host (docs/live.md, "Measured")."""
     max_per_update: int = 4
     """``/cmm/raw`` and ``/cmm/corrected`` messages per update, at most (evenly picked, the
-    newest always included; answers not ``ok`` are kept besides): 120 a second each at the
+    newest always included; answers not ``ok`` are kept besides): 40 a second each at the
     defaults. The MCAP log is the full record."""
-    scene_rate_hz: float = 20.0
+    scene_rate_hz: float = 10.0
     """At most this many ``/cmm/scene`` updates per second."""
     scene_keep_arrows: int = 256
     """Correction arrows kept in the 3-D scene (the newest replace the oldest)."""
