@@ -37,6 +37,8 @@ _QUANTUM_MM = 1e-4  # positions: 0.1 µm (TwinCAT's length unit; 4 decimals in t
 _MAX_EVAL_STEPS = 201
 _MAX_EVAL_POINTS = 2_000_000  # grid nodes × direction combinations
 _CHUNK = 100_000  # points per model evaluation (bounds the memory)
+#: points per table this exporter fits (the fit's memory grows ~0.35 MB per point: 4001 → 1.5 GB)
+_MAX_TABLE_POINTS = 5000
 
 
 @dataclass
@@ -106,19 +108,25 @@ def _points(machine: Machine, fmt: str, opts: ExportOptions) -> tuple[list[int],
                 f"{fmt}: --points {opts.points} is more than a table holds: at most {limit} "
                 f"({source}; --max-points raises it to your control's setting)"
             )
-        return [opts.points] * 3, limit, source
-    counts = [int(min(limit, max(11, math.ceil(float(s) / 10.0) + 1))) for s in span]
+        counts = [opts.points] * 3
+    else:
+        counts = [int(min(limit, max(11, math.ceil(float(s) / 10.0) + 1))) for s in span]
+    if max(counts) > _MAX_TABLE_POINTS:
+        raise ExportError(
+            f"{fmt}: {max(counts)} points per table is more than this exporter fits: at most "
+            f"{_MAX_TABLE_POINTS} (memory and time grow with the points; set --points)"
+        )
     return counts, limit, source
 
 
-_AXIS_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,15}$")
+_AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,15}")  # whole name (fullmatch: "X\n" is not one)
 
 
 def _check_axes(fmt: str, opts: ExportOptions) -> None:
     """Axis names are identifiers (letter first, ≤ 16 letters, digits, _); TwinCAT logical axis
     numbers are distinct and ≥ 1 (0 is not allowed), LinuxCNC joints distinct and ≥ 0."""
     names = opts.cec_axis_names if fmt == "sinumerik-cec" else opts.twincat_axis_names
-    named = len(names) == 3 and all(isinstance(n, str) and _AXIS_NAME.match(n) for n in names)
+    named = len(names) == 3 and all(isinstance(n, str) and _AXIS_NAME.fullmatch(n) for n in names)
     if fmt != "linuxcnc" and not named:
         raise ExportError(
             f"--axis-names needs 3 identifiers (a letter, then letters, digits or _; at most "
@@ -145,19 +153,28 @@ def _check_eval_steps(steps: Sequence[int]) -> tuple[int, int, int]:
     return int(steps[0]), int(steps[1]), int(steps[2])
 
 
-def _stats(r: FloatArray) -> dict[str, Any]:
-    norm = np.linalg.norm(r, axis=1)
-    return {
-        "rms": float(np.sqrt(np.mean(norm**2))),
-        "max": float(np.max(norm)),
-        "per_axis": {
+def _stats(r: FloatArray, what: str) -> dict[str, Any]:
+    """RMS and max µm of the 3-D vector and per axis; :class:`ExportError` naming ``what`` when
+    one is not a finite number (an error so large that its square overflows, or a table value
+    beyond what the control's arithmetic holds): never a NaN/inf figure reported as a result."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        norm = np.linalg.norm(r, axis=1)
+        rms, peak = float(np.sqrt(np.mean(norm**2))), float(np.max(norm))
+        per_axis = {
             AXES[k]: {
                 "rms": float(np.sqrt(np.mean(r[:, k] ** 2))),
                 "max": float(np.max(np.abs(r[:, k]))),
             }
             for k in range(3)
-        },
-    }
+        }
+    figures = [rms, peak] + [v for a in per_axis.values() for v in a.values()]
+    if not all(math.isfinite(v) for v in figures):
+        raise ExportError(
+            f"{what} over the working volume is not a finite number (RMS {rms:g} µm, "
+            f"max {peak:g} µm): the machine description's errors are too large to "
+            "export; check its error tables (µm, µrad)"
+        )
+    return {"rms": rms, "max": peak, "per_axis": per_axis}
 
 
 def evaluation_points(machine: Machine, steps: Sequence[int]) -> FloatArray:
@@ -189,9 +206,11 @@ def measure_residual(
             dirs = np.ones_like(q)
             for a, s in combo.items():
                 dirs[:, a] = s
-            res.append(e - represented_um(q, dirs))
+            with np.errstate(over="ignore", invalid="ignore"):
+                res.append(e - represented_um(q, dirs))
             raw.append(e)
-    return _stats(np.concatenate(res)), _stats(np.concatenate(raw))
+    raw_stats = _stats(np.concatenate(raw), "the model's error")
+    return _stats(np.concatenate(res), "the residual after the written tables"), raw_stats
 
 
 def _header(machine: Machine, fmt: str, tool: FloatArray) -> list[str]:
@@ -212,7 +231,21 @@ def export_tables(
     progress: Callable[[str], None] | None = None,
 ) -> ExportResult:
     """Fit, write (in memory) and measure the tables of ``fmt`` for ``machine`` at ``tool_mm``
-    (default: the machine's probe offset). :class:`ExportError` names any limit it cannot meet."""
+    (default: the machine's probe offset). :class:`ExportError` names any limit it cannot meet.
+
+    Floating-point overflow on the way (errors of absurd size) is not warned about here: the
+    measured residual is checked to be finite at the end (:func:`_stats`)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _export_tables(machine, fmt, tool_mm, options, progress)
+
+
+def _export_tables(
+    machine: Machine,
+    fmt: str,
+    tool_mm: Sequence[float] | FloatArray | None,
+    options: ExportOptions | None,
+    progress: Callable[[str], None] | None,
+) -> ExportResult:
     if fmt not in FORMATS:
         raise ExportError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     opts = options or ExportOptions()

@@ -1,0 +1,112 @@
+"""Bad values on internal paths: numbers that are valid input but overflow or turn non-finite
+inside a computation, and values that pass a check yet corrupt what is written. Each case gets
+one clear error (never a NaN/inf figure reported as a result, never a corrupted file), and JSON
+the project writes parses without the non-standard NaN/Infinity tokens."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from cmm_comp.compensation import Machine, ParametricErrors
+from cmm_comp.compensation.export import ExportError, ExportOptions, export_tables
+
+ROOT = Path(__file__).resolve().parents[1]
+GOLDEN = ROOT / "tests" / "data" / "export" / "golden-machine.toml"
+FAST = {"points": 11, "eval_steps": (5, 5, 3)}
+
+
+def _strict_json(text: str) -> object:
+    def refuse(token: str) -> object:
+        raise AssertionError(f"non-standard JSON token {token}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _machine_dx(values: list[float]) -> Machine:
+    """X positional error tabulated at x = 0, 200, 400 mm (µm)."""
+    return Machine.from_parts(
+        model="MB1",
+        volume=((0, 400), (0, 300), (0, 200)),
+        errors=ParametricErrors.from_tables({"dx_x": ([0.0, 200.0, 400.0], values)}),
+    )
+
+
+@pytest.mark.parametrize("fmt", ["sinumerik-cec", "linuxcnc"])
+def test_export_refuses_an_error_whose_statistics_overflow(fmt: str) -> None:
+    """1e300 µm is finite, its square is not: the RMS was reported as inf/NaN (exit 0, garbage
+    controller files); now one error naming the cause."""
+    machine = _machine_dx([0.0, 1e300, 0.0])
+    with pytest.raises(ExportError, match="not a finite number"):
+        export_tables(machine, fmt, (0, 0, 0), ExportOptions(cec_max_sum_mm=1e308, **FAST))
+
+
+def test_export_refuses_tables_the_control_cannot_hold() -> None:
+    """LinuxCNC's trims are single precision: 4e146 mm becomes inf in the control's arithmetic,
+    the residual NaN (was printed as 'RMS nan µm', exit 0)."""
+    machine = Machine.from_parts(
+        model="MB1",
+        volume=((0, 400), (0, 300), (0, 200)),
+        errors=ParametricErrors.from_polynomials({"dx_x": [0.0, 1e150]}),
+    )
+    with pytest.raises(ExportError, match=r"residual .* not a finite number"):
+        export_tables(machine, "linuxcnc", (0, 0, 0), ExportOptions(**FAST))
+
+
+def test_export_large_but_representable_error_is_reported_finite() -> None:
+    """1e20 µm/mm is absurd but representable: the report is finite and strict JSON."""
+    from cmm_comp.compensation.export.report import report_json
+
+    machine = Machine.from_parts(
+        model="MB1",
+        volume=((0, 400), (0, 300), (0, 200)),
+        errors=ParametricErrors.from_polynomials({"dx_x": [0.0, 1e20]}),
+    )
+    result = export_tables(machine, "linuxcnc", (0, 0, 0), ExportOptions(**FAST))
+    report = _strict_json(report_json(result))
+    assert isinstance(report, dict)
+    # the model's max is at x = 400 mm: 400 · 1e20 µm, worked out by hand
+    assert report["uncompensated_um"]["max"] == pytest.approx(4e22, rel=1e-9)
+
+
+def test_cli_export_overflow_is_one_line_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cmm_comp.cli.main import main
+
+    src = tmp_path / "big.toml"
+    src.write_text(
+        GOLDEN.read_text(encoding="utf-8").replace(
+            "value = [0.0, 1.0, 2.0, 3.0, 4.0]", "value = [0.0, 1.0, 1e300, 3.0, 4.0]"
+        ),
+        encoding="utf-8",
+    )
+    out = tmp_path / "out"
+    args = ["export", str(src), "--format", "linuxcnc", "--points", "11"]
+    assert main([*args, "--eval-steps", "5", "5", "3", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "Warning" not in err, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("cmm-comp: error: ") and "not a finite number" in last
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("fmt", ["sinumerik-cec", "twincat-cnc"])
+def test_export_axis_name_with_a_trailing_newline_is_refused(fmt: str) -> None:
+    """``re.match(r'^…$')`` accepts 'AX1\\n' ($ matches before a final newline): the name
+    was written into the controller file, splitting '$AN_CEC_INPUT_AXIS[0]=(AX1' from ')'."""
+    machine = Machine.from_toml(GOLDEN)
+    names = ("AX1\n", "AX2", "AX3")
+    opts = ExportOptions(cec_axis_names=names, twincat_axis_names=names, **FAST)
+    with pytest.raises(ExportError, match="axis-names"):
+        export_tables(machine, fmt, None, opts)
+
+
+def test_export_points_beyond_what_the_fit_can_hold_are_refused_at_once() -> None:
+    """--max-points lifts the format's default without a bound: --points 100000 ran the fit out
+    of memory (the process was killed); now refused before any work."""
+    machine = Machine.from_toml(GOLDEN)
+    with pytest.raises(ExportError, match="at most 5000"):
+        export_tables(machine, "twincat-cnc", None, ExportOptions(points=100_000, max_points=10**9))
