@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cmm_comp.compensation import Machine, ParametricErrors
@@ -110,3 +111,25 @@ def test_export_points_beyond_what_the_fit_can_hold_are_refused_at_once() -> Non
     machine = Machine.from_toml(GOLDEN)
     with pytest.raises(ExportError, match="at most 5000"):
         export_tables(machine, "twincat-cnc", None, ExportOptions(points=100_000, max_points=10**9))
+
+
+def test_binned_statistics_of_a_quantised_variable_has_no_empty_bins() -> None:
+    """A temperature read in 0.1 °C steps has three levels: its equal-count bin edges repeat and
+    five of eight bins were empty, listed with NaN centre and means (NaN tokens in the report's
+    diagnosis.json). Now only bins with points, and they add up to the data."""
+    from cmm_comp.compensation.diagnosis.residuals import binned_statistics
+
+    x = np.array([20.0] * 50 + [20.1] * 40 + [20.2] * 10)
+    r = np.zeros((100, 3))
+    r[:, 0] = 1.0
+    r[:, 1] = (x - 20.0) * 10.0  # 0, 1, 2 µm
+    stats = binned_statistics(x, r)
+    _strict_json(json.dumps(stats))
+    counts = np.asarray(stats["count"])
+    assert counts.sum() == 100 and np.all(counts > 0)
+    # weighted sums over the bins equal the sums over the data, worked out by hand
+    assert float(np.dot(counts, stats["centre"])) == pytest.approx(
+        50 * 20.0 + 40 * 20.1 + 10 * 20.2
+    )
+    assert float(np.dot(counts, stats["mean_x_um"])) == pytest.approx(100.0)
+    assert float(np.dot(counts, stats["mean_y_um"])) == pytest.approx(40 * 1.0 + 10 * 2.0)

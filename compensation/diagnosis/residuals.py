@@ -134,22 +134,23 @@ def explanatory_variables(res: Residuals) -> dict[str, FloatArray]:
 
 
 def binned_statistics(x: FloatArray, r_um: FloatArray, bins: int = 8) -> dict[str, list[float]]:
-    """Mean residual per axis in ``bins`` equal-count bins of ``x`` (±1 variables: 2 bins)."""
+    """Mean residual per axis in up to ``bins`` equal-count bins of ``x`` (±1 variables: 2
+    bins). A bin left empty by tied values (a quantised temperature: its quantiles repeat) is
+    not listed: it has no centre or mean (was NaN, written into diagnosis.json)."""
     x = np.asarray(x, dtype=float)
     levels = np.unique(x)
     if len(levels) <= 2:
         edges_idx = [x == v for v in levels]
-        centres = [float(v) for v in levels]
     else:
         qs = np.quantile(x, np.linspace(0, 1, bins + 1))
         which = np.clip(np.searchsorted(qs, x, side="right") - 1, 0, bins - 1)
-        edges_idx = [which == b for b in range(bins)]
-        centres = [float(np.mean(x[m])) if m.any() else float("nan") for m in edges_idx]
-    out: dict[str, list[float]] = {"centre": centres, "count": [int(m.sum()) for m in edges_idx]}
+        edges_idx = [m for m in (which == b for b in range(bins)) if m.any()]
+    out: dict[str, list[float]] = {
+        "centre": [float(np.mean(x[m])) for m in edges_idx],
+        "count": [int(m.sum()) for m in edges_idx],
+    }
     for k, a in enumerate("xyz"):
-        out[f"mean_{a}_um"] = [
-            float(np.mean(r_um[m, k])) if m.any() else float("nan") for m in edges_idx
-        ]
+        out[f"mean_{a}_um"] = [float(np.mean(r_um[m, k])) for m in edges_idx]
     return out
 
 
