@@ -295,6 +295,60 @@ def test_reference_not_following_position(tmp_path) -> None:
         align_streams(flat, options())
 
 
+# ---------------------------------------------------------------- bad values on internal paths
+def _strict_json(text: str) -> Any:
+    def refuse(token: str) -> Any:
+        raise AssertionError(f"non-standard JSON token {token}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _first_seconds(log: dict, seconds: float) -> dict:
+    out = {}
+    for k, s in log.items():
+        m = s.time_s < s.time_s[0] + seconds
+        out[k] = type(s)(s.name, s.time_s[m], s.value[m], tuple(np.asarray(s.alarm, object)[m]))
+    return out
+
+
+def test_short_log_too_few_decelerations_for_the_latency_sigma(synthetic) -> None:
+    """30 s of the test hold 15 decelerating position samples: no time block of 4 for the
+    latency's spread, whose std was NaN (summary.json held NaN, the alignment error NaN)."""
+    path, _, _ = synthetic
+    short = _first_seconds(read_camonitor_log(path), 30.0)
+    with pytest.raises(RealDataError, match="too few to estimate the latency"):
+        align_streams(short, options())
+    a = align_streams(short, options(latency_s=0.05))  # given: no estimate needed
+    _strict_json(json.dumps(import_summary(a, "short.log")))
+
+
+def test_position_glitch_whose_square_overflows_gives_a_finite_summary(synthetic) -> None:
+    """One position sample of 1e300 mm: the alignment error's RMS squared it (inf, written as
+    Infinity into summary.json). The RMS is now scaled: finite and true."""
+    from cmm_comp.compensation.formats.camonitor_output import _rms
+
+    assert _rms(np.array([3e200, 4e200])) == pytest.approx(np.sqrt(12.5) * 1e200, rel=1e-12)
+    assert _rms(np.array([3.0, -4.0])) == pytest.approx(np.sqrt(12.5), rel=1e-12)
+    path, _, _ = synthetic
+    log = dict(read_camonitor_log(path))
+    s = log[POS]
+    value = s.value.copy()
+    value[value.size // 2] = 1e300
+    log[POS] = type(s)(s.name, s.time_s, value, s.alarm)
+    summary = _strict_json(json.dumps(import_summary(align_streams(log, options()), "g.log")))
+    assert isinstance(summary, dict) and summary["alignment_error_um"]["rms"] > 0
+
+
+def test_write_import_refuses_a_non_finite_summary_and_writes_nothing(synthetic, tmp_path) -> None:
+    import dataclasses
+
+    path, _, a = synthetic
+    bad = dataclasses.replace(a, latency_sigma_s=float("nan"))
+    with pytest.raises(RealDataError, match=r"latency_ms\.sigma is nan"):
+        write_import(bad, tmp_path / "out", str(path), plot=False)
+    assert not (tmp_path / "out").exists()
+
+
 def test_cli_bad_log_one_line_nothing_written(tmp_path, capsys) -> None:
     path = tmp_path / "garbage.log"
     path.write_text("garbage\n")

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import RealDataError
 from .atomic import atomic_output, write_text_atomic
 from .camonitor_stream import AlignedStream, reversal_um
 
@@ -98,7 +99,14 @@ def machine_toml_text(a: AlignedStream, name: str, source: str) -> str:
 
 
 def _rms(v: np.ndarray) -> float:
-    return math.sqrt(float(np.mean(np.square(v)))) if v.size else math.nan
+    """RMS, scaled so that values whose squares overflow (a position glitch of 1e200 mm) give
+    their true, finite RMS rather than inf."""
+    if not v.size:
+        return math.nan
+    peak = float(np.max(np.abs(v)))
+    if not 0.0 < peak < math.inf:
+        return peak  # 0, or the inf/NaN itself (a caller's bug: refused by write_import)
+    return peak * math.sqrt(float(np.mean(np.square(v / peak))))
 
 
 def measurements_csv_text(a: AlignedStream) -> str:
@@ -237,6 +245,14 @@ def write_import(
     toml = machine_toml_text(a, name or f"{stem}-{a.options.axis}-linear", source)
     csv_text = measurements_csv_text(a)
     summary = import_summary(a, source)
+    try:  # before anything is written: summary.json must be standard JSON (no NaN/Infinity)
+        summary_text = json.dumps(summary, indent=2, default=_json_default, allow_nan=False)
+    except ValueError:
+        where, value = _non_finite(summary)
+        raise RealDataError(
+            f"summary {where} is {value} (not a finite number): the log holds a value out of "
+            "range; nothing written"
+        ) from None
     out.mkdir(parents=True, exist_ok=True)
     paths = {
         "machine": out / "machine.toml",
@@ -245,11 +261,25 @@ def write_import(
     }
     write_text_atomic(paths["machine"], toml)
     write_text_atomic(paths["measurements"], csv_text)
-    write_text_atomic(paths["summary"], json.dumps(summary, indent=2, default=_json_default) + "\n")
+    write_text_atomic(paths["summary"], summary_text + "\n")
     if plot:
         paths["plot"] = out / "import.png"
         _plot(a, paths["plot"])
     return paths
+
+
+def _non_finite(obj: Any, where: str = "") -> tuple[str, float]:
+    """The first non-finite float in a JSON-ready tree: (dotted path, value); ("", nan) if none."""
+    if isinstance(obj, float | np.floating) and not math.isfinite(obj):
+        return where, float(obj)
+    items = (
+        obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, list) else ()
+    )
+    for k, v in items:
+        found = _non_finite(v, f"{where}.{k}" if where else str(k))
+        if found[0]:
+            return found
+    return "", math.nan
 
 
 def _json_default(value: Any) -> Any:

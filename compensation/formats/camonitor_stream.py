@@ -194,7 +194,8 @@ def _lag_cost(
     out = np.empty((lags.size, t0.size))
     for k, lag in enumerate(lags):
         vr = (np.interp(t1 + lag, tr, r_mm) - np.interp(t0 + lag, tr, r_mm)) / (t1 - t0)
-        out[k] = (vr - vp) ** 2
+        with np.errstate(over="ignore"):  # a position glitch's velocity: an infinite mismatch
+            out[k] = (vr - vp) ** 2
     return out
 
 
@@ -256,6 +257,12 @@ def _estimate_latency(
     best = _parabola_min(fine, f_cost[:, stops].mean(axis=1))
     blocks = np.array_split(np.flatnonzero(stops), 8)
     per_block = [_parabola_min(fine, f_cost[:, b].mean(axis=1)) for b in blocks if b.size > 3]
+    if len(per_block) < 2:  # its spread is the 1σ: one block has none (was NaN in summary.json)
+        raise RealDataError(
+            f"the stage decelerates in only {int(stops.sum())} position samples: too few to "
+            "estimate the latency between the streams and its uncertainty (at least 2 time "
+            "blocks of 4 are needed; give it with --latency)"
+        )
     statistical = float(np.std(per_block, ddof=1) / math.sqrt(len(per_block)))
     split = {"all_moves": _parabola_min(fine, f_cost.mean(axis=1)), "statistical": statistical}
     # model dependence (a positional error or friction also shifts the ramps) counts in the 1σ
