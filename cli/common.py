@@ -67,6 +67,12 @@ def temps_from_args(args: argparse.Namespace) -> dict[str, float] | None:
         )
         if value is not None
     }
+    for name, value in temps.items():
+        if not -273.15 <= value <= 1000.0:  # also NaN; inf made every figure inf or NaN
+            flag = {"T_x": "--temp-x", "T_y": "--temp-y", "T_z": "--temp-z", "T_wp": "--temp-wp"}
+            raise ValueError(
+                f"{flag[name]} {value}: not a temperature (a finite number in -273.15…1000 °C)"
+            )
     return temps or None
 
 
@@ -79,4 +85,10 @@ def write_text_atomic(path: str | Path, text: str) -> None:
 
 def write_json_atomic(path: str | Path, data: Any) -> None:
     """``data`` as indented JSON, written atomically (see :func:`write_text_atomic`)."""
-    write_text_atomic(path, json.dumps(data, indent=2, default=float) + "\n")
+    try:  # standard JSON only: NaN/Infinity are refused, the previous file is kept
+        text = json.dumps(data, indent=2, default=float, allow_nan=False)
+    except ValueError:
+        raise ValueError(
+            f"{path}: a figure to write is not a finite number; nothing written"
+        ) from None
+    write_text_atomic(path, text + "\n")

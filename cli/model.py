@@ -107,9 +107,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     machine = load_machine(args.machine)
     out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
     temps = temps_from_args(args)
     vmap = volumetric_map(machine, args.steps, args.probe, temps, progress_printer("map"))
+    out.mkdir(parents=True, exist_ok=True)  # after the checks: a refused run leaves no directory
     vmap.write_csv(out / "map.csv")
     plot_vector_map(vmap, out / "map.png", args.magnification, title=machine.name)
     plot_parametric_errors(machine, out / "parametric_errors.png")

@@ -133,3 +133,88 @@ def test_binned_statistics_of_a_quantised_variable_has_no_empty_bins() -> None:
     )
     assert float(np.dot(counts, stats["mean_x_um"])) == pytest.approx(100.0)
     assert float(np.dot(counts, stats["mean_y_um"])) == pytest.approx(40 * 1.0 + 10 * 2.0)
+
+
+# ---------------------------------------------------------------- model reports (map, diagonals, line)
+BIG_TOML = """format = "cmm-machine/1"
+name = "big"
+model = "MB1"
+[volume]
+x = [0.0, 400.0]
+y = [0.0, 300.0]
+z = [0.0, 200.0]
+[errors.dx_x]
+position = [0.0, 200.0, 400.0]
+value = [0.0, 1e300, 0.0]
+"""
+
+
+def test_reports_refuse_a_model_error_beyond_any_machine() -> None:
+    """A table value of 1e300 µm: the diagonals' lengths and the line's resultant overflowed and
+    were printed (and written to JSON) as inf; now one error naming the point."""
+    from cmm_comp.compensation.reports.maps import diagonals_um, line_report, volumetric_map
+
+    big = _machine_dx([0.0, 1e300, 0.0])
+    for run in (
+        lambda: diagonals_um(big),
+        lambda: line_report(big, "x", (0.0, 0.0, 0.0)),
+        lambda: volumetric_map(big, (3, 3, 3)),
+    ):
+        with pytest.raises(ValueError, match="not a finite error"):
+            run()
+    machine = Machine.from_toml(GOLDEN)
+    with pytest.raises(ValueError, match="finite"):
+        line_report(machine, "x", (0.0, float("nan"), 0.0))
+    with pytest.raises(ValueError, match="stylus"):
+        diagonals_um(machine, (float("nan"), 0.0, 0.0))
+
+
+def test_cli_model_commands_refuse_non_finite_inputs_and_write_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cmm_comp.cli.main import main
+
+    npl = str(ROOT / "examples" / "machines" / "npl-bridge.toml")
+    big = tmp_path / "big.toml"
+    big.write_text(BIG_TOML, encoding="utf-8")
+    for argv, message, written in (
+        (
+            ["diagonals", str(big), "--json", str(tmp_path / "d.json")],
+            "not a finite error",
+            "d.json",
+        ),
+        (
+            ["report", str(big), "--steps", "3", "3", "3", "--out", str(tmp_path / "r")],
+            "finite",
+            "r",
+        ),
+        (
+            ["line", npl, "--axis", "x", "--through", "0", "0", "0", "--temp-x", "nan"],
+            "--temp-x",
+            "",
+        ),
+        (
+            ["line", npl, "--axis", "x", "--through", "0", "0", "0", "--temp-x", "1e300"],
+            "--temp-x",
+            "",
+        ),
+    ):
+        assert main(argv) == 2, argv
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("cmm-comp: error: ") and message in err[0], err
+        assert "inf" not in captured.out and "nan" not in captured.out
+        if written:
+            assert not (tmp_path / written).exists()
+
+
+def test_write_json_atomic_refuses_nan_and_keeps_the_previous_file(tmp_path: Path) -> None:
+    from cmm_comp.cli.common import write_json_atomic
+
+    path = tmp_path / "summary.json"
+    path.write_text('{"ok": 1}\n', encoding="utf-8")
+    with pytest.raises(ValueError, match="not a finite number"):
+        write_json_atomic(path, {"rms_um": float("nan")})
+    assert path.read_text(encoding="utf-8") == '{"ok": 1}\n'
+    write_json_atomic(path, {"rms_um": 1.5})
+    assert _strict_json(path.read_text(encoding="utf-8")) == {"rms_um": 1.5}

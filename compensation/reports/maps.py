@@ -24,6 +24,39 @@ ProgressFn = Callable[[float], None]
 DEFAULT_STEPS = (11, 11, 11)
 MAX_MAP_NODES = 50_000_000
 _CHUNK = 200_000
+#: a larger |error| is no machine error (a unit mistake, a corrupt table): refused, so that the
+#: lengths, norms and squares of the reports stay finite (was inf/NaN printed and written as valid)
+MAX_ERROR_UM = 1e9
+
+
+def _stylus(machine: Machine, stylus_mm: ArrayLike | None) -> FloatArray:
+    p = machine.stylus_or_probe(stylus_mm)
+    if not np.all(np.isfinite(p)):
+        raise ValueError(
+            f"the stylus offset (--probe) must be finite numbers (mm), got {p.tolist()}"
+        )
+    return p
+
+
+def model_error_um(
+    machine: Machine,
+    points_mm: FloatArray,
+    stylus_mm: FloatArray,
+    temps_C: Mapping[str, Any] | None,
+) -> FloatArray:
+    """``machine.volumetric_error``; ValueError naming the first point whose error is not a
+    finite number within ±:data:`MAX_ERROR_UM`."""
+    err = machine.volumetric_error(points_mm, stylus_mm, temps_C)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.all(np.abs(err) <= MAX_ERROR_UM, axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"the machine model's error at {np.asarray(points_mm)[i].tolist()} mm is "
+            f"{err[i].tolist()} µm: not a finite error within ±{MAX_ERROR_UM:g} µm (check the "
+            "machine description's error tables, µm and µrad, and the temperatures)"
+        )
+    return err
 
 
 @dataclass(frozen=True)
@@ -71,13 +104,13 @@ def volumetric_map(
 ) -> VolumetricMap:
     """The volumetric error at every node (``steps`` nodes per axis; default the machine's)."""
     s = check_steps(steps if steps is not None else (machine.volume.steps or DEFAULT_STEPS))
-    p = machine.stylus_or_probe(stylus_mm)
+    p = _stylus(machine, stylus_mm)
     axes = machine.volume.nodes(s)
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     err = np.empty_like(grid)
     for start in range(0, len(grid), _CHUNK):
         sl = slice(start, start + _CHUNK)
-        err[sl] = machine.volumetric_error(grid[sl], p, temps_C)
+        err[sl] = model_error_um(machine, grid[sl], p, temps_C)
         if progress:
             progress(min(1.0, (start + _CHUNK) / len(grid)))
     rnd = machine.random_error(grid, p) if machine.has_random else None
@@ -106,8 +139,8 @@ def length_error_um(
 ) -> float:
     """True − indicated length (µm) of the segment between two indicated points (exact)."""
     a, b = np.asarray(start_mm, dtype=float), np.asarray(end_mm, dtype=float)
-    p = machine.stylus_or_probe(stylus_mm)
-    e = machine.volumetric_error(np.stack([a, b]), p, temps_C) / 1000.0
+    p = _stylus(machine, stylus_mm)
+    e = model_error_um(machine, np.stack([a, b]), p, temps_C) / 1000.0
     true_len = np.linalg.norm((b + e[1]) - (a + e[0]))
     return float((true_len - np.linalg.norm(b - a)) * 1000.0)
 
@@ -174,13 +207,15 @@ def line_report(
         raise ValueError(f"samples must be ≥ 2, got {samples}")
     k = "xyz".index(axis)
     point = np.asarray(through_mm, dtype=float)
-    if point.shape != (3,):
-        raise ValueError(f"the line's point must be (x, y, z) in mm, got {point.tolist()}")
+    if point.shape != (3,) or not np.all(np.isfinite(point)):
+        raise ValueError(
+            f"the line's point must be (x, y, z) in mm, finite numbers, got {point.tolist()}"
+        )
     q = np.linspace(machine.volume.lower_mm[k], machine.volume.upper_mm[k], samples)
     pts = np.repeat(point[None, :], samples, axis=0)
     pts[:, k] = q
-    p = machine.stylus_or_probe(stylus_mm)
-    err = machine.volumetric_error(pts, p, temps_C)
+    p = _stylus(machine, stylus_mm)
+    err = model_error_um(machine, pts, p, temps_C)
     return LineReport(
         axis=axis,
         through_mm=point,
