@@ -218,3 +218,18 @@ def test_write_json_atomic_refuses_nan_and_keeps_the_previous_file(tmp_path: Pat
     assert path.read_text(encoding="utf-8") == '{"ok": 1}\n'
     write_json_atomic(path, {"rms_um": 1.5})
     assert _strict_json(path.read_text(encoding="utf-8")) == {"rms_um": 1.5}
+
+
+def test_iso230_refuses_a_deviation_whose_statistics_overflow() -> None:
+    """One reading of 1e200 mm: s↑, R and A were printed as inf and E as a 200-digit number
+    (exit 0); now one error naming the reading. A large but representable deviation is
+    evaluated: worked by hand, x̄↑ at the 2nd target = (1000 + 0) / 2 µm."""
+    from cmm_comp.compensation.reports.iso230 import evaluate_iso230
+
+    target = [0.0, 10.0]
+    bwd = [[0.0, 0.0], [10.0, 10.0]]
+    with pytest.raises(ValueError, match=r"1e\+200 mm at target 10 mm \(position 2, cycle 1\)"):
+        evaluate_iso230(target, [[0.0, 0.0], [1e200, 10.0]], bwd)
+    result = evaluate_iso230(target, [[0.0, 0.0], [11.0, 10.0]], bwd)
+    assert result.mean_fwd_um[1] == pytest.approx(500.0)
+    assert np.isfinite(result.A_um) and np.isfinite(result.R_um)

@@ -27,6 +27,7 @@ __all__ = [
 ]
 
 _UM_PER_MM = 1000.0
+_MAX_DEVIATION_MM = 1e6  # 1 km: beyond it no deviation, a wrong value or unit
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +101,18 @@ def _check_inputs(
         )
     if not all(np.all(np.isfinite(a)) for a in (p, up, down)):
         raise ValueError("target and measured positions must be finite (no NaN or inf)")
+    for name, a in (("forward", up), ("backward", down)):
+        with np.errstate(over="ignore"):
+            dev = np.abs(a - p[:, None])
+        if not np.all(dev <= _MAX_DEVIATION_MM):  # its square overflowed: s, R, A were inf
+            i, j = np.unravel_index(
+                int(np.argmax(np.where(np.isfinite(dev), dev, np.inf))), a.shape
+            )
+            raise ValueError(
+                f"{name} measurement {a[i, j]:g} mm at target {p[i]:g} mm (position {i + 1}, "
+                f"cycle {j + 1}) deviates by more than {_MAX_DEVIATION_MM:g} mm: not a "
+                "positioning deviation (check the value and the file's UNIT)"
+            )
     return p, up, down
 
 
