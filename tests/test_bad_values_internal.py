@@ -233,3 +233,31 @@ def test_iso230_refuses_a_deviation_whose_statistics_overflow() -> None:
     result = evaluate_iso230(target, [[0.0, 0.0], [11.0, 10.0]], bwd)
     assert result.mean_fwd_um[1] == pytest.approx(500.0)
     assert np.isfinite(result.A_um) and np.isfinite(result.R_um)
+
+
+def test_residuals_refuse_a_reading_whose_error_overflows() -> None:
+    """A reference read as 1e200 mm (finite, so the reader takes it): every RMS of the diagnosis
+    was inf and diagnosis.json held NaN (exit 0); now one error naming the row. Ordinary rows
+    give the residual worked out by hand: the golden machine's X error at x = 100 mm (stylus
+    and y, z at 0) is 1 µm, so a reference 3 µm long leaves 2 µm."""
+    from cmm_comp.compensation.diagnosis.residuals import compute_residuals
+    from cmm_comp.compensation.formats.measurements import measurements_from_columns
+
+    machine = Machine.from_parts(
+        model="MB1",
+        volume=((0, 400), (0, 300), (0, 200)),
+        errors=ParametricErrors.from_tables({"dx_x": ([0.0, 200.0, 400.0], [0.0, 2.0, 4.0])}),
+    )
+    cols = {
+        "x": np.array([100.0, 200.0]),
+        "y": np.zeros(2),
+        "z": np.zeros(2),
+        "ref_x": np.array([100.003, 1e200]),
+        "ref_y": np.zeros(2),
+        "ref_z": np.zeros(2),
+    }
+    with pytest.raises(ValueError, match="data row 2"):
+        compute_residuals(machine, measurements_from_columns(cols))
+    cols["ref_x"] = np.array([100.003, 200.002])
+    res = compute_residuals(machine, measurements_from_columns(cols))
+    assert res.residual_um[:, 0] == pytest.approx([2.0, 0.0], abs=1e-6)

@@ -21,6 +21,8 @@ from ..machine import Machine
 from ..thermal.roles import TEMPERATURE_ROLES
 
 FloatArray = NDArray[np.float64]
+#: a larger |residual| is no machine error (a wrong value or unit): refused, not averaged
+MAX_RESIDUAL_UM = 1e9
 
 
 def rms3d(r_um: FloatArray) -> float:
@@ -85,13 +87,23 @@ def compute_residuals(machine: Machine, data: Measurements) -> Residuals:
     jac, sq = first_order_jacobian(
         machine.chain, data.indicated_mm - machine.volume.reference_mm, stylus
     )
+    residual = data.observed_error_um() - predicted
+    with np.errstate(invalid="ignore"):
+        bad = ~np.all(np.abs(residual) <= MAX_RESIDUAL_UM, axis=1)
+    if bad.any():  # its square overflows: every RMS was inf, diagnosis.json held NaN
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"data row {i + 1}: observed − modelled error "
+            f"{residual[i].tolist()} µm is not a finite error within ±{MAX_RESIDUAL_UM:g} µm "
+            "(check its reference and indicated positions, mm, and temperatures)"
+        )
     return Residuals(
         machine=machine,
         data=data,
         stylus_mm=stylus,
         signals=signals,
         predicted_um=predicted,
-        residual_um=data.observed_error_um() - predicted,
+        residual_um=residual,
         jacobian=jac,
         squareness_jacobian=sq,
     )
