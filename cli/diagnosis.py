@@ -7,12 +7,11 @@ message naming the file, line and column on stderr, write nothing and return exi
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
-from .common import load_machine, write_text_atomic
+from .common import load_machine, write_json_atomic
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, Any]:
@@ -48,7 +47,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     """``diagnose MACHINE MEASUREMENTS --json OUT [--report DIR]``: exit 0 found or not."""
 
     def action(diagnosis: Any) -> int:
-        write_text_atomic(Path(args.json), json.dumps(diagnosis.to_json(), indent=2, default=float))
+        write_json_atomic(Path(args.json), diagnosis.to_json())  # standard JSON, else refused
         if args.report:
             from cmm_comp.compensation.diagnosis.report import write_report
 

@@ -65,7 +65,9 @@ def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagno
         binned[name] = binned_statistics(x, before)
     stats = {"before": axis_statistics(before), "after_heldout": axis_statistics(after)}
     payload = {**diagnosis.to_json(), "statistics": stats, "binned_before": binned}
-    (out / "diagnosis.json").write_text(json.dumps(payload, indent=2, default=float))
+    (out / "diagnosis.json").write_text(
+        json.dumps(payload, indent=2, default=float, allow_nan=False)
+    )
     rows = "".join(
         f"<tr><td>{html.escape(str(e.get('cause')))}</td><td>"
         f"{html.escape(json.dumps({k: v for k, v in e.items() if k not in ('cause', 'parameters', 'explained_fraction', 'label')}))}"
