@@ -113,6 +113,7 @@ class Machine:
             refer_to_reference(machine, parsed.squareness_offset_mm)
         except ValueError as exc:
             raise MachineFileError(source, "errors", str(exc)) from None
+        _check_magnitudes(machine)
         return machine
 
     @classmethod
@@ -384,3 +385,47 @@ def _signals(
                 )
             out[key] = arr
     return out
+
+
+#: Largest |value| of a linear error (µm: 1 km) and of an angle (µrad: 1 rad) in the volume: beyond
+#: them a value is a unit mistake or a corrupt table, not a machine error (an angle of 1e300 µrad
+#: wrapped through sin/cos into plausible mm; a 1e300 µm error overflowed every RMS to inf).
+MAX_LINEAR_UM = 1e9
+MAX_ANGLE_URAD = 1e6
+
+
+def _check_magnitudes(machine: Machine) -> None:
+    """MachineFileError naming the first error table (systematic or random part) or squareness
+    whose value within the working volume is not finite or beyond the limits above."""
+    lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
+    for name, table in machine.tables.items():
+        c = table.component
+        k = AXIS_INDEX[c.axis]
+        q = np.linspace(lo[k], hi[k], 201)
+        if table.position_mm is not None:
+            inside = table.position_mm[(table.position_mm >= lo[k]) & (table.position_mm <= hi[k])]
+            q = np.union1d(q, inside)
+        limit = MAX_ANGLE_URAD if c.is_angular else MAX_LINEAR_UM
+        for part, values in (("value", table.evaluate(q)), ("random", table.evaluate_random(q))):
+            with np.errstate(invalid="ignore"):
+                bad = ~(np.abs(values) <= limit)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise MachineFileError(
+                    machine.source,
+                    f"errors.{name}",
+                    f"{part} reaches {values[i]:g} {c.unit} at {c.axis} = {q[i]:g} mm: beyond "
+                    f"±{limit:g} {c.unit} it is no machine error (check the values and the unit, "
+                    f"{c.unit})",
+                )
+    for what, values in (
+        ("squareness", machine.squareness_urad),
+        ("squareness random", machine.squareness_random_urad),
+    ):
+        if not np.all(np.abs(values) <= MAX_ANGLE_URAD):
+            raise MachineFileError(
+                machine.source,
+                what,
+                f"{np.asarray(values).tolist()} urad: beyond ±{MAX_ANGLE_URAD:g} urad it is no "
+                "machine error (check the values and the unit, urad)",
+            )

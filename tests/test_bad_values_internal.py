@@ -35,6 +35,58 @@ def _machine_dx(values: list[float]) -> Machine:
     )
 
 
+@pytest.fixture
+def unchecked(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Machines built without the description's magnitude check (Machine.from_dict): the
+    internal guards behind it (export, reports) are tested on what it would refuse."""
+    import cmm_comp.compensation.machine as machine_module
+
+    monkeypatch.setattr(machine_module, "_check_magnitudes", lambda machine: None)
+
+
+# ---------------------------------------------------------------- machine description
+@pytest.mark.parametrize(
+    ("errors", "message"),
+    [
+        ({"dx_x": ([0.0, 200.0, 400.0], [0.0, 1e300, 0.0])}, r"errors\.dx_x: value reaches"),
+        # 2π·1e6 µrad is a whole turn: sin/cos gave a plausible, wrong error of a few µm
+        ({"ey_y": ([0.0, 150.0, 300.0], [0.0, 6283185.307, 0.0])}, r"errors\.ey_y: value reaches"),
+        ({"dx_x": ([0.0, 400.0], [0.0, 2e9])}, r"beyond ±1e\+09 um"),
+    ],
+)
+def test_machine_refuses_errors_beyond_any_machine(errors: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        Machine.from_parts(
+            model="MB1",
+            volume=((0, 400), (0, 300), (0, 200)),
+            errors=ParametricErrors.from_tables(errors),
+        )
+
+
+def test_machine_refuses_a_random_band_or_squareness_beyond_any_machine(tmp_path: Path) -> None:
+    """A 2σ band of 1e300 µm made the uncertainty's U inf (written into its JSON)."""
+    text = GOLDEN.read_text(encoding="utf-8")
+    bad_random = tmp_path / "random.toml"
+    bad_random.write_text(
+        text.replace("reversal = [0.5", "random = [0.0, 1e300, 0.0, 0.0, 0.0]\nreversal = [0.5"),
+        encoding="utf-8",
+    )
+    with pytest.raises(ValueError, match=r"errors\.dx_x: random reaches"):
+        Machine.from_toml(bad_random)
+    bad_square = tmp_path / "square.toml"
+    bad_square.write_text(text.replace("alpha = 20.0", "alpha = 2e6"), encoding="utf-8")
+    with pytest.raises(ValueError, match="squareness"):
+        Machine.from_toml(bad_square)
+    # the limits themselves are machines: 1 km and 1 rad load (by hand: 4e8 µm at x = 400 mm)
+    Machine.from_parts(
+        model="MB1",
+        volume=((0, 400), (0, 300), (0, 200)),
+        errors=ParametricErrors.from_polynomials({"dx_x": [0.0, 1e6], "ez_x": [9e5]}),
+    )
+
+
+# ---------------------------------------------------------------- export
+@pytest.mark.usefixtures("unchecked")
 @pytest.mark.parametrize("fmt", ["sinumerik-cec", "linuxcnc"])
 def test_export_refuses_an_error_whose_statistics_overflow(fmt: str) -> None:
     """1e300 µm is finite, its square is not: the RMS was reported as inf/NaN (exit 0, garbage
@@ -44,6 +96,7 @@ def test_export_refuses_an_error_whose_statistics_overflow(fmt: str) -> None:
         export_tables(machine, fmt, (0, 0, 0), ExportOptions(cec_max_sum_mm=1e308, **FAST))
 
 
+@pytest.mark.usefixtures("unchecked")
 def test_export_refuses_tables_the_control_cannot_hold() -> None:
     """LinuxCNC's trims are single precision: 4e146 mm becomes inf in the control's arithmetic,
     the residual NaN (was printed as 'RMS nan µm', exit 0)."""
@@ -57,22 +110,23 @@ def test_export_refuses_tables_the_control_cannot_hold() -> None:
 
 
 def test_export_large_but_representable_error_is_reported_finite() -> None:
-    """1e20 µm/mm is absurd but representable: the report is finite and strict JSON."""
+    """400 m at the far end is absurd but a machine by the description's limits: the report
+    is finite and strict JSON."""
     from cmm_comp.compensation.export.report import report_json
 
     machine = Machine.from_parts(
         model="MB1",
         volume=((0, 400), (0, 300), (0, 200)),
-        errors=ParametricErrors.from_polynomials({"dx_x": [0.0, 1e20]}),
+        errors=ParametricErrors.from_polynomials({"dx_x": [0.0, 1e6]}),
     )
     result = export_tables(machine, "linuxcnc", (0, 0, 0), ExportOptions(**FAST))
     report = _strict_json(report_json(result))
     assert isinstance(report, dict)
-    # the model's max is at x = 400 mm: 400 · 1e20 µm, worked out by hand
-    assert report["uncompensated_um"]["max"] == pytest.approx(4e22, rel=1e-9)
+    # the model's max is at x = 400 mm: 400 · 1e6 µm, worked out by hand
+    assert report["uncompensated_um"]["max"] == pytest.approx(4e8, rel=1e-9)
 
 
-def test_cli_export_overflow_is_one_line_and_writes_nothing(
+def test_cli_export_of_an_absurd_table_is_one_line_and_writes_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from cmm_comp.cli.main import main
@@ -89,8 +143,9 @@ def test_cli_export_overflow_is_one_line_and_writes_nothing(
     assert main([*args, "--eval-steps", "5", "5", "3", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert "Warning" not in err, err
-    last = err.strip().splitlines()[-1]
-    assert last.startswith("cmm-comp: error: ") and "not a finite number" in last
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cmm-comp: error: ")
+    assert "errors.dx_x: value reaches" in lines[0]
     assert not out.exists()
 
 
@@ -149,6 +204,7 @@ value = [0.0, 1e300, 0.0]
 """
 
 
+@pytest.mark.usefixtures("unchecked")
 def test_reports_refuse_a_model_error_beyond_any_machine() -> None:
     """A table value of 1e300 µm: the diagonals' lengths and the line's resultant overflowed and
     were printed (and written to JSON) as inf; now one error naming the point."""
@@ -180,12 +236,12 @@ def test_cli_model_commands_refuse_non_finite_inputs_and_write_nothing(
     for argv, message, written in (
         (
             ["diagonals", str(big), "--json", str(tmp_path / "d.json")],
-            "not a finite error",
+            "value reaches",
             "d.json",
         ),
         (
             ["report", str(big), "--steps", "3", "3", "3", "--out", str(tmp_path / "r")],
-            "finite",
+            "value reaches",
             "r",
         ),
         (
