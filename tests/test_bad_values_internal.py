@@ -17,6 +17,7 @@ from cmm_comp.compensation.export import ExportError, ExportOptions, export_tabl
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "tests" / "data" / "export" / "golden-machine.toml"
 FAST = {"points": 11, "eval_steps": (5, 5, 3)}
+FAST_STEPS = {"eval_steps": (5, 5, 3)}
 
 
 def _strict_json(text: str) -> object:
@@ -317,3 +318,23 @@ def test_residuals_refuse_a_reading_whose_error_overflows() -> None:
     cols["ref_x"] = np.array([100.003, 200.002])
     res = compute_residuals(machine, measurements_from_columns(cols))
     assert res.residual_um[:, 0] == pytest.approx([2.0, 0.0], abs=1e-6)
+
+
+def test_export_travel_too_short_for_the_points_is_named() -> None:
+    """An X travel of 1.5 µm (15 steps of the 0.1 µm position resolution) and the default 11
+    points: the step rounds up to 0.2 µm, the last points lie beyond the travel with nothing to
+    fit, and the fit failed with 'Matrix is not positive definite' after a MatrixRankWarning (a
+    travel of 1e-300 mm: 'array must not contain infs or NaNs'). Now one error with a count that
+    fits, worked out by hand: 9 points 0.2 µm apart, the 8th at 1.4 µm < 1.5 µm."""
+
+    def machine(x_mm: float) -> Machine:
+        return Machine.from_parts(
+            model="MB1", volume=((0, x_mm), (0, 300), (0, 200)), probe=(0, 0, 0)
+        )
+
+    short = machine(0.0015)
+    with pytest.raises(ExportError, match=r"X travel of 0.0015 mm .* e\.g\. 9$"):
+        export_tables(short, "sinumerik-cec", None, ExportOptions(eval_steps=(5, 5, 3)))
+    export_tables(short, "sinumerik-cec", None, ExportOptions(points=9, eval_steps=(5, 5, 3)))
+    with pytest.raises(ExportError, match="shorter than that resolution"):
+        export_tables(machine(1e-300), "linuxcnc", None, ExportOptions(points=2, **FAST_STEPS))

@@ -119,6 +119,15 @@ def _points(machine: Machine, fmt: str, opts: ExportOptions) -> tuple[list[int],
     return counts, limit, source
 
 
+def _knots_fit(kn: Knots, lo: float, hi: float) -> bool:
+    """Whether every point of the table has travel to fit: one position step per point (never
+    a step shorter than the resolution on a shorter travel) and the last but one point inside
+    the volume (else the last point's weight has nothing to fit: a singular fit)."""
+    return (kn.count - 1) * _QUANTUM_MM <= (hi - lo) * (1 + 1e-9) and (
+        kn.start_mm + (kn.count - 2) * kn.step_mm < hi
+    )
+
+
 _AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,15}")  # whole name (fullmatch: "X\n" is not one)
 
 
@@ -267,6 +276,26 @@ def _export_tables(
     knots: tuple[Knots, Knots, Knots] = tuple(  # type: ignore[assignment]
         make_knots(a, float(lo[a]), float(hi[a]), counts[a], _QUANTUM_MM) for a in range(3)
     )
+    for a, kn in enumerate(knots):
+        if not _knots_fit(kn, float(lo[a]), float(hi[a])):
+            span = float(hi[a] - lo[a])
+            fitting = [
+                n
+                for n in range(2, min(_MAX_TABLE_POINTS, int(span / _QUANTUM_MM + 1e-6) + 1) + 1)
+                if _knots_fit(
+                    make_knots(a, float(lo[a]), float(hi[a]), n, _QUANTUM_MM), lo[a], hi[a]
+                )
+            ]
+            hint = (
+                "it is shorter than that resolution"
+                if not fitting
+                else f"set --points to one that fits, e.g. {min(fitting, key=lambda n: abs(n - kn.count))}"
+            )
+            raise ExportError(
+                f"{fmt}: the {AXES[a].upper()} travel of {span:g} mm cannot hold {kn.count} points "
+                f"{_QUANTUM_MM * 1000:g} µm apart or more (the position resolution written): {hint}"
+            )
+    ranks = 2 if (fmt == "sinumerik-cec" and opts.products) else 0
     ranks = 2 if (fmt == "sinumerik-cec" and opts.products) else 0
     say(f"fitting {fmt} tables ({counts[0]}/{counts[1]}/{counts[2]} points on X/Y/Z)")
     d = decompose(machine, tool, knots, interaction_ranks=ranks)

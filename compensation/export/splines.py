@@ -61,7 +61,7 @@ def make_knots(axis: int, lo_mm: float, hi_mm: float, count: int, quantum_mm: fl
     if count < 2:
         raise ValueError(f"a table needs at least 2 points, got {count}")
     raw = (hi_mm - lo_mm) / (count - 1)
-    step = math.ceil(raw / quantum_mm - 1e-9) * quantum_mm
+    step = max(1, math.ceil(raw / quantum_mm - 1e-9)) * quantum_mm  # ≥ 1 quantum: never 0
     step = round(step / quantum_mm) * quantum_mm
     return Knots(axis=axis, start_mm=float(lo_mm), step_mm=float(step), count=int(count))
 
