@@ -338,3 +338,11 @@ def test_export_travel_too_short_for_the_points_is_named() -> None:
     export_tables(short, "sinumerik-cec", None, ExportOptions(points=9, eval_steps=(5, 5, 3)))
     with pytest.raises(ExportError, match="shorter than that resolution"):
         export_tables(machine(1e-300), "linuxcnc", None, ExportOptions(points=2, **FAST_STEPS))
+
+
+def test_machine_refuses_a_volume_beyond_any_machine() -> None:
+    """x = [0, 1e300] mm loaded; its diagonals and map then failed on 'the error tables' (the
+    squareness times 1e300 mm), not on the volume. Now the volume is named at load."""
+    with pytest.raises(ValueError, match=r"volume\.x: \[0\.0, 1e\+300\] mm is beyond"):
+        Machine.from_parts(model="MB1", volume=((0, 1e300), (0, 300), (0, 200)))
+    Machine.from_parts(model="MB1", volume=((-1e6, 1e6), (0, 300), (0, 200)))  # 2 km: loads

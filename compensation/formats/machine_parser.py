@@ -229,6 +229,11 @@ class _Parser(TomlChecks):
             lo, hi = self.vector(tbl[axis], f"volume.{axis}", 2)
             if not hi > lo:
                 raise self.fail(f"volume.{axis}", f"upper ({hi}) must be greater than lower ({lo})")
+            if max(abs(lo), abs(hi)) > 1e6:  # a travel of 1e300 mm overflowed every report
+                raise self.fail(
+                    f"volume.{axis}",
+                    f"[{lo}, {hi}] mm is beyond ±1e6 mm (1 km): check the unit, mm",
+                )
             lower[k], upper[k] = lo, hi
         reference = (
             self.vector(tbl["reference"], "volume.reference", 3)
