@@ -346,3 +346,26 @@ def test_machine_refuses_a_volume_beyond_any_machine() -> None:
     with pytest.raises(ValueError, match=r"volume\.x: \[0\.0, 1e\+300\] mm is beyond"):
         Machine.from_parts(model="MB1", volume=((0, 1e300), (0, 300), (0, 200)))
     Machine.from_parts(model="MB1", volume=((-1e6, 1e6), (0, 300), (0, 200)))  # 2 km: loads
+
+
+def test_uncertainty_input_beyond_any_machine_is_refused_at_load(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """[uncertainty] probe_um = 1e300 (finite, ≥ 0: accepted) squared to inf in the covariance:
+    `cmm-comp uncertainty` ended in a traceback (OverflowError). Now refused at load."""
+    from cmm_comp.cli.main import main
+
+    src = tmp_path / "u.toml"
+    src.write_text(
+        GOLDEN.read_text(encoding="utf-8") + "\n[uncertainty]\nprobe_um = 1e300\n", encoding="utf-8"
+    )
+    with pytest.raises(ValueError, match=r"uncertainty\.probe_um: 1e\+300 is beyond 1e9"):
+        Machine.from_toml(src)
+    points = tmp_path / "p.csv"
+    points.write_text("x,y,z\n100,100,100\n", encoding="utf-8")
+    out = tmp_path / "u.json"
+    argv = ["uncertainty", str(src), "--points", str(points), "--trials", "50", "--json", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("cmm-comp: error: ") and "probe_um" in err[0]
+    assert not out.exists()

@@ -193,6 +193,10 @@ class _Reader(TomlChecks):
         out = super().number(value, where, positive=positive)
         if out < 0:
             raise self.fail(where, f"a standard uncertainty must be ≥ 0, got {value!r}")
+        if out > 1e9:  # 1e300 overflowed the covariance into a traceback (OverflowError)
+            raise self.fail(
+                where, f"{value!r} is beyond 1e9: no standard uncertainty (check the unit)"
+            )
         return out
 
     def table(self, value: Any, where: str, allowed: set[str]) -> Mapping[str, Any]:
