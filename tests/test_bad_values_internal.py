@@ -369,3 +369,49 @@ def test_uncertainty_input_beyond_any_machine_is_refused_at_load(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("cmm-comp: error: ") and "probe_um" in err[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        # a 2σ probing band of 1e300 µm: report and uncertainty ended in an OverflowError
+        (
+            "offset = [0.0, 0.0, -100.0]",
+            "offset = [0.0, 0.0, -100.0]\nrandom_um = 1e300",
+            "probe.random_um",
+        ),
+        # a stylus of 1e300 mm: grid build wrote corrections of 1e297 µm without a word
+        ("offset = [0.0, 0.0, -100.0]", "offset = [0.0, 0.0, -1e300]", "probe.offset"),
+        ("[squareness]", "[thermal]\nreference_C = 1e300\n\n[squareness]", "thermal.reference_C"),
+        (
+            "[squareness]",
+            "[thermal]\nexpansion = { x = 1e300 }\n\n[squareness]",
+            "thermal.expansion.x",
+        ),
+    ],
+)
+def test_machine_refuses_probe_and_thermal_values_beyond_any_machine(
+    tmp_path: Path, old: str, new: str, message: str
+) -> None:
+    text = GOLDEN.read_text(encoding="utf-8")
+    assert old in text
+    src = tmp_path / "m.toml"
+    src.write_text(text.replace(old, new, 1), encoding="utf-8")
+    with pytest.raises(ValueError, match=message.replace(".", r"\.")):
+        Machine.from_toml(src)
+
+
+def test_cli_grid_build_of_an_absurd_stylus_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cmm_comp.cli.main import main
+
+    src = tmp_path / "m.toml"
+    src.write_text(
+        GOLDEN.read_text(encoding="utf-8").replace("-100.0]", "-1e300]", 1), encoding="utf-8"
+    )
+    out = tmp_path / "m.grid"
+    assert main(["grid", "build", str(src), "-o", str(out), "--steps", "4", "4", "4"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "probe.offset" in err[0]
+    assert not out.exists()

@@ -260,6 +260,12 @@ class _Parser(TomlChecks):
         rnd = self.number(tbl.get("random_um", 0.0), "probe.random_um")
         if rnd < 0:
             raise self.fail("probe.random_um", f"must be ≥ 0, got {rnd}")
+        # beyond these no stylus (1e300 mm wrote a grid of 1e297 µm corrections; a random
+        # part of 1e300 µm ended report and uncertainty in an OverflowError traceback)
+        if not np.all(np.abs(offset) <= 1e6):
+            raise self.fail("probe.offset", f"{offset.tolist()} mm is beyond ±1e6 mm (1 km)")
+        if rnd > 1e9:
+            raise self.fail("probe.random_um", f"{rnd:g} µm is beyond 1e9 µm (1 km)")
         return Probe(offset_mm=offset, random_um=rnd)
 
     def thermal(self, tbl: Mapping[str, Any], volume: Volume) -> Thermal:
@@ -279,6 +285,15 @@ class _Parser(TomlChecks):
         fixture = None
         if "workpiece_fixture" in tbl:
             fixture = self.vector(tbl["workpiece_fixture"], "thermal.workpiece_fixture", 3)
+        # beyond these no machine: products with a temperature difference overflowed to inf
+        if not -273.15 <= ref <= 1000.0:
+            raise self.fail("thermal.reference_C", f"{ref:g} °C is not in -273.15…1000 °C")
+        for k, alpha in enumerate([*expansion, 0.0 if wp_val is None else wp_val]):
+            if abs(alpha) > 1e6:
+                where = f"thermal.expansion.{AXES[k]}" if k < 3 else "thermal.workpiece_expansion"
+                raise self.fail(where, f"{alpha:g} µm/(m·°C) is beyond ±1e6")
+        if fixture is not None and not np.all(np.abs(fixture) <= 1e6):
+            raise self.fail("thermal.workpiece_fixture", f"{fixture.tolist()} mm is beyond ±1e6 mm")
         return Thermal(
             reference_C=ref,
             expansion=expansion,
