@@ -415,3 +415,27 @@ def test_cli_grid_build_of_an_absurd_stylus_writes_nothing(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "probe.offset" in err[0]
     assert not out.exists()
+
+
+def test_grid_refuses_node_values_beyond_any_machine(tmp_path: Path) -> None:
+    """An effect of 1e300 µm (effects are not bounded at load: they need run-time signals) made
+    `grid build` write a grid whose `correct` answered coordinates of 1e297 mm; a grid file with
+    such values loaded too. Now the grid itself refuses them (build and load)."""
+    from cmm_comp.compensation.grid.correction_grid import CorrectionGrid
+
+    src = tmp_path / "m.toml"
+    src.write_text(
+        GOLDEN.read_text(encoding="utf-8")
+        + '\n[[effects]]\ncause = "periodic"\naxis = "x"\nperiod_mm = 50.0\n'
+        + "a_cos_um = 1e300\nb_sin_um = 0.0\n",
+        encoding="utf-8",
+    )
+    with pytest.raises(ValueError, match=r"node translations reach .* beyond ±1e\+09 µm"):
+        CorrectionGrid.build(Machine.from_toml(src), (4, 4, 4))
+    q = np.zeros((4, 4, 4, 4))
+    q[..., 0] = 1.0
+    t = np.zeros((4, 4, 4, 3))
+    CorrectionGrid((0, 0, 0), (1, 1, 1), q, t + 1e9)  # 1 km: the limit itself is a grid
+    t[1, 2, 3, 0] = -2e9
+    with pytest.raises(ValueError, match="beyond"):
+        CorrectionGrid((0, 0, 0), (1, 1, 1), q, t)

@@ -70,6 +70,7 @@ FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[float, str], None]
 _WARM = {"done": False}
 _NAN3 = (math.nan, math.nan, math.nan)
+_MAX_UM = 1e9  # largest |translation| µm (1 km) and |sensitivity| per signal unit of a grid
 
 
 class CorrectionGrid:
@@ -106,6 +107,11 @@ class CorrectionGrid:
             raise ValueError(f"volume axes must increase: lower {lo.tolist()}, upper {hi.tolist()}")
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
             raise ValueError("node quaternions and translations must be finite")
+        if np.abs(t).max() > _MAX_UM:  # 1e300 µm gave corrected coordinates of 1e297 mm
+            raise ValueError(
+                f"node translations reach {np.abs(t).max():g} µm, beyond ±{_MAX_UM:g} µm: no "
+                "machine error (check the model's tables and effects)"
+            )
         norm_dev = np.abs(np.linalg.norm(q, axis=-1) - 1.0).max()
         if norm_dev > 1e-9:
             raise ValueError(f"node quaternions must be unit (largest |‖q‖ − 1| = {norm_dev:.3g})")
@@ -125,6 +131,11 @@ class CorrectionGrid:
                     )
                 if not np.all(np.isfinite(arr)):
                     raise ValueError(f"sensitivity_{name} grid must be finite")
+                if np.abs(arr).max(initial=0.0) > _MAX_UM:
+                    raise ValueError(
+                        f"sensitivity_{name} reaches {np.abs(arr).max():g} per unit of a signal, "
+                        f"beyond ±{_MAX_UM:g}: no machine error"
+                    )
         self.outside = check_policy(outside)
         self.lower_mm = lo
         self.upper_mm = hi
