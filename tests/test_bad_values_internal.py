@@ -439,3 +439,20 @@ def test_grid_refuses_node_values_beyond_any_machine(tmp_path: Path) -> None:
     t[1, 2, 3, 0] = -2e9
     with pytest.raises(ValueError, match="beyond"):
         CorrectionGrid((0, 0, 0), (1, 1, 1), q, t)
+
+
+def test_export_report_with_a_non_finite_figure_is_refused_and_nothing_written(
+    tmp_path: Path,
+) -> None:
+    """export.json wrote a non-finite figure as null (a number silently missing), and
+    write_export wrote the controller files before the PNG/HTML/JSON were made, so a failure
+    there left a half-written directory. Now: one error naming the figure, no directory."""
+    from cmm_comp.compensation.export.report import write_export
+
+    machine = Machine.from_toml(GOLDEN)
+    result = export_tables(machine, "linuxcnc", None, ExportOptions(**FAST))
+    result.report["residual_um"]["per_axis"]["x"]["rms"] = float("nan")
+    out = tmp_path / "out"
+    with pytest.raises(ExportError, match=r"report\.residual_um\.per_axis\.x\.rms is nan"):
+        write_export(result, machine, out)
+    assert not out.exists()

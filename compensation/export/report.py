@@ -21,24 +21,27 @@ from matplotlib.figure import Figure
 from ..parametric_errors import AXES
 from .decompose import model_error_um
 from .export import ExportResult, direction_combinations, evaluation_points
+from .limits import ExportError
 
 __all__ = ["export_figure_png", "export_html", "report_json"]
 
 
-def _finite(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
+def _finite(obj: Any, where: str = "report") -> Any:
+    """``obj`` with numpy scalars as Python numbers; :class:`ExportError` naming the first
+    number that is not finite (was written as null: a figure silently missing)."""
     if isinstance(obj, np.generic):
-        return _finite(obj.item())
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        raise ExportError(f"export.json: {where} is {obj} (not a finite number); nothing written")
+    if isinstance(obj, dict):
+        return {k: _finite(v, f"{where}.{k}") for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v, f"{where}[{i}]") for i, v in enumerate(obj)]
     return obj
 
 
 def report_json(result: ExportResult) -> str:
-    """The report as JSON text (non-finite numbers written as null, never NaN)."""
+    """The report as standard JSON text (ExportError if a number is not finite)."""
     return json.dumps(_finite(result.report), indent=2, allow_nan=False) + "\n"
 
 
@@ -184,15 +187,18 @@ def write_export(result: ExportResult, machine: Any, out_dir: Path) -> list[Path
     """Every file of ``result`` plus export.json, export.png and export.html, each atomically."""
     from ..formats.atomic import atomic_output, write_text_atomic
 
+    # everything is made before the first file is written: a failure leaves no partial directory
+    png = export_figure_png(result, machine)
+    page = export_html(result, png)
+    report = report_json(result)
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for name, text in result.files.items():
         write_text_atomic(out_dir / name, text)
         written.append(out_dir / name)
-    png = export_figure_png(result, machine)
     with atomic_output(out_dir / "export.png", "wb") as fh:
         fh.write(png)
-    write_text_atomic(out_dir / "export.html", export_html(result, png))
-    write_text_atomic(out_dir / "export.json", report_json(result))
+    write_text_atomic(out_dir / "export.html", page)
+    write_text_atomic(out_dir / "export.json", report)
     written += [out_dir / "export.png", out_dir / "export.html", out_dir / "export.json"]
     return written
