@@ -128,6 +128,14 @@ def _knots_fit(kn: Knots, lo: float, hi: float) -> bool:
     )
 
 
+def _count_fits(machine: Machine, axes: Sequence[int], count: int) -> bool:
+    lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
+    return all(
+        _knots_fit(make_knots(a, float(lo[a]), float(hi[a]), count, _QUANTUM_MM), lo[a], hi[a])
+        for a in axes
+    )
+
+
 _AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,15}")  # whole name (fullmatch: "X\n" is not one)
 
 
@@ -278,24 +286,19 @@ def _export_tables(
     )
     for a, kn in enumerate(knots):
         if not _knots_fit(kn, float(lo[a]), float(hi[a])):
-            span = float(hi[a] - lo[a])
-            fitting = [
-                n
-                for n in range(2, min(_MAX_TABLE_POINTS, int(span / _QUANTUM_MM + 1e-6) + 1) + 1)
-                if _knots_fit(
-                    make_knots(a, float(lo[a]), float(hi[a]), n, _QUANTUM_MM), lo[a], hi[a]
-                )
-            ]
+            # --points sets all three axes: a count to suggest must fit each of them
+            axes = range(3) if opts.points is not None else (a,)
+            fitting = [n for n in range(2, _MAX_TABLE_POINTS + 1) if _count_fits(machine, axes, n)]
             hint = (
-                "it is shorter than that resolution"
-                if not fitting
-                else f"set --points to one that fits, e.g. {min(fitting, key=lambda n: abs(n - kn.count))}"
+                f"set --points to one that fits, e.g. {min(fitting, key=lambda n: abs(n - kn.count))}"
+                if fitting
+                else "it is shorter than that resolution"
             )
             raise ExportError(
-                f"{fmt}: the {AXES[a].upper()} travel of {span:g} mm cannot hold {kn.count} points "
-                f"{_QUANTUM_MM * 1000:g} µm apart or more (the position resolution written): {hint}"
+                f"{fmt}: the {AXES[a].upper()} travel of {float(hi[a] - lo[a]):g} mm cannot hold "
+                f"{kn.count} points {_QUANTUM_MM * 1000:g} µm apart or more (the position "
+                f"resolution written): {hint}"
             )
-    ranks = 2 if (fmt == "sinumerik-cec" and opts.products) else 0
     ranks = 2 if (fmt == "sinumerik-cec" and opts.products) else 0
     say(f"fitting {fmt} tables ({counts[0]}/{counts[1]}/{counts[2]} points on X/Y/Z)")
     d = decompose(machine, tool, knots, interaction_ranks=ranks)
