@@ -339,6 +339,29 @@ def test_position_glitch_whose_square_overflows_gives_a_finite_summary(synthetic
     assert isinstance(summary, dict) and summary["alignment_error_um"]["rms"] > 0
 
 
+def test_one_reference_glitch_is_left_out_not_averaged_in(synthetic) -> None:
+    """One reference sample of 1e30 (finite: the reader takes it): the import ran to the end
+    with a latency of +847 ± 6 ms (truth 50 ms) and a reversal while moving of +776 µm,
+    without a word. The isolated spike is now left out and named in the notes."""
+    from cmm_comp.compensation.formats.camonitor_stream import isolated_spikes
+
+    # by hand: a ramp of step 1 (30 samples) with one sample replaced; a jump is no spike
+    v = np.arange(30.0)
+    v[10] = 1e30
+    assert np.flatnonzero(isolated_spikes(v)).tolist() == [10]
+    jump = np.r_[np.arange(15.0), 1e6 + np.arange(15.0)]
+    assert not isolated_spikes(jump).any()
+    path, _, _ = synthetic
+    log = dict(read_camonitor_log(path))
+    s = log[REF]
+    value = s.value.copy()
+    value[value.size // 2] = 1e30
+    log[REF] = type(s)(s.name, s.time_s, value, s.alarm)
+    a = align_streams(log, options())
+    assert abs(a.latency_s - LATENCY) < max(3.0 * a.latency_sigma_s, 0.005)
+    assert any(f"{REF}: 1 isolated spike" in note for note in a.notes)
+
+
 def test_write_import_refuses_a_non_finite_summary_and_writes_nothing(synthetic, tmp_path) -> None:
     import dataclasses
 
