@@ -456,3 +456,17 @@ def test_export_report_with_a_non_finite_figure_is_refused_and_nothing_written(
     with pytest.raises(ExportError, match=r"report\.residual_um\.per_axis\.x\.rms is nan"):
         write_export(result, machine, out)
     assert not out.exists()
+
+
+def test_measurements_refuse_a_temperature_no_machine_has(tmp_path: Path) -> None:
+    """T_x = 1e5 °C was read as a measurement (finite): a 10.5 µm/(m·°C) scale 1 m out gave a
+    modelled error of ~1e6 µm, below the residual bound, fed to the diagnosis as data. Now the
+    reader names the cell, as the --temp-* flags do."""
+    from cmm_comp.compensation.formats.measurements import read_measurements
+
+    src = tmp_path / "m.csv"
+    src.write_text("x,y,z,ref_x,ref_y,ref_z,T_x\n1,2,3,1,2,3,20.5\n1,2,3,1,2,3,1e5\n", "utf-8")
+    with pytest.raises(ValueError, match=r"m\.csv: line 3, column .T_x.: not a temperature"):
+        read_measurements(src)
+    src.write_text("x,y,z,ref_x,ref_y,ref_z,T_x\n1,2,3,1,2,3,20.5\n1,2,3,1,2,3,-20\n", "utf-8")
+    assert read_measurements(src).temps_C["T_x"].tolist() == [20.5, -20.0]

@@ -183,6 +183,8 @@ def read_measurements(path: str | Path) -> Measurements:
                 raise _fail(src, line, c, f"not a finite number: {cell!r}")
             if c in DIR_COLUMNS and v not in (1.0, -1.0):
                 raise _fail(src, line, c, f"direction must be +1 or -1, got {cell!r}")
+            if c in TEMPERATURE_COLUMNS and not -273.15 <= v <= 1000.0:
+                raise _fail(src, line, c, f"not a temperature in -273.15…1000 °C: {cell!r}")
             values[c][r] = v
         if "group" in index:
             groups.append(row[index["group"]].strip())
