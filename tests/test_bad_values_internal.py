@@ -470,3 +470,19 @@ def test_measurements_refuse_a_temperature_no_machine_has(tmp_path: Path) -> Non
         read_measurements(src)
     src.write_text("x,y,z,ref_x,ref_y,ref_z,T_x\n1,2,3,1,2,3,20.5\n1,2,3,1,2,3,-20\n", "utf-8")
     assert read_measurements(src).temps_C["T_x"].tolist() == [20.5, -20.0]
+
+
+def test_line_refuses_more_samples_than_memory_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`line --samples 1000000000` allocated 7.45 GiB per array and ended in a MemoryError
+    traceback (or the kernel's kill); now one error naming the range."""
+    from cmm_comp.cli.main import main
+
+    argv = ["line", str(GOLDEN), "--axis", "x", "--through", "0", "0", "0"]
+    assert main([*argv, "--samples", "1000000000"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "samples must be 2…1000000" in err[0]
+    for bad in ("1", "0", "-5"):
+        assert main([*argv, "--samples", bad]) == 2
+        capsys.readouterr()

@@ -23,6 +23,7 @@ FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[float], None]
 DEFAULT_STEPS = (11, 11, 11)
 MAX_MAP_NODES = 50_000_000
+MAX_LINE_SAMPLES = 1_000_000
 _CHUNK = 200_000
 #: a larger |error| is no machine error (a unit mistake, a corrupt table): refused, so that the
 #: lengths, norms and squares of the reports stay finite (was inf/NaN printed and written as valid)
@@ -203,8 +204,8 @@ def line_report(
     """ΔX, ΔY, ΔZ and resultant along a line parallel to ``axis`` through ``through_mm``."""
     if axis not in ("x", "y", "z"):
         raise ValueError(f"axis must be x, y or z, got {axis!r}")
-    if samples < 2:
-        raise ValueError(f"samples must be ≥ 2, got {samples}")
+    if not 2 <= samples <= MAX_LINE_SAMPLES:  # 1e9 ran out of memory (a traceback)
+        raise ValueError(f"samples must be 2…{MAX_LINE_SAMPLES}, got {samples}")
     k = "xyz".index(axis)
     point = np.asarray(through_mm, dtype=float)
     if point.shape != (3,) or not np.all(np.isfinite(point)):
