@@ -486,3 +486,33 @@ def test_line_refuses_more_samples_than_memory_holds(
     for bad in ("1", "0", "-5"):
         assert main([*argv, "--samples", bad]) == 2
         capsys.readouterr()
+
+
+def test_monte_carlo_plan_of_many_trials_allocates_nothing_of_that_size() -> None:
+    """--trials 1000000000 built its plan from np.arange(1e9): 7.45 GiB before the first
+    trial (a MemoryError traceback, or the kernel's kill). The plan is now arithmetic: the
+    first run is drawn at once (peak memory measured with tracemalloc, an independent probe)."""
+    import tracemalloc
+
+    from cmm_comp.compensation.uncertainty.adaptive import MonteCarloSettings, run_monte_carlo
+
+    class Drawn(Exception):
+        pass
+
+    sizes: list[int] = []
+
+    def draw(m: int, rng: np.random.Generator) -> np.ndarray:
+        sizes.append(m)
+        raise Drawn
+
+    tracemalloc.start()
+    try:
+        with pytest.raises(Drawn):
+            run_monte_carlo(
+                draw, np.random.default_rng(0), MonteCarloSettings(trials=10**9, batch=10**4)
+            )
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert sizes == [10**4]  # 1e9 trials in 1e5 runs of 1e4, worked out by hand
+    assert peak < 50e6, peak

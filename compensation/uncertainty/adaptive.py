@@ -164,7 +164,8 @@ def run_monte_carlo(
     size = s.run_size()
     if s.trials is not None:  # a fixed number in runs as equal as possible (none tiny)
         n_runs = max(1, round(s.trials / size))
-        plan = [len(c) for c in np.array_split(np.arange(s.trials), n_runs)]
+        base, extra = divmod(s.trials, n_runs)  # np.array_split's sizes, without an arange of
+        plan = [base + (i < extra) for i in range(n_runs)]  # all trials (1e9: a 7.45 GiB array)
     else:  # adaptive: runs of one size, as many as fit under max_trials
         plan = [size] * max(1, s.max_trials // size) if s.max_trials >= size else [s.max_trials]
     stats: list[FloatArray] = []
