@@ -239,9 +239,14 @@ def _stability(mc: Any, args: argparse.Namespace) -> str:
 def _warn_if_unstable(mc: Any, args: argparse.Namespace) -> None:
     """One line on stderr when the adaptive Monte Carlo stopped at --max-trials unstable."""
     if mc is not None and not mc.stable and args.trials is None:
+        worst = (
+            f"worst 2s/δ = {mc.worst:.2f}"
+            if math.isfinite(mc.worst)
+            else "a single run: its stability cannot be measured"  # was printed as 'nan'
+        )
         print(
             "cmm-comp: warning: the Monte Carlo did not stabilise within --max-trials "
-            f"({mc.trials}); worst 2s/δ = {mc.worst:.2f}",
+            f"({mc.trials}); {worst}",
             file=sys.stderr,
         )
 

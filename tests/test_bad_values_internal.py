@@ -516,3 +516,29 @@ def test_monte_carlo_plan_of_many_trials_allocates_nothing_of_that_size() -> Non
         tracemalloc.stop()
     assert sizes == [10**4]  # 1e9 trials in 1e5 runs of 1e4, worked out by hand
     assert peak < 50e6, peak
+
+
+def test_monte_carlo_run_size_is_bounded() -> None:
+    """--batch 1e9 (or p = 0.9999999, whose J = 100/(1 − p) is 1e9 trials a run) tried to hold
+    a run of 1e9 trials in memory: a MemoryError traceback or the kernel's kill."""
+    from cmm_comp.compensation.uncertainty.adaptive import MonteCarloSettings
+
+    with pytest.raises(ValueError, match="batch"):
+        MonteCarloSettings(batch=10**9)
+    with pytest.raises(ValueError, match=r"J = 100/\(1 − p\)"):
+        MonteCarloSettings(probability=0.9999999)
+    assert MonteCarloSettings(probability=0.999).j_min == 100_000  # 100/0.001, by hand
+
+
+def test_uncertainty_single_run_warning_prints_no_nan(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A single run cannot be judged stable: it was reported as 'worst 2s/δ = nan'."""
+    from cmm_comp.cli.main import main
+
+    points = tmp_path / "p.csv"
+    points.write_text("x,y,z\n100,100,100\n", encoding="utf-8")
+    argv = ["uncertainty", str(GOLDEN), "--points", str(points), "--max-trials", "3000"]
+    assert main([*argv, "--batch", "5000"]) == 0
+    err = capsys.readouterr().err
+    assert "did not stabilise" in err and "nan" not in err.lower()

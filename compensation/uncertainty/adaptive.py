@@ -39,6 +39,10 @@ JCGM_MIN_BATCH = 10_000
 ProgressFn = Callable[[int, float], None]
 
 
+#: most trials in one run (held in memory at once): a larger --batch ran out of memory
+MAX_RUN = 1_000_000
+
+
 @dataclass(frozen=True)
 class MonteCarloSettings:
     """How many trials: ``trials`` fixed (no stopping rule; split into runs of about ``batch``,
@@ -66,8 +70,13 @@ class MonteCarloSettings:
             math.isfinite(self.tolerance) and self.tolerance > 0
         ):
             raise ValueError(f"tolerance must be finite and > 0, got {self.tolerance}")
-        if self.batch is not None and self.batch < 2:
-            raise ValueError(f"batch (trials per run) must be ≥ 2, got {self.batch}")
+        if self.batch is not None and not 2 <= self.batch <= MAX_RUN:
+            raise ValueError(f"batch (trials per run) must be 2…{MAX_RUN}, got {self.batch}")
+        if self.j_min > MAX_RUN:  # a run holds at least J trials: p = 0.9999999 made J = 1e9
+            raise ValueError(
+                f"coverage probability {self.probability} needs runs of {self.j_min} trials "
+                f"(J = 100/(1 − p)), more than {MAX_RUN}: use p below {1 - 100 / MAX_RUN:g}"
+            )
         if self.max_trials < 2:
             raise ValueError(f"max_trials must be ≥ 2, got {self.max_trials}")
 
