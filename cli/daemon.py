@@ -148,6 +148,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         ("session grid", report.session_grid_sha256[:12] or "-"),
         ("readings", str(report.readings)),
         ("compared (both corrected)", str(report.compared)),
+        ("sent position not finite", str(report.sent_not_finite)),
         ("max |replayed − sent|", f"{report.max_abs_diff_um:.4f} µm"),
         ("RMS 3-D difference", f"{report.rms_diff_um:.4f} µm"),
         ("status agrees", f"{report.status_agree}/{report.readings}"),

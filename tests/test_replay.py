@@ -128,3 +128,31 @@ def test_replay_reads_a_cut_session_with_a_one_line_warning(session, tmp_path, c
     assert main(["replay", str(cut)]) == 0
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cut by a crash" in err and f"the {expected} readings" in err
+
+
+def test_replay_counts_a_logged_answer_that_is_not_a_number(session, monkeypatch, capsys) -> None:
+    """A damaged log whose corrected answer holds NaN / inf (the logger never writes one) is
+    not compared and is counted; the other answers compare as before, every figure finite and
+    the JSON standard. Oracle: the two answers doctored here."""
+    from cmm_comp.cli.main import main
+    from cmm_comp.daemon.sessionlog import replay as replay_mod
+    from cmm_comp.daemon.sessionlog.reader import read_messages
+
+    res = read_messages(session)
+    corrected = [m for m in res.messages if m.topic == "/cmm/corrected"]
+    corrected[3].payload["x_mm"] = float("nan")
+    corrected[7].payload["z_mm"] = float("inf")
+    monkeypatch.setattr(replay_mod, "read_messages", lambda *_a, **_k: res)
+    report = replay_offline(session)
+    assert report.sent_not_finite == 2 and report.compared == 58
+    assert report.max_abs_diff_um < 0.002 and np.isfinite(report.rms_diff_um)
+    assert "2 answer(s) logged as corrected" in (report.warning or "")
+
+    def strict(token: str) -> float:
+        raise ValueError(token)
+
+    text = json.dumps(report.as_dict())
+    assert json.loads(text, parse_constant=strict)["sent_not_finite"] == 2
+    assert main(["replay", str(session)]) == 0
+    captured = capsys.readouterr()
+    assert "not a finite number" in captured.err

@@ -74,16 +74,26 @@ class ReplayReport:
     uncertainty_mismatch: int = 0
     """Readings whose U only one side knows (e.g. another grid with or without U, a status
     that differs, a correction the daemon refused by its limits)."""
+    sent_not_finite: int = 0
+    """Answers logged as corrected whose position is not a finite number (only a damaged or
+    hand-made log holds one: the logger never writes them): not compared, counted here."""
 
     @property
     def warning(self) -> str | None:
-        """One line for the user when the session was cut by a crash, else None."""
-        if not self.truncated:
-            return None
-        return (
-            f"session cut by a crash: replayed the {self.readings} readings read before the "
-            f"break ({self.read_error or 'file ends without its footer'})"
-        )
+        """One line for the user when the session was cut by a crash or holds corrected answers
+        that are not numbers, else None."""
+        lines = []
+        if self.truncated:
+            lines.append(
+                f"session cut by a crash: replayed the {self.readings} readings read before the "
+                f"break ({self.read_error or 'file ends without its footer'})"
+            )
+        if self.sent_not_finite:
+            lines.append(
+                f"{self.sent_not_finite} answer(s) logged as corrected hold a position that is "
+                "not a finite number (a damaged log?): not compared"
+            )
+        return "; ".join(lines) or None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly report."""
@@ -180,7 +190,10 @@ def replay_offline(source: str | Path, grid_path: str | Path | None = None) -> R
     sent_pos = np.array([[s["x_mm"], s["y_mm"], s["z_mm"]] for s in sent], dtype=float)
     sent_status = np.array([s["status"] for s in sent])
     replayed = np.array([_as_sent_label(s) for s in status])
-    both = np.isin(sent_status, _GEOMETRY_APPLIED) & np.isin(replayed, _GEOMETRY_APPLIED)
+    geometry = np.isin(sent_status, _GEOMETRY_APPLIED) & np.isin(replayed, _GEOMETRY_APPLIED)
+    finite = np.all(np.isfinite(sent_pos), axis=1)
+    report.sent_not_finite = int(np.sum(geometry & ~finite))
+    both = geometry & finite
     diffs = (corrected[both] - sent_pos[both]) * 1000.0
     report.compared = int(both.sum())
     if report.compared:
