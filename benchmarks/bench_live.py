@@ -47,6 +47,7 @@ import platform
 import subprocess
 import sys
 import time
+import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -162,6 +163,15 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--with-thread", action="store_true", help="also the sender thread in the daemon"
     )
+    parser.add_argument(
+        "--out", type=Path, help="--daemon-only: the JSON file (default results/live_daemon.json)"
+    )
+    parser.add_argument(
+        "--browser",
+        metavar="CHROMIUM",
+        help="also a browser as the client: Chromium (this path, e.g. /usr/bin/chromium) "
+        "showing examples/live-view.html, at normal and at idle priority",
+    )
     args = parser.parse_args(argv)
     if args.client:
         client_main(args.client, args.client_priority)
@@ -171,12 +181,14 @@ def main(argv: list[str]) -> int:
 
     sys.setswitchinterval(0.0005)  # as `cmm-comp daemon` does
     if args.daemon_only:
-        daemon = bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.with_thread)
-        out_path = ROOT / "benchmarks" / "results" / "live_daemon.json"
+        daemon = bench_live_daemon(
+            args.daemon_n, args.rounds, args.rate_hz, args.with_thread, args.browser
+        )
+        out_path = args.out or ROOT / "benchmarks" / "results" / "live_daemon.json"
         out_path.write_text(
             json.dumps({"benchmark": "bench_live --daemon-only", **(daemon or {})}, indent=2) + "\n"
         )
-        print(f"wrote {out_path.relative_to(ROOT)}")
+        print(f"wrote {out_path}")
         return 0
     n = int(args.seconds_per_case * args.rate_hz)
     idle = LiveSink(LiveSection(enabled=True, port=0)).start()
@@ -266,7 +278,7 @@ def main(argv: list[str]) -> int:
         f"{proc_stats.dropped}; idle sink: not encoded {idle_stats.not_encoded}"
     )
     daemon = (
-        bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.with_thread)
+        bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.with_thread, args.browser)
         if args.daemon
         else None
     )
@@ -324,6 +336,13 @@ DAEMON_CASES: dict[str, DaemonCase] = {
     # the same client where its own CPU cannot compete: the view's cost alone
     "live on, subscribed, client at idle priority": DaemonCase(True, client="idle"),
 }
+BROWSER_CASES = {
+    # a real viewer: headless Chromium showing examples/live-view.html (it draws 5 times a
+    # second), at normal priority as started by hand, and at Linux SCHED_IDLE (`chrt -i 0`)
+    "live on, Chromium showing live-view.html": DaemonCase(True, client="browser"),
+    "live on, Chromium at idle priority": DaemonCase(True, client="browser-idle"),
+}
+"""With ``--browser PATH``: a browser as the client (the page subscribes to the 6 JSON topics)."""
 THREAD_CASE = ("live on (thread), subscribed", DaemonCase(True, "thread", "normal"))
 """With ``--with-thread``: the sender thread in the daemon (shares the reply path's GIL)."""
 BASELINES = ("live off", "live off again")
@@ -343,6 +362,54 @@ def start_client(url: str, priority: str = "normal") -> subprocess.Popen[str]:
         client.kill()
         raise RuntimeError(f"the client did not subscribe: {line!r}")
     return client
+
+
+class Browsers:
+    """Headless Chromium instances (one at normal priority, one at ``SCHED_IDLE``) kept open for
+    the whole run on ``about:blank``; :meth:`watch` points one at ``examples/live-view.html``
+    for a daemon's live view, :meth:`blank` takes it away again. Driven over the DevTools
+    protocol, as ``docs/img/live_view_screenshot.py`` does for the screenshot."""
+
+    def __init__(self, chromium: str, profile_root: Path) -> None:
+        sys.path.insert(0, str(ROOT / "docs" / "img"))
+        from live_view_screenshot import FLAGS, devtools_port
+        from websockets.sync.client import connect
+
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._cdp: dict[str, Any] = {}
+        self._ids = iter(range(1, 1 << 62))
+        for mode, prefix in (("browser", []), ("browser-idle", ["chrt", "-i", "0"])):
+            profile = profile_root / mode
+            profile.mkdir()
+            self.procs[mode] = subprocess.Popen(
+                [*prefix, chromium, *FLAGS, f"--user-data-dir={profile}",
+                 "--window-size=1280,900", "about:blank"],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )  # fmt: skip
+            port = devtools_port(profile)
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as r:
+                target = next(t for t in json.load(r) if t["type"] == "page")
+            self._cdp[mode] = connect(target["webSocketDebuggerUrl"], max_size=None)
+
+    def _call(self, mode: str, method: str, **params: object) -> None:
+        cdp, mid = self._cdp[mode], next(self._ids)
+        cdp.send(json.dumps({"id": mid, "method": method, "params": params}))
+        while json.loads(cdp.recv(timeout=30)).get("id") != mid:
+            pass
+
+    def watch(self, mode: str, url: str) -> None:
+        page = (ROOT / "examples" / "live-view.html").as_uri()
+        self._call(mode, "Page.navigate", url=f"{page}?url={url}")
+
+    def blank(self, mode: str) -> None:
+        self._call(mode, "Page.navigate", url="about:blank")
+
+    def close(self) -> None:
+        for mode, proc in self.procs.items():
+            self._cdp[mode].close()
+            proc.terminate()
+            proc.wait(10)
 
 
 def stop_client(client: subprocess.Popen[str]) -> dict[str, int]:
@@ -369,7 +436,7 @@ def _spread(values: list[float], digits: int = 3) -> str:
 
 
 def bench_live_daemon(
-    n: int, rounds: int, rate_hz: float, with_thread: bool = False
+    n: int, rounds: int, rate_hz: float, with_thread: bool = False, browser: str | None = None
 ) -> dict[str, Any] | None:
     """The daemon's reply latency with the live view off / on idle / on with a client
     subscribed to every channel: interleaved rounds (the order rotated each round), a new
@@ -386,6 +453,7 @@ def bench_live_daemon(
         measure,
         process_cpu_s,
         readings,
+        tree_cpu_s,
         wait_quiet,
     )
 
@@ -397,6 +465,8 @@ def bench_live_daemon(
     cases = dict(DAEMON_CASES)
     if with_thread:
         cases[THREAD_CASE[0]] = THREAD_CASE[1]
+    if browser:
+        cases.update(BROWSER_CASES)
     names = list(cases)
     machine = Machine.from_toml(ROOT / "examples" / "machines" / "npl-bridge.toml")
     rs = readings(n + 200, np.random.default_rng(1))
@@ -409,6 +479,8 @@ def bench_live_daemon(
         tmp = Path(tmpd)
         grid = tmp / "npl.grid"
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
+        browsers = Browsers(browser, tmp) if browser else None
+        viewer_cpu_us: dict[str, list[float]] = {}
 
         def one_round(name: str) -> tuple[list[float], int]:
             case = cases[name]
@@ -425,11 +497,18 @@ def bench_live_daemon(
                 CanController(bus) as ctl,
             ):
                 client = None
+                viewer = None  # the browser's process tree
                 if case.client is not None:
                     assert d.live is not None
-                    client = start_client(d.live.url, case.client)
-                    deadline = time.monotonic() + 5.0
-                    while d.live.stats().subscriptions < 7 and time.monotonic() < deadline:
+                    topics = 7
+                    if case.client.startswith("browser"):
+                        assert browsers is not None
+                        browsers.watch(case.client, d.live.url)
+                        viewer, topics = browsers.procs[case.client].pid, 6
+                    else:
+                        client = start_client(d.live.url, case.client)
+                    deadline = time.monotonic() + 10.0
+                    while d.live.stats().subscriptions < topics and time.monotonic() < deadline:
                         time.sleep(0.01)
                 try:
                     # the steady state: the live view's process (and the MCAP writer) have
@@ -438,9 +517,14 @@ def bench_live_daemon(
                     child = getattr(d.live, "child_pid", None)
                     cpu0 = time.process_time()
                     child0 = process_cpu_s(child) if child else 0.0
+                    viewer0 = tree_cpu_s(viewer) if viewer else 0.0
                     out = measure(ctl, rs, rate_hz)
                     per = 1e6 / len(rs)
                     cpu_us[name].append((time.process_time() - cpu0) * per)
+                    if viewer:
+                        viewer_cpu_us.setdefault(name, []).append(
+                            (tree_cpu_s(viewer) - viewer0) * per
+                        )
                     if child:
                         child_cpu_us[name].append((process_cpu_s(child) - child0) * per)
                     time.sleep(0.2)  # the last answers reach the client
@@ -451,6 +535,9 @@ def bench_live_daemon(
                             acc[key] = acc.get(key, 0) + getattr(st, key)
                         acc["up_at_end"] = acc.get("up_at_end", 0) + int(st.up)
                 finally:
+                    if browsers is not None and viewer is not None and case.client:
+                        browsers.blank(case.client)
+                        time.sleep(0.3)  # the page's connection closes
                     if client is not None:
                         for topic, k in stop_client(client).items():
                             key = f"{name}: {topic}"
@@ -458,18 +545,23 @@ def bench_live_daemon(
             return out
 
         print("daemon rounds …", file=sys.stderr)
-        runs = interleaved(
-            names,
-            rounds,
-            one_round,
-            lambda k: print(f"daemon round {k}/{rounds} done", file=sys.stderr, flush=True),
-        )
+        try:
+            runs = interleaved(
+                names,
+                rounds,
+                one_round,
+                lambda k: print(f"daemon round {k}/{rounds} done", file=sys.stderr, flush=True),
+            )
+        finally:
+            if browsers is not None:
+                browsers.close()
     per_round = {name: runs[f"{name}_per_round"] for name in names}
     res: dict[str, Any] = {
         "rounds": rounds,
         "readings_per_case_round": n,
         "rate_hz": rate_hz,
         "settled_s_median": {k: float(np.median(v)) for k, v in settle_s.items()},
+        "browser_cpu_us_per_reading": viewer_cpu_us,
     }
     for name in names:
         res[name] = {
@@ -526,6 +618,8 @@ def bench_live_daemon(
     for name in names:
         view = _spread(child_cpu_us[name], 0) if child_cpu_us[name] else "-"
         print(f"| {name} | {_spread(cpu_us[name], 0)} | {view} |")
+    for name, v in viewer_cpu_us.items():
+        print(f"browser's processes, CPU µs per reading, {name}: {_spread(v, 0)}")
     print(f"client received (all rounds): {received}")
     print(f"settled before measuring (median s): {res['settled_s_median']}")
     print(f"live view counters at the end of each case (all rounds): {live_stats}")
