@@ -47,7 +47,6 @@ import platform
 import subprocess
 import sys
 import time
-import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -372,44 +371,24 @@ class Browsers:
 
     def __init__(self, chromium: str, profile_root: Path) -> None:
         sys.path.insert(0, str(ROOT / "docs" / "img"))
-        from live_view_screenshot import FLAGS, devtools_port
-        from websockets.sync.client import connect
+        from live_view_screenshot import HeadlessChromium
 
-        self.procs: dict[str, subprocess.Popen[bytes]] = {}
-        self._cdp: dict[str, Any] = {}
-        self._ids = iter(range(1, 1 << 62))
+        self.browsers: dict[str, Any] = {}
         for mode, prefix in (("browser", []), ("browser-idle", ["chrt", "-i", "0"])):
-            profile = profile_root / mode
-            profile.mkdir()
-            self.procs[mode] = subprocess.Popen(
-                [*prefix, chromium, *FLAGS, f"--user-data-dir={profile}",
-                 "--window-size=1280,900", "about:blank"],
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-            )  # fmt: skip
-            port = devtools_port(profile)
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as r:
-                target = next(t for t in json.load(r) if t["type"] == "page")
-            self._cdp[mode] = connect(target["webSocketDebuggerUrl"], max_size=None)
-
-    def _call(self, mode: str, method: str, **params: object) -> None:
-        cdp, mid = self._cdp[mode], next(self._ids)
-        cdp.send(json.dumps({"id": mid, "method": method, "params": params}))
-        while json.loads(cdp.recv(timeout=30)).get("id") != mid:
-            pass
+            (profile_root / mode).mkdir()
+            self.browsers[mode] = HeadlessChromium(chromium, profile_root / mode, prefix=prefix)
+        self.procs = {mode: b.proc for mode, b in self.browsers.items()}
 
     def watch(self, mode: str, url: str) -> None:
         page = (ROOT / "examples" / "live-view.html").as_uri()
-        self._call(mode, "Page.navigate", url=f"{page}?url={url}")
+        self.browsers[mode].call("Page.navigate", url=f"{page}?url={url}")
 
     def blank(self, mode: str) -> None:
-        self._call(mode, "Page.navigate", url="about:blank")
+        self.browsers[mode].call("Page.navigate", url="about:blank")
 
     def close(self) -> None:
-        for mode, proc in self.procs.items():
-            self._cdp[mode].close()
-            proc.terminate()
-            proc.wait(10)
+        for b in self.browsers.values():
+            b.close()
 
 
 def stop_client(client: subprocess.Popen[str]) -> dict[str, int]:

@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import argparse
 import base64
+import contextlib
 import json
 import subprocess
 import sys
 import tempfile
 import time
 import urllib.request
+from collections.abc import Sequence
 from pathlib import Path
 
 from websockets.sync.client import connect
@@ -51,6 +53,50 @@ def devtools_port(profile: Path, timeout_s: float = 20.0) -> int:
     raise RuntimeError("chromium did not open its DevTools port")
 
 
+class HeadlessChromium:
+    """A headless Chromium (``FLAGS``, a fresh ``profile`` directory) on ``about:blank``,
+    driven over its DevTools protocol: :meth:`call` sends one command to its page and returns
+    the result (an error answer raises). ``prefix`` runs before the binary (``chrt -i 0``)."""
+
+    def __init__(
+        self, chromium: str, profile: Path, size: str = "1280,900", prefix: Sequence[str] = ()
+    ) -> None:
+        self.proc = subprocess.Popen(
+            [*prefix, chromium, *FLAGS, f"--user-data-dir={profile}",
+             f"--window-size={size}", "about:blank"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        try:
+            port = devtools_port(profile)
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as r:
+                target = next(t for t in json.load(r) if t["type"] == "page")
+            self._stack = contextlib.ExitStack()
+            self._cdp = self._stack.enter_context(
+                connect(target["webSocketDebuggerUrl"], max_size=None)
+            )
+        except BaseException:
+            self.proc.kill()
+            self.proc.wait(10)
+            raise
+        self._ids = iter(range(1, 1 << 62))
+
+    def call(self, method: str, **params: object) -> dict[str, object]:
+        mid = next(self._ids)
+        self._cdp.send(json.dumps({"id": mid, "method": method, "params": params}))
+        while True:
+            msg = json.loads(self._cdp.recv(timeout=30))
+            if msg.get("id") == mid:
+                if "error" in msg:
+                    raise RuntimeError(f"{method}: {msg['error']}")
+                return msg.get("result", {})  # type: ignore[no-any-return]
+
+    def close(self) -> None:
+        self._stack.close()
+        self.proc.terminate()
+        self.proc.wait(10)
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=20.0)
@@ -72,38 +118,15 @@ def main(argv: list[str]) -> int:
                 raise RuntimeError(f"demo did not start: {line!r}")
             url = line.split()[2]
             page = f"{(ROOT / 'examples' / 'live-view.html').as_uri()}?url={url}"
-            profile = Path(tmp)
-            browser = subprocess.Popen(
-                [args.chromium, *FLAGS, f"--user-data-dir={profile}",
-                 f"--window-size={args.size}", "about:blank"],
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-            )  # fmt: skip
-            port = devtools_port(profile)
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as r:
-                target = next(t for t in json.load(r) if t["type"] == "page")
-            with connect(target["webSocketDebuggerUrl"], max_size=None) as cdp:
-                ids = iter(range(1, 1_000_000))
-
-                def call(method: str, **params: object) -> dict[str, object]:
-                    mid = next(ids)
-                    cdp.send(json.dumps({"id": mid, "method": method, "params": params}))
-                    while True:
-                        msg = json.loads(cdp.recv(timeout=30))
-                        if msg.get("id") == mid:
-                            if "error" in msg:
-                                raise RuntimeError(f"{method}: {msg['error']}")
-                            return msg.get("result", {})  # type: ignore[no-any-return]
-
-                call("Page.navigate", url=page)
-                time.sleep(args.seconds)
-                shot = call("Page.captureScreenshot", format="png")
+            browser = HeadlessChromium(args.chromium, Path(tmp), args.size)
+            browser.call("Page.navigate", url=page)
+            time.sleep(args.seconds)
+            shot = browser.call("Page.captureScreenshot", format="png")
             Path(args.out).write_bytes(base64.b64decode(str(shot["data"])))
             print(f"wrote {args.out}")
         finally:
             if browser is not None:
-                browser.terminate()
-                browser.wait(10)
+                browser.close()
             demo.terminate()
             demo.wait(10)
     return 0
