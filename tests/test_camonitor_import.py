@@ -322,6 +322,16 @@ def test_short_log_too_few_decelerations_for_the_latency_sigma(synthetic) -> Non
     _strict_json(json.dumps(import_summary(a, "short.log")))
 
 
+def _glitched(path, pv: str, value: float) -> dict:
+    """The log at ``path`` with the middle sample of ``pv`` replaced by ``value``."""
+    log = dict(read_camonitor_log(path))
+    s = log[pv]
+    values = s.value.copy()
+    values[values.size // 2] = value
+    log[pv] = type(s)(s.name, s.time_s, values, s.alarm)
+    return log
+
+
 def test_position_glitch_whose_square_overflows_gives_a_finite_summary(synthetic) -> None:
     """One position sample of 1e300 mm: the alignment error's RMS squared it (inf, written as
     Infinity into summary.json). The RMS is now scaled: finite and true."""
@@ -329,12 +339,7 @@ def test_position_glitch_whose_square_overflows_gives_a_finite_summary(synthetic
 
     assert _rms(np.array([3e200, 4e200])) == pytest.approx(np.sqrt(12.5) * 1e200, rel=1e-12)
     assert _rms(np.array([3.0, -4.0])) == pytest.approx(np.sqrt(12.5), rel=1e-12)
-    path, _, _ = synthetic
-    log = dict(read_camonitor_log(path))
-    s = log[POS]
-    value = s.value.copy()
-    value[value.size // 2] = 1e300
-    log[POS] = type(s)(s.name, s.time_s, value, s.alarm)
+    log = _glitched(synthetic[0], POS, 1e300)
     summary = _strict_json(json.dumps(import_summary(align_streams(log, options()), "g.log")))
     assert isinstance(summary, dict) and summary["alignment_error_um"]["rms"] > 0
 
@@ -351,12 +356,7 @@ def test_one_reference_glitch_is_left_out_not_averaged_in(synthetic) -> None:
     assert np.flatnonzero(isolated_spikes(v)).tolist() == [10]
     jump = np.r_[np.arange(15.0), 1e6 + np.arange(15.0)]
     assert not isolated_spikes(jump).any()
-    path, _, _ = synthetic
-    log = dict(read_camonitor_log(path))
-    s = log[REF]
-    value = s.value.copy()
-    value[value.size // 2] = 1e30
-    log[REF] = type(s)(s.name, s.time_s, value, s.alarm)
+    log = _glitched(synthetic[0], REF, 1e30)
     a = align_streams(log, options())
     assert abs(a.latency_s - LATENCY) < max(3.0 * a.latency_sigma_s, 0.005)
     assert any(f"{REF}: 1 isolated spike" in note for note in a.notes)
