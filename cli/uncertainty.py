@@ -53,10 +53,10 @@ def _end_progress() -> None:
         print(file=sys.stderr)
 
 
-def _settings(args: argparse.Namespace, many_outputs: bool) -> MonteCarloSettings:
+def _settings(args: argparse.Namespace, default_ndig: int) -> MonteCarloSettings:
     from cmm_comp.compensation.uncertainty import MonteCarloSettings
 
-    ndig = args.ndig if args.ndig is not None else (1 if many_outputs else 2)
+    ndig = args.ndig if args.ndig is not None else default_ndig
     try:
         return MonteCarloSettings(
             probability=args.probability,
@@ -169,7 +169,7 @@ def _points_mode(
         signals or None,
         inputs,
         rng=rng,
-        settings=_settings(args, many_outputs=True),
+        settings=_settings(args, default_ndig=1),
         progress=_progress("uncertainty"),
     )
     _end_progress()
@@ -308,7 +308,7 @@ def _task_mode(
 
     from cmm_comp.compensation import uncertainty as unc
 
-    settings = _settings(args, many_outputs=False)
+    settings = _settings(args, default_ndig=unc.E0_NDIG if mode == "--e0-test" else 2)
     progress = _progress("uncertainty")
     kw: dict[str, Any] = {"rng": rng, "settings": settings, "progress": progress}
     mpe_ratio_limit = None
@@ -351,27 +351,37 @@ def _task_mode(
     if args.plot is not None:
         from cmm_comp.compensation.uncertainty.plots import plot_histogram
 
-        if mc.values is None:
-            raise ValueError("uncertainty: too many trials kept no values to plot a histogram")
         gum_u = result.gum["u"] if result.gum is not None else [None] * len(result.outputs)
         shown = [
             i for i, name in enumerate(result.outputs) if not name.startswith("length_error_um[")
         ]
+        columns = {i: mc.column(i) for i in shown}
+        if any(c is None for c in columns.values()):  # not reachable with the tasks' defaults
+            raise ValueError(
+                f"uncertainty: the {mc.trials} trials' values were not kept "
+                "(more than keep_values_limit): no histogram; fewer --max-trials or --trials"
+            )
         panels = [
             (
                 result.outputs[i],
-                mc.values[:, i],
+                columns[i],
                 (float(mc.low[i]), float(mc.high[i])),
                 gum_u[i],
                 mpe_ratio_limit if result.outputs[i] == "E0_over_MPE" else None,
             )
             for i in shown
         ]
+        title = f"{machine.name}: {_TASK_TITLES.get(result.task, result.task)}, {mc.trials} virtual machines"
+        if "p_pass" in result.nominal:
+            title += f", probability of passing {_p_pass_text(result.nominal)}"
+        if not mc.stable and args.trials is None:
+            title += " (NOT stable: --max-trials reached)"
         plot_histogram(
             panels,
             args.plot,
-            title=f"{machine.name}: {result.task}, {mc.trials} virtual machines",
+            title=title,
             limit_label="pass limit E0/MPE =",
+            probability=mc.probability,
         )
     for i, name in enumerate(result.outputs):
         if name.startswith("length_error_um["):
@@ -381,10 +391,24 @@ def _task_mode(
             f"95 % interval [{mc.low[i]:.4g}, {mc.high[i]:.4g}]"
         )
     if "p_pass" in result.nominal:
-        print(f"probability of passing the E0 test: {result.nominal['p_pass']:.3f}")
+        print(f"probability of passing the E0 test: {_p_pass_text(result.nominal)}")
     print(f"{mc.trials} trials{_stability(mc, args)}")
     _warn_if_unstable(mc, args)
     return 0
+
+
+_TASK_TITLES = {
+    "length": "length",
+    "e0": "ISO 10360-2 E0 test",
+    "sphere": "sphere",
+    "flatness": "flatness",
+}
+
+
+def _p_pass_text(nominal: dict[str, Any]) -> str:
+    two_s = nominal.get("p_pass_2s")
+    spread = "" if two_s is None else f" ± {two_s:.3f} (2s between the runs)"
+    return f"{nominal['p_pass']:.3f}{spread}"
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -461,7 +485,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     mc.add_argument(
         "--ndig",
         type=int,
-        help="significant digits of u the result must be stable to (default 2; 1 for --points/--volume)",
+        help="significant digits of u the result must be stable to (default 2; 1 for "
+        "--points/--volume/--e0-test)",
     )
     mc.add_argument(
         "--tolerance-um", type=float, help="numerical tolerance of u in µm (instead of --ndig)"

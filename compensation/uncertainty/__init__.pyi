@@ -5,6 +5,8 @@ from .fields import SquaredExponentialBasis, squared_exponential_basis
 from .gum import BUDGET_GROUPS, residual_covariance, residual_std, uncertainty_budget
 from .model import TableUncertainty, UncertaintyModel, parse_uncertainty
 from .tasks import (
+    E0_NDIG,
+    P_PASS_TOLERANCE,
     PointUncertainty,
     TaskUncertainty,
     e0_uncertainty,
@@ -19,6 +21,8 @@ from .virtual_cmm import VirtualCMM
 
 __all__ = [
     "BUDGET_GROUPS",
+    "E0_NDIG",
+    "P_PASS_TOLERANCE",
     "McResult",
     "MonteCarloSettings",
     "PointUncertainty",
