@@ -13,6 +13,7 @@ import csv
 import io
 import math
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,7 +23,7 @@ if TYPE_CHECKING:
     from cmm_comp.compensation import Machine
     from cmm_comp.compensation.uncertainty import MonteCarloSettings, PointUncertainty
 
-__all__ = ["add_parsers", "cmd_uncertainty"]
+__all__ = ["add_parsers", "assumption_lines", "cmd_uncertainty", "print_assumptions"]
 
 _POINT_COLUMNS = (
     "Ux_um", "Uy_um", "Uz_um",
@@ -46,6 +47,65 @@ def _progress(label: str) -> Any:
             )
 
     return report
+
+
+_TABLE_KEYS = ("u", "u_per_m", "u_relative", "correlation_mm")
+
+
+def assumption_lines(
+    defaulted: Sequence[str], zero: Sequence[str], label: Callable[[str], str] = str
+) -> list[str]:
+    """What an uncertainty statement assumed, for the terminal: every input ``defaulted``
+    (``uncertainty.errors.dx_x.u`` …) grouped by kind, and every component taken as exactly
+    ``zero``; error components named by ``label`` (the machine file's own names)."""
+    tables: dict[str, list[str]] = {}
+    groups: dict[str, list[str]] = {}
+    for name in defaulted:
+        parts = name.split(".")
+        if len(parts) == 4 and parts[1] == "errors":
+            tables.setdefault(parts[2], []).append(parts[3])
+        elif len(parts) == 3:
+            groups.setdefault(parts[1], []).append(parts[2])
+        else:
+            groups.setdefault("", []).append(parts[-1])
+    lines = []
+    if defaulted:
+        lines.append(
+            f"{len(defaulted)} uncertainty input(s) not in [uncertainty], defaulted "
+            "(values: docs/uncertainty.md §2):"
+        )
+        by_keys: dict[tuple[str, ...], list[str]] = {}
+        for comp, keys in tables.items():
+            ordered = tuple(k for k in _TABLE_KEYS if k in keys) + tuple(
+                k for k in keys if k not in _TABLE_KEYS
+            )
+            by_keys.setdefault(ordered, []).append(label(comp))
+        for keys, comps in by_keys.items():
+            lines.append(f"  {', '.join(keys)} of {len(comps)} table(s): {', '.join(comps)}")
+        for group, names in groups.items():
+            lines.append(f"  {group}: {', '.join(names)}" if group else f"  {', '.join(names)}")
+    if zero:
+        lines.append(
+            f"taken as exactly zero (no table, no [uncertainty.errors.<name>]): "
+            f"{', '.join(label(c) for c in zero)}; give [uncertainty.errors.<name>] u = … for "
+            "an error that was never measured"
+        )
+    return lines
+
+
+def print_assumptions(
+    defaulted: Sequence[str],
+    zero: Sequence[str],
+    label: Callable[[str], str] = str,
+    *,
+    where: str,
+) -> None:
+    """:func:`assumption_lines` on stderr as ``cmm-comp: note:`` lines (all also in ``where``)."""
+    lines = assumption_lines(defaulted, zero, label)
+    if lines:
+        lines[-1] += f" (all in {where})"
+    for line in lines:
+        print(f"cmm-comp: note: {line}", file=sys.stderr)
 
 
 def _end_progress() -> None:
@@ -106,14 +166,7 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     machine = load_machine(args.machine)
     model = machine.uncertainty_model()
     if not args.quiet:
-        n_def = len(model.defaulted)
-        if n_def:
-            print(
-                f"cmm-comp: note: {n_def} uncertainty input(s) defaulted (not in [uncertainty]): "
-                f"{', '.join(model.defaulted[:6])}{' …' if n_def > 6 else ''} "
-                "(all listed in the JSON output)",
-                file=sys.stderr,
-            )
+        print_assumptions(model.defaulted, model.zero, machine.error_label, where="the JSON output")
     seed = args.seed
     rng = np.random.default_rng(seed)
     temps = temps_from_args(args)
@@ -506,5 +559,5 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     out.add_argument(
         "--plot", type=Path, help="PNG: U over the volume / at the points, or histograms"
     )
-    out.add_argument("--quiet", action="store_true", help="no note about defaulted inputs")  # fmt: skip
+    out.add_argument("--quiet", action="store_true", help="no notes about defaulted inputs and components taken as zero")  # fmt: skip
     p.set_defaults(handler=cmd_uncertainty)

@@ -138,7 +138,8 @@ class UncertaintyModel:
     without a table that the file gives an uncertainty for); ``squareness_urad`` (α, β1, β2);
     ``scale_temperature_C`` and ``expansion`` per axis (sensor reading, expansion coefficient
     µm/(m·°C)); ``workpiece_*`` likewise; ``probe_um`` one probing, per component.
-    ``defaulted`` names every value that was not in the file; ``notes`` what is left out.
+    ``defaulted`` names every value that was not in the file; ``zero`` the components taken
+    as exactly zero (no table, no uncertainty); ``notes`` what is left out.
     """
 
     tables: dict[str, TableUncertainty]
@@ -151,6 +152,8 @@ class UncertaintyModel:
     defaulted: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     given: dict[str, Any] = field(default_factory=dict)
+    zero: tuple[str, ...] = ()
+    """Components with neither a table nor an uncertainty: taken as exactly zero."""
 
     def describe(self) -> dict[str, Any]:
         """JSON-able summary: every value used, the defaulted ones and the notes."""
@@ -177,6 +180,7 @@ class UncertaintyModel:
                 "probe_um": self.probe_um,
             },
             "defaulted": list(self.defaulted),
+            "taken_as_zero": list(self.zero),
             "notes": list(self.notes),
         }
 
@@ -378,6 +382,7 @@ def parse_uncertainty(
         defaulted=tuple(r.defaulted),
         notes=tuple(notes),
         given=dict(sec),
+        zero=tuple(missing),
     )
 
 
