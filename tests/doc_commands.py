@@ -65,7 +65,10 @@ def run_cli(line: str, cwd: Path) -> CliRun:
     try:
         os.chdir(cwd)
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = cli_main(words[1:])
+            try:
+                code = cli_main(words[1:])
+            except SystemExit as exc:  # argparse: a usage error (2) or --help (0)
+                code = exc.code if isinstance(exc.code, int) else 2
     finally:
         os.chdir(before)
     return CliRun(

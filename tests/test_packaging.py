@@ -78,7 +78,7 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
     # build from a copy: setuptools leaves build/ and *.egg-info in the folder it builds
     src = tmp_path / "src"
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for name in (*FOLDERS, "pyproject.toml", "README.md"):
+    for name in (*FOLDERS, "pyproject.toml", "README.md", "LICENSE"):
         if (ROOT / name).is_dir():
             shutil.copytree(ROOT / name, src / name, ignore=ignore)
         else:
@@ -102,6 +102,11 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
         timeout=300,
     )
     (wheel,) = wheel_dir.glob("cmm_comp-*.whl")
+    import zipfile
+
+    with zipfile.ZipFile(wheel) as whl:  # the licence travels with the wheel's metadata
+        licences = [n for n in whl.namelist() if ".dist-info/" in n and "LICENSE" in n]
+        assert licences and b"Apache License" in whl.read(licences[0]), whl.namelist()
     subprocess.run(
         [
             sys.executable,
