@@ -80,8 +80,8 @@ def assumption_lines(
                 k for k in keys if k not in _TABLE_KEYS
             )
             by_keys.setdefault(ordered, []).append(label(comp))
-        for keys, comps in by_keys.items():
-            lines.append(f"  {', '.join(keys)} of {len(comps)} table(s): {', '.join(comps)}")
+        for key_set, comps in by_keys.items():
+            lines.append(f"  {', '.join(key_set)} of {len(comps)} table(s): {', '.join(comps)}")
         for group, names in groups.items():
             lines.append(f"  {group}: {', '.join(names)}" if group else f"  {', '.join(names)}")
     if zero:

@@ -268,6 +268,31 @@ def test_adaptive_stops_when_stable_and_fixed_does_not() -> None:
         run_monte_carlo(bad, np.random.default_rng(0), MonteCarloSettings(trials=100))
 
 
+def test_assembled_errors_equal_numpys_fancy_indexed_sums() -> None:
+    """The compiled assembly of the perturbed errors (issue 25) against the numpy expression it
+    replaced, on the E0 test's probing points of the bridge: identical bits."""
+    from cmm_comp.compensation.uncertainty.chain_kernel import assemble_errors
+    from cmm_comp.compensation.uncertainty.virtual_cmm import VirtualCMM
+    from cmm_comp.sim_controller.iso10360 import length_test
+
+    machine = Machine.from_toml(NPL)
+    tests = length_test(machine.volume.lower_mm, machine.volume.upper_mm)
+    prep = VirtualCMM(machine).prepare(np.array([[t.a_mm, t.b_mm] for t in tests]).reshape(-1, 3))
+    rng = np.random.default_rng(4)
+    t = 37
+    delta_t = prep.calibration_t @ rng.standard_normal((prep.calibration.shape[0], t))
+    z = rng.standard_normal((t, prep.random_sigma.size))
+    base = prep.errors.reshape(-1)
+    expect = np.broadcast_to(base, (t, base.size)).copy()
+    expect[:, prep.target] += delta_t.T[:, prep.source]
+    expect[:, prep.random_target] += prep.random_sigma * z
+    got = assemble_errors(
+        base, t, delta_t, prep.source, prep.target, prep.random_sigma, z, prep.random_target
+    )
+    assert prep.target.size > 1000 and prep.random_target.size > 1000
+    np.testing.assert_array_equal(got, expect)
+
+
 def test_stopping_rule_watches_only_the_outputs_named() -> None:
     """Issue 25: E0's rule watched 107 outputs to 2 digits and never stopped. Output 1 here
     never stabilises (each run is offset by one N(0, 1000²) number: the run averages disagree

@@ -181,16 +181,11 @@ def assemble_errors(
     Targets are distinct within each of the two lists. (The same sums as numpy's fancy-indexed
     ``+=`` along the second axis, which cost 5× the chain evaluation.)"""
     out = np.empty((trials, base.shape[0]))
-    _assemble_rows(
-        np.ascontiguousarray(base, dtype=np.float64),
-        np.ascontiguousarray(delta_t, dtype=np.float64),
-        np.ascontiguousarray(source, dtype=np.intp),
-        np.ascontiguousarray(target, dtype=np.intp),
-        np.ascontiguousarray(sigma, dtype=np.float64),
-        np.ascontiguousarray(z, dtype=np.float64),
-        np.ascontiguousarray(random_target, dtype=np.intp),
-        out,
+    b, d, sg, zz = (np.ascontiguousarray(a, dtype=np.float64) for a in (base, delta_t, sigma, z))
+    src, tgt, rtg = (
+        np.ascontiguousarray(a, dtype=np.intp) for a in (source, target, random_target)
     )
+    _assemble_rows(b, d, src, tgt, sg, zz, rtg, out)
     return out
 
 
