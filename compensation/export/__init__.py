@@ -19,6 +19,7 @@ from .export import (
     evaluation_points,
     export_tables,
     measure_residual,
+    validate_axes,
 )
 from .limits import ExportError
 from .plan import Plan
@@ -40,4 +41,5 @@ __all__ = [
     "export_tables",
     "measure_residual",
     "model_error_um",
+    "validate_axes",
 ]
