@@ -39,12 +39,15 @@ def _grid(machine: Machine, steps: list[int]) -> np.ndarray:
     return np.stack([m.ravel() for m in np.meshgrid(*axes, indexing="ij")], axis=1)
 
 
-def _reader_error(fmt: str, files: dict[str, str], q: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+def _reader_error(
+    fmt: str, files: dict[str, str], q: np.ndarray, dirs: np.ndarray, sign: int = 1
+) -> np.ndarray:
     if fmt == "sinumerik-cec":
-        return cec_error_um(read_cec(files["NC_CEC.INI"]), ["AX1", "AX2", "AX3"], q, dirs)
+        tables = read_cec(files["NC_CEC.INI"])
+        return cec_error_um(tables, ["AX1", "AX2", "AX3"], q, dirs, sign=sign)
     if fmt == "twincat-cnc":
         axes = [twincat_axis(read_twincat(files[f"achskw{n}.lis"])) for n in (1, 2, 3)]
-        return twincat_error_um(axes, [1, 2, 3], q, dirs)
+        return twincat_error_um(axes, [1, 2, 3], q, dirs, cross_sign=sign)
     ini = files["linuxcnc-joints.ini"]
     file_type = int(ini.split("COMP_FILE_TYPE = ")[1][0])
     return linuxcnc_error_um(
@@ -52,9 +55,12 @@ def _reader_error(fmt: str, files: dict[str, str], q: np.ndarray, dirs: np.ndarr
     )
 
 
-def _measured(machine: Machine, fmt: str, files: dict[str, str], report: dict) -> dict:
+def _measured(
+    machine: Machine, fmt: str, files: dict[str, str], report: dict, sign: int = 1
+) -> dict:
     """Residual statistics of the files, evaluated by the readers over the report's grid and
-    every combination of travel directions, against the model at the report's tool."""
+    every combination of travel directions, against the model at the report's tool; ``sign``
+    −1 applies the opposite of the documented sign (CEC values, TwinCAT cross corrections)."""
     q = _grid(machine, report["evaluation"]["grid_steps"])
     dir_axes = ["xyz".index(a) for a in report["evaluation"]["direction_axes"]]
     res = []
@@ -65,7 +71,7 @@ def _measured(machine: Machine, fmt: str, files: dict[str, str], report: dict) -
             dirs[:, a] = s
             inputs[f"dir_{'xyz'[a]}"] = s
         e = machine.volumetric_error(q, stylus_mm=report["tool_mm"], inputs=inputs)
-        res.append(e - _reader_error(fmt, files, q, dirs))
+        res.append(e - _reader_error(fmt, files, q, dirs, sign))
     r = np.concatenate(res)
     norm = np.linalg.norm(r, axis=1)
     return {
@@ -140,8 +146,9 @@ def test_direction_tables_carry_the_reversal_exactly() -> None:
 
 
 def test_hand_values_positional_and_squareness() -> None:
-    """X positional 10 µm/m, squareness α = 20 µrad (ΔY = −α·x): SINUMERIK holds −e, TwinCAT
-    +e in 0.1 µm, LinuxCNC the actual position; the values are known by hand."""
+    """X positional 10 µm/m, squareness α = 20 µrad (ΔY = −α·x): SINUMERIK holds +e in mm (the
+    K3 reading: a positive value moves the axis negative), TwinCAT +e in 0.1 µm, LinuxCNC the
+    actual position; the values are known by hand."""
     errors = ParametricErrors.from_polynomials({"dx_x": [0.0, 0.01]})
     machine = Machine.from_parts(model="MB1", volume=((0, 400), (0, 300), (0, 200)), errors=errors)
     data = machine.description
@@ -156,8 +163,8 @@ def test_hand_values_positional_and_squareness() -> None:
     xy = by_pair[("(AX1)", "(AX2)")]
     got_xx = np.array([xx.values[n] for n in range(11)])
     got_xy = np.array([xy.values[n] for n in range(11)])
-    assert np.allclose(got_xx - got_xx[0], -0.01 * x / 1000.0, atol=1e-4 + 1e-12)
-    assert np.allclose(got_xy - got_xy[0], 0.02 * x / 1000.0, atol=1e-4 + 1e-12)
+    assert np.allclose(got_xx - got_xx[0], 0.01 * x / 1000.0, atol=1e-4 + 1e-12)
+    assert np.allclose(got_xy - got_xy[0], -0.02 * x / 1000.0, atol=1e-4 + 1e-12)
     assert cec.report["residual_um"]["max"] < 0.11  # two 0.1 µm roundings at most
     tc = export_tables(machine, "twincat-cnc", (0, 0, 0), opts)
     y_list = twincat_axis(read_twincat(tc.files["achskw2.lis"]))
@@ -174,21 +181,21 @@ def test_hand_values_positional_and_squareness() -> None:
     )
 
 
-def test_products_carry_an_abbe_term() -> None:
+def test_products_carry_an_abbe_term_only_when_asked() -> None:
     """Y pitch growing along Y on a bridge with a long stylus: X's error gets ε(y)·(z + p_z),
-    a product of two axes. With $AN_CEC_MULT_BY_TABLE it is carried (as read: the product is
-    added on top of both tables' own values); without, it is left."""
+    a product of two axes. By default no $AN_CEC_MULT_BY_TABLE is written and the term is left;
+    with ``products`` it is carried in Siemens' example semantics (read by the passages' reader:
+    the referenced table only as the factor), and either reading of the referencing table's own
+    value gives the same residual within ``product_rate_own_max_um``."""
     errors = ParametricErrors.from_polynomials({"ey_y": [0.0, 0.05]})
     machine = Machine.from_parts(model="MB1", volume=((0, 500), (0, 600), (0, 400)), errors=errors)
+    without = export_tables(machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, **FAST))
     with_p = export_tables(
-        machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, **FAST)
+        machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, products=True, **FAST)
     )
-    without = export_tables(
-        machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, products=False, **FAST)
-    )
-    assert any(
-        t.params["MULT_BY_TABLE"] != "0" for t in read_cec(with_p.files["NC_CEC.INI"]).values()
-    )
+    assert all(t.params["MULT_BY_TABLE"] == "0" for t in read_cec(without.files["NC_CEC.INI"]).values())
+    tables = read_cec(with_p.files["NC_CEC.INI"])
+    assert any(t.params["MULT_BY_TABLE"] != "0" for t in tables.values())
     for res in (with_p, without):
         _assert_same_residual(
             _measured(machine, "sinumerik-cec", res.files, res.report), res.report["residual_um"]
@@ -198,6 +205,13 @@ def test_products_carry_an_abbe_term() -> None:
     assert with_p.report["residual_without_products_um"]["rms"] == pytest.approx(
         without.report["residual_um"]["rms"], rel=1e-9
     )
+    # the other reading of "added as an additional compensation value": no own value
+    q = _grid(machine, [9, 9, 5])
+    ones = np.ones_like(q)
+    both = [cec_error_um(tables, ["AX1", "AX2", "AX3"], q, ones, referencing_own=own) for own in (True, False)]
+    bound = with_p.report["limits"]["product_rate_own_max_um"]
+    assert 0 < np.max(np.abs(both[0] - both[1])) <= bound + 1e-9
+    assert bound < 1e-3 * with_p.report["uncompensated_um"]["max"]
 
 
 def test_golden_files_reproduce_and_read_back(tmp_path: Path) -> None:
@@ -205,11 +219,13 @@ def test_golden_files_reproduce_and_read_back(tmp_path: Path) -> None:
     golden machine (byte for byte), and they carry its errors as derived there by hand."""
     machine = Machine.from_toml(GOLDEN / "golden-machine.toml")
     opts = ExportOptions(points=11, eval_steps=(9, 7, 5))
-    for fmt in ("sinumerik-cec", "twincat-cnc", "linuxcnc"):
-        result = export_tables(machine, fmt, None, opts)
+    cases = [(fmt, fmt, opts) for fmt in ("sinumerik-cec", "twincat-cnc", "linuxcnc")]
+    cases.append(("sinumerik-cec", "sinumerik-cec-products", ExportOptions(products=True, points=11, eval_steps=(9, 7, 5))))
+    for fmt, folder, o in cases:
+        result = export_tables(machine, fmt, None, o)
         for name, text in result.files.items():
-            assert (GOLDEN / fmt / name).read_text(encoding="utf-8") == text, (fmt, name)
-        golden = {p.name: p.read_text(encoding="utf-8") for p in (GOLDEN / fmt).iterdir()}
+            assert (GOLDEN / folder / name).read_text(encoding="utf-8") == text, (folder, name)
+        golden = {p.name: p.read_text(encoding="utf-8") for p in (GOLDEN / folder).iterdir()}
         _assert_same_residual(
             _measured(machine, fmt, golden, result.report), result.report["residual_um"]
         )
@@ -217,20 +233,30 @@ def test_golden_files_reproduce_and_read_back(tmp_path: Path) -> None:
     plus = np.array([cec[0].values[n] for n in range(11)])
     minus = np.array([cec[1].values[n] for n in range(11)])
     assert (cec[0].params["DIRECTION"], cec[1].params["DIRECTION"]) == ("1", "-1")
-    assert np.allclose(plus - minus, -0.001)  # half reversal 0.5 µm each way, as −error
-    assert np.allclose(np.diff(plus), -0.0004)  # 10 µm/m over 40 mm steps
+    assert np.allclose(plus - minus, 0.001)  # half reversal +0.5 µm after +X, −0.5 after −X
+    assert np.allclose(np.diff(plus), 0.0004)  # 10 µm/m over 40 mm steps, as +error
+    prod = read_cec((GOLDEN / "sinumerik-cec-products" / "NC_CEC.INI").read_text(encoding="utf-8"))
+    (rate_t,) = [t for t in prod if prod[t].params["MULT_BY_TABLE"] != "0"]
+    rate, arm = prod[rate_t], prod[int(prod[rate_t].params["MULT_BY_TABLE"]) - 1]
+    assert (rate.params["INPUT_AXIS"], arm.params["INPUT_AXIS"]) == ("(AX1)", "(AX2)")
+    assert rate.params["OUTPUT_AXIS"] == arm.params["OUTPUT_AXIS"] == "(AX3)"
+    # ΔZ = −0.02·x·y·10⁻³ µm; its two-axis part −0.02·(x − 200)·(y − 150)·10⁻³ µm is rate × arm
+    r, a = (np.array([t.values[n] for n in range(11)]) for t in (rate, arm))
+    assert max(abs(a)) == 1000.0
+    assert r[0] * a[0] == pytest.approx(-0.02e-3 * (-200) * (-150) / 1000, rel=1e-4)
     j0 = read_linuxcnc((GOLDEN / "linuxcnc" / "joint0.comp").read_text(encoding="utf-8"))
     assert np.allclose(j0[:, 1] - j0[:, 2], 0.001, atol=2e-7)
 
 
 def test_reader_is_not_the_writer() -> None:
     """The comparison can fail: a CEC table with one value changed by 1 µm changes the residual
-    the reader measures, and the direction selection matters."""
+    the reader measures, the direction selection matters, and so does the sign: the tables read
+    with the opposite sign (the exporter's earlier −error) leave twice the model's error."""
     machine = Machine.from_toml(GOLDEN / "golden-machine.toml")
     result = export_tables(
         machine, "sinumerik-cec", None, ExportOptions(points=11, eval_steps=(9, 7, 5))
     )
-    text = result.files["NC_CEC.INI"].replace("$AN_CEC[0,5]=-0.0025", "$AN_CEC[0,5]=-0.0035")
+    text = result.files["NC_CEC.INI"].replace("$AN_CEC[0,5]=0.0025", "$AN_CEC[0,5]=0.0035")
     assert text != result.files["NC_CEC.INI"]
     bad = _measured(machine, "sinumerik-cec", {"NC_CEC.INI": text}, result.report)
     assert bad["max"] > result.report["residual_um"]["max"] + 0.5
@@ -240,6 +266,30 @@ def test_reader_is_not_the_writer() -> None:
         .replace("DIRECTION[1]=-1", "DIRECTION[1]=1")
     )
     assert _measured(machine, "sinumerik-cec", {"NC_CEC.INI": swapped}, result.report)["max"] > 0.9
+    flipped = _measured(machine, "sinumerik-cec", result.files, result.report, sign=-1)
+    model = result.report["uncompensated_um"]["rms"]
+    assert flipped["rms"] == pytest.approx(2 * model, abs=result.report["residual_um"]["rms"])
+
+
+def test_invert_sign_writes_the_opposite_reading() -> None:
+    """--invert-sign (after a check showing the opposite sign): the CEC values and TwinCAT cross
+    corrections are negated; read with the opposite sign they leave the same residual."""
+    machine = Machine.from_toml(GOLDEN / "golden-machine.toml")
+    for fmt in ("sinumerik-cec", "twincat-cnc"):
+        plain = export_tables(machine, fmt, None, ExportOptions(points=11, eval_steps=(9, 7, 5)))
+        inv = export_tables(
+            machine, fmt, None, ExportOptions(points=11, eval_steps=(9, 7, 5), invert_sign=True)
+        )
+        _assert_same_residual(
+            _measured(machine, fmt, inv.files, inv.report, sign=-1), inv.report["residual_um"]
+        )
+        assert inv.report["residual_um"]["rms"] == pytest.approx(
+            plain.report["residual_um"]["rms"], abs=1e-9
+        )
+    y_plain = twincat_axis(read_twincat(plain.files["achskw2.lis"]))
+    y_inv = twincat_axis(read_twincat(inv.files["achskw2.lis"]))
+    assert np.array_equal(y_inv.cross_val, -y_plain.cross_val)
+    assert np.array_equal(y_inv.ssfk_plus, y_plain.ssfk_plus)  # the leadscrew sign is verified
 
 
 def test_limits_and_bad_input() -> None:

@@ -53,7 +53,8 @@ class CheckResult:
 def unverified(fmt: str, *, products: bool = False, cross: bool = False) -> list[dict[str, str]]:
     """The points of ``fmt``'s tables no public passage settles: what is assumed, where from,
     and the measurement on a real control that settles it (docs/export.md, "Not verified")."""
-    check = "cmm-comp export MACHINE --format {fmt} --check-table -o DIR".format(fmt=fmt)
+    check = f"cmm-comp export MACHINE --format {fmt} --check-table -o DIR"
+    check_products = f"cmm-comp export MACHINE --format {fmt} --check-table --products -o DIR"
     if fmt == "sinumerik-cec":
         items = [
             {
@@ -86,7 +87,7 @@ def unverified(fmt: str, *, products: bool = False, cross: bool = False) -> list
                     "product, so either way it does not matter)",
                     "source": "K3 p. 249 ('The product is added as an additional compensation "
                     "value'), p. 252 (foundation sag: DX1 = Z1*sin(beta(X1)), table 2 holds Z1)",
-                    "settle": f"{check} --products: the product check (two constant tables) gives "
+                    "settle": f"{check_products}: the product check (two constant tables) gives "
                     "a different indicator reading for each reading of the manual",
                 },
             )

@@ -370,6 +370,12 @@ def _export_tables(
             "total_compensation_peak_mm": peak.tolist(),
             "total_compensation_peak_exact": exact,
             "value_resolution_um": 0.1,
+            # what a referencing (rate) table would add on its own: the most the result changes
+            # between the two readings of "added as an additional compensation value"
+            "product_rate_own_max_um": max(
+                (1000.0 * float(np.max(np.abs(t.values_mm))) for t in cec if t.mult_by is not None),
+                default=0.0,
+            ),
         }
         extra["unverified"] = unverified(fmt, products=bool(plan.products))
         if opts.products and plan.products:
