@@ -189,11 +189,15 @@ def test_products_carry_an_abbe_term_only_when_asked() -> None:
     value gives the same residual within ``product_rate_own_max_um``."""
     errors = ParametricErrors.from_polynomials({"ey_y": [0.0, 0.05]})
     machine = Machine.from_parts(model="MB1", volume=((0, 500), (0, 600), (0, 400)), errors=errors)
-    without = export_tables(machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, **FAST))
+    without = export_tables(
+        machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, **FAST)
+    )
     with_p = export_tables(
         machine, "sinumerik-cec", (0, 0, -200), ExportOptions(max_tables=20, products=True, **FAST)
     )
-    assert all(t.params["MULT_BY_TABLE"] == "0" for t in read_cec(without.files["NC_CEC.INI"]).values())
+    assert all(
+        t.params["MULT_BY_TABLE"] == "0" for t in read_cec(without.files["NC_CEC.INI"]).values()
+    )
     tables = read_cec(with_p.files["NC_CEC.INI"])
     assert any(t.params["MULT_BY_TABLE"] != "0" for t in tables.values())
     for res in (with_p, without):
@@ -208,7 +212,10 @@ def test_products_carry_an_abbe_term_only_when_asked() -> None:
     # the other reading of "added as an additional compensation value": no own value
     q = _grid(machine, [9, 9, 5])
     ones = np.ones_like(q)
-    both = [cec_error_um(tables, ["AX1", "AX2", "AX3"], q, ones, referencing_own=own) for own in (True, False)]
+    both = [
+        cec_error_um(tables, ["AX1", "AX2", "AX3"], q, ones, referencing_own=own)
+        for own in (True, False)
+    ]
     bound = with_p.report["limits"]["product_rate_own_max_um"]
     assert 0 < np.max(np.abs(both[0] - both[1])) <= bound + 1e-9
     assert bound < 1e-3 * with_p.report["uncompensated_um"]["max"]
@@ -220,7 +227,13 @@ def test_golden_files_reproduce_and_read_back(tmp_path: Path) -> None:
     machine = Machine.from_toml(GOLDEN / "golden-machine.toml")
     opts = ExportOptions(points=11, eval_steps=(9, 7, 5))
     cases = [(fmt, fmt, opts) for fmt in ("sinumerik-cec", "twincat-cnc", "linuxcnc")]
-    cases.append(("sinumerik-cec", "sinumerik-cec-products", ExportOptions(products=True, points=11, eval_steps=(9, 7, 5))))
+    cases.append(
+        (
+            "sinumerik-cec",
+            "sinumerik-cec-products",
+            ExportOptions(products=True, points=11, eval_steps=(9, 7, 5)),
+        )
+    )
     for fmt, folder, o in cases:
         result = export_tables(machine, fmt, None, o)
         for name, text in result.files.items():
@@ -372,3 +385,177 @@ def test_cli_writes_everything_and_refuses_bad_input(
         assert err[-1].startswith("cmm-comp: error: ") and message in err[-1], err
     assert not any((tmp_path / n).exists() for n in ("a", "b", "c"))
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # nothing lost
+
+
+def _cec_text(tables: list[tuple[str, str, list[float], float, float, int]]) -> str:
+    """An NC_CEC.INI written by hand: (input, output, values mm, MIN, STEP, MULT_BY_TABLE)."""
+    lines = ["%_N_NC_CEC_INI", "CHANDATA(1)"]
+    for t, (inp, out, values, lo, step, mult) in enumerate(tables):
+        lines += [f"$AN_CEC[{t},{n}]={v!r}" for n, v in enumerate(values)]
+        lines += [
+            f"$AN_CEC_INPUT_AXIS[{t}]=({inp})",
+            f"$AN_CEC_OUTPUT_AXIS[{t}]=({out})",
+            f"$AN_CEC_STEP[{t}]={step}",
+            f"$AN_CEC_MIN[{t}]={lo}",
+            f"$AN_CEC_MAX[{t}]={lo + step * (len(values) - 1)}",
+            f"$AN_CEC_DIRECTION[{t}]=0",
+            f"$AN_CEC_MULT_BY_TABLE[{t}]={mult}",
+            f"$AN_CEC_IS_MODULO[{t}]=0",
+        ]
+    return "\n".join([*lines, "M17"]) + "\n"
+
+
+def test_siemens_foundation_sag_example() -> None:
+    """K3 p. 252: ΔX1 = Z1·sinβ(X1); table 1 (index 0) X1 → X1 holds sinβ(X1) with
+    $AN_CEC_MULT_BY_TABLE[0] = 2, table 2 (index 1) Z1 → X1 holds Z1 (mm, linear). The reader
+    (from the passages) gives the example's ΔX1, within the referencing table's own value, and
+    not Z1 itself; the writer, given such a machine, writes the same structure."""
+    beta_urad = [0.0, 20.0, 50.0, 60.0, 40.0]
+    sin_beta = [float(np.sin(b * 1e-6)) for b in beta_urad]
+    z_pts = [0.0, 500.0, 1000.0, 1500.0, 2000.0]
+    text = _cec_text([("X1", "X1", sin_beta, 0.0, 1000.0, 2), ("Z1", "X1", z_pts, 0.0, 500.0, 0)])
+    rng = np.random.default_rng(7)
+    q = np.column_stack([rng.uniform(0, 4000, 200), np.zeros(200), rng.uniform(0, 2000, 200)])
+    total_mm = cec_error_um(read_cec(text), ["X1", "Y1", "Z1"], q, np.ones_like(q))[:, 0] / 1000
+    sin_at_x = np.interp(q[:, 0], [0, 1000, 2000, 3000, 4000], sin_beta)
+    example = q[:, 2] * sin_at_x  # ΔX1 = Z1·sinβ(X1), mm
+    assert np.max(np.abs(total_mm - example)) <= max(sin_beta) + 1e-12
+    assert np.max(np.abs(example)) > 100 * max(sin_beta)  # the product dominates
+    # the writer: X's error ε(x)·(z + p_z) from a pitch of the X carriage
+    errors = ParametricErrors.from_polynomials({"ey_x": [0.0, 0.0, 1e-4]})
+    machine = Machine.from_parts(model="MB1", volume=((0, 800), (0, 500), (0, 400)), errors=errors)
+    opts = ExportOptions(products=True, points=21, eval_steps=(9, 9, 5))
+    result = export_tables(machine, "sinumerik-cec", (0, 0, -150), opts)
+    tables = read_cec(result.files["NC_CEC.INI"])
+    (t,) = [i for i in tables if tables[i].params["MULT_BY_TABLE"] != "0"]
+    rate, arm = tables[t], tables[int(tables[t].params["MULT_BY_TABLE"]) - 1]
+    assert (rate.params["INPUT_AXIS"], rate.params["OUTPUT_AXIS"]) == ("(AX1)", "(AX1)")
+    assert (arm.params["INPUT_AXIS"], arm.params["OUTPUT_AXIS"]) == ("(AX3)", "(AX1)")
+    arm_values = np.array([arm.values[n] for n in range(len(arm.values))])
+    assert np.allclose(np.diff(arm_values), arm_values[1] - arm_values[0], atol=2e-4)  # linear
+    _assert_same_residual(
+        _measured(machine, "sinumerik-cec", result.files, result.report),
+        result.report["residual_um"],
+    )
+    assert result.report["residual_um"]["rms"] < 0.02 * result.report["uncompensated_um"]["rms"]
+
+
+def test_check_table_states_what_the_passages_predict(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`export --check-table`: the check table, read by the passages' reader at the positions the
+    instructions name, gives the step they state; the documented sign moves the output axis by
+    minus it. The product check's 'this export' line is the reader's total; 'product only' is
+    the reader without the referencing table's own value. LinuxCNC has nothing to check."""
+    from cmm_comp.cli.main import main
+
+    golden = str(GOLDEN / "golden-machine.toml")
+    out = tmp_path / "cec"
+    assert (
+        main(
+            [
+                "export",
+                golden,
+                "--format",
+                "sinumerik-cec",
+                "--check-table",
+                "--products",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    printed = capsys.readouterr().out
+    rep = json.loads((out / "check-table.json").read_text(encoding="utf-8"))
+    assert (out / "check-table.txt").read_text(encoding="utf-8") in printed
+    tables = read_cec((out / "NC_CEC.INI").read_text(encoding="utf-8"))
+    assert list(tables) == [0]
+    q = np.full((2, 3), 100.0)
+    q[:, 1] = [rep["inside_mm"], rep["outside_mm"]]  # input Y, output X (the default)
+    taken_um = cec_error_um(tables, ["AX1", "AX2", "AX3"], q, np.ones_like(q))
+    # the error the control takes off is the axis' move with the sign reversed
+    assert -taken_um[0, 0] / 1000 == pytest.approx(rep["expected_output_move_mm"]["documented"])
+    assert rep["expected_output_move_mm"]["documented"] == -0.010
+    assert taken_um[1, 0] == 0.0 and np.all(taken_um[:, 1:] == 0.0)
+    assert "the tool moved 0.010 mm in -X: the documentation's reading holds" in printed
+    assert f"Move Y to {rep['inside_mm']:g} mm" in printed
+    prod = read_cec((out / "NC_CEC_PRODUCT.INI").read_text(encoding="utf-8"))
+    moves = rep["product_check"]["expected_output_move_mm"]
+    (ours,) = [v for name, v in moves.items() if name.startswith("this export")]
+    q1 = np.full((1, 3), 50.0)
+    for own, expected in ((True, ours), (False, moves["product only (neither table's own value)"])):
+        total = cec_error_um(prod, ["AX1", "AX2", "AX3"], q1, np.ones((1, 3)), referencing_own=own)
+        assert -total[0, 0] / 1000 == pytest.approx(expected)
+        assert f"{expected:+.3f}" in printed
+    assert len({round(v, 6) for v in moves.values()}) == len(moves)  # every reading tells apart
+
+    tc = tmp_path / "tc"
+    assert (
+        main(
+            [
+                "export",
+                golden,
+                "--format",
+                "twincat-cnc",
+                "--check-table",
+                "--check-axes",
+                "x",
+                "z",
+                "-o",
+                str(tc),
+            ]
+        )
+        == 0
+    )
+    printed = capsys.readouterr().out
+    rep = json.loads((tc / "check-table.json").read_text(encoding="utf-8"))
+    slave = twincat_axis(read_twincat((tc / "achskw3.lis").read_text(encoding="utf-8")))
+    assert slave.master_nr == 1 and not slave.ssfk_plus.any()
+    qx = np.zeros((2, 3))
+    qx[:, 0] = [rep["inside_mm"], rep["outside_mm"]]
+    taken_um = twincat_error_um([slave], [1, 2, 3], qx, np.ones_like(qx))
+    assert -taken_um[0, 2] / 1000 == pytest.approx(rep["expected_output_move_mm"]["documented"])
+    assert taken_um[1, 2] == 0.0
+    assert (
+        "Z moved 0.010 mm in -Z" in printed
+        and "achs_kw[0]" in (tc / "startup-snippet.txt").read_text()
+    )
+
+    assert (
+        main(["export", golden, "--format", "linuxcnc", "--check-table", "-o", str(tmp_path / "l")])
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("cmm-comp: error: ") and "no unverified sign" in err[-1], err
+    assert not (tmp_path / "l").exists()
+
+
+def _doc_row(flags: str) -> tuple[float, float]:
+    """(left RMS, left max) µm of the docs/export.md table row whose flags are ``flags``."""
+    text = (ROOT / "docs" / "export.md").read_text(encoding="utf-8")
+    (row,) = [ln for ln in text.splitlines() if ln.startswith(f"| `{flags}`")]
+    rms, peak = row.split("|")[4].replace("*", "").split("/")
+    return float(rms), float(peak)
+
+
+def test_npl_bridge_figures() -> None:
+    """docs/export.md's NPL rows for SINUMERIK (the documented command's defaults), recomputed:
+    the reported residual, the same measured by the passages' reader, and the opposite sign
+    (the tables as the exporter wrote them before) leaving the 20.55 µm the docs state."""
+    machine = Machine.from_toml(NPL)
+    docs = (ROOT / "docs" / "export.md").read_text(encoding="utf-8")
+    for flags, opts in (
+        ("--format sinumerik-cec", ExportOptions()),
+        (
+            "--format sinumerik-cec --max-tables 24 --products",
+            ExportOptions(max_tables=24, products=True),
+        ),
+    ):
+        result = export_tables(machine, "sinumerik-cec", None, opts)
+        rep = result.report["residual_um"]
+        assert (round(rep["rms"], 3), round(rep["max"], 3)) == _doc_row(flags), flags
+        _assert_same_residual(_measured(machine, "sinumerik-cec", result.files, result.report), rep)
+        if not opts.products:
+            flipped = _measured(machine, "sinumerik-cec", result.files, result.report, sign=-1)
+            assert f"{flipped['rms']:.2f} µm RMS ({flipped['max']:.2f} µm max)" in docs

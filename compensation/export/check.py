@@ -144,7 +144,9 @@ def check_tables(
             "(docs/export.md): there is no unverified sign to check"
         )
     if fmt not in ("sinumerik-cec", "twincat-cnc"):
-        raise ExportError(f"--format must be sinumerik-cec or twincat-cnc for --check-table, got {fmt!r}")
+        raise ExportError(
+            f"--format must be sinumerik-cec or twincat-cnc for --check-table, got {fmt!r}"
+        )
     if input_axis == output_axis:
         raise ExportError(
             "--check-axes: input and output must differ (the check moves one axis and watches "
@@ -186,8 +188,14 @@ def check_tables(
         lo_k, hi_k = machine.volume.lower_mm[output_axis], machine.volume.upper_mm[output_axis]
         lead = make_knots(output_axis, float(lo_k), float(hi_k), 2, 1e-4)
         entry = TwinCatList(
-            output_axis, lead, np.zeros(2, np.int64), np.zeros(2, np.int64), False,
-            input_axis, kn, np.round(unit * CHECK_STEP_MM * 1e4).astype(np.int64),
+            output_axis,
+            lead,
+            np.zeros(2, np.int64),
+            np.zeros(2, np.int64),
+            False,
+            input_axis,
+            kn,
+            np.round(unit * CHECK_STEP_MM * 1e4).astype(np.int64),
         )
         header = [
             f"cmm-comp export --check-table: SIGN CHECK of the cross compensation, {machine.name};",

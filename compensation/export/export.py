@@ -359,6 +359,10 @@ def _export_tables(
                     "max_mm": t.knots.end_mm,
                     "step_mm": t.knots.step_mm,
                     "max_abs_mm": round(float(np.max(np.abs(t.values_mm))), 7),
+                    # what the compensation asks of the output axis per mm of the input axis
+                    "max_slope_um_per_mm": round(
+                        1000.0 * float(np.max(np.abs(np.diff(t.values_mm)))) / t.knots.step_mm, 6
+                    ),
                 }
             )
         extra["limits"] = {

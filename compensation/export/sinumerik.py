@@ -113,9 +113,14 @@ def build_cec(
             base = sign * plan.plain[(a, k)] / 1000.0
             if (a, k) in plan.directional:
                 h = sign * plan.directional[(a, k)] / 1000.0
-                for direction, values, role in ((1, base + h, "direction +"), (-1, base - h, "direction -")):
+                for direction, values, role in (
+                    (1, base + h, "direction +"),
+                    (-1, base - h, "direction -"),
+                ):
                     tables.append(
-                        CecTable(a, k, knots[a], _round(values, PLAIN_DECIMALS), direction, None, role)
+                        CecTable(
+                            a, k, knots[a], _round(values, PLAIN_DECIMALS), direction, None, role
+                        )
                     )
             else:
                 tables.append(CecTable(a, k, knots[a], _round(base, PLAIN_DECIMALS)))
@@ -128,12 +133,27 @@ def build_cec(
         rate = _round(sign * t.u / (1000.0 * g), RATE_DECIMALS)
         name = f"{AXES[t.a]}*{AXES[t.b]}"
         tables.append(
-            CecTable(t.a, t.k, knots[t.a], rate, 0, len(tables) + 1, f"product {name}: rate",
-                     RATE_DECIMALS)
+            CecTable(
+                t.a,
+                t.k,
+                knots[t.a],
+                rate,
+                0,
+                len(tables) + 1,
+                f"product {name}: rate",
+                RATE_DECIMALS,
+            )
         )
         tables.append(
-            CecTable(t.b, t.k, knots[t.b], arm, 0, None,
-                     f"product {name}: arm (referenced, only the factor)")
+            CecTable(
+                t.b,
+                t.k,
+                knots[t.b],
+                arm,
+                0,
+                None,
+                f"product {name}: arm (referenced, only the factor)",
+            )
         )
     if len(tables) > max_tables:  # cannot happen: the plan respects the budget
         raise AssertionError(f"{len(tables)} CEC tables > {max_tables}")
