@@ -71,8 +71,7 @@ def _write_check(args: argparse.Namespace, machine: Any, opts: Any, out: Path) -
     """``--check-table``: the check files, check-table.json, and the instructions printed."""
     import json
 
-    from cmm_comp.compensation.export import validate_axes
-    from cmm_comp.compensation.export.check import check_tables
+    from cmm_comp.compensation.export import check_tables, validate_axes
     from cmm_comp.compensation.formats.atomic import write_text_atomic
 
     validate_axes(args.format, opts)

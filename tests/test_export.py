@@ -451,21 +451,8 @@ def test_check_table_states_what_the_passages_predict(
 
     golden = str(GOLDEN / "golden-machine.toml")
     out = tmp_path / "cec"
-    assert (
-        main(
-            [
-                "export",
-                golden,
-                "--format",
-                "sinumerik-cec",
-                "--check-table",
-                "--products",
-                "-o",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    args = ["--check-table", "--products", "-o", str(out)]
+    assert main(["export", golden, "--format", "sinumerik-cec", *args]) == 0
     printed = capsys.readouterr().out
     rep = json.loads((out / "check-table.json").read_text(encoding="utf-8"))
     assert (out / "check-table.txt").read_text(encoding="utf-8") in printed
@@ -491,23 +478,8 @@ def test_check_table_states_what_the_passages_predict(
     assert len({round(v, 6) for v in moves.values()}) == len(moves)  # every reading tells apart
 
     tc = tmp_path / "tc"
-    assert (
-        main(
-            [
-                "export",
-                golden,
-                "--format",
-                "twincat-cnc",
-                "--check-table",
-                "--check-axes",
-                "x",
-                "z",
-                "-o",
-                str(tc),
-            ]
-        )
-        == 0
-    )
+    args = ["--check-table", "--check-axes", "x", "z", "-o", str(tc)]
+    assert main(["export", golden, "--format", "twincat-cnc", *args]) == 0
     printed = capsys.readouterr().out
     rep = json.loads((tc / "check-table.json").read_text(encoding="utf-8"))
     slave = twincat_axis(read_twincat((tc / "achskw3.lis").read_text(encoding="utf-8")))

@@ -219,13 +219,24 @@ def _indicator_steps(k: str) -> list[str]:
     ]
 
 
+def _step_facts(rep: dict[str, Any], a_idx: int, k_idx: int) -> tuple[Any, ...]:
+    """(input name, output name, step mm, inside mm, outside mm, positions, centre index)."""
+    pos = rep["table_positions_mm"]
+    return (
+        AXES[a_idx].upper(),
+        AXES[k_idx].upper(),
+        rep["step_mm"],
+        rep["inside_mm"],
+        rep["outside_mm"],
+        pos,
+        (len(pos) - 1) // 2,
+    )
+
+
 def _cec_sign_text(
     machine: Machine, rep: dict[str, Any], names: Sequence[str], a_idx: int, k_idx: int
 ) -> str:
-    a, k = AXES[a_idx].upper(), AXES[k_idx].upper()
-    s, inside, outside = rep["step_mm"], rep["inside_mm"], rep["outside_mm"]
-    pos = rep["table_positions_mm"]
-    i_c = (len(pos) - 1) // 2
+    a, k, s, inside, outside, pos, i_c = _step_facts(rep, a_idx, k_idx)
     lines = [
         f"SINUMERIK CEC sign check for {machine.name} ({machine.model})",
         "",
@@ -317,10 +328,7 @@ def _cec_product_check(
 def _twincat_sign_text(
     machine: Machine, rep: dict[str, Any], numbers: Sequence[int], a_idx: int, k_idx: int
 ) -> str:
-    a, k = AXES[a_idx].upper(), AXES[k_idx].upper()
-    s, inside, outside = rep["step_mm"], rep["inside_mm"], rep["outside_mm"]
-    pos = rep["table_positions_mm"]
-    i_c = (len(pos) - 1) // 2
+    a, k, s, inside, outside, pos, i_c = _step_facts(rep, a_idx, k_idx)
     nr = numbers[k_idx]
     lines = [
         f"TwinCAT CNC cross-compensation sign check for {machine.name} ({machine.model})",
