@@ -54,7 +54,7 @@ def agree(topic: str, rec: tuple, t_ns: int) -> bytes | None:
     return fast
 
 
-frames = st.tuples(
+FRAME_FIELDS = (
     st.integers(0, 2**29 - 1),
     st.booleans(),
     st.integers(0, 64),
@@ -64,6 +64,9 @@ frames = st.tuples(
     st.booleans(),
     st.booleans(),
     st.booleans(),
+)
+frames = st.one_of(  # with the direction field (what the daemon logs) and without (before it)
+    st.tuples(*FRAME_FIELDS, st.sampled_from(["rx", "tx", "tx_echo"])), st.tuples(*FRAME_FIELDS)
 )
 raws = st.tuples(
     st.integers(0, 2**64 - 1),
@@ -179,6 +182,8 @@ def test_any_odd_field_is_equal_or_left_to_the_general_path(data: st.DataObject,
         ("/cmm/can_rx", (2**29, False, 8, b"\0" * 8, 1.0, "c", False, False, False)),
         ("/cmm/can_rx", (0x200, 0, 8, b"\0" * 8, 1.0, "c", False, False, False)),
         ("/cmm/can_rx", (0x200, False, 8, b"\0" * 8, 1.0, "c", False, False)),
+        ("/cmm/can_rx", (0x200, False, 8, b"\0" * 8, 1.0, "c", False, False, False, "echo")),
+        ("/cmm/can_rx", (0x200, False, 8, b"\0" * 8, 1.0, "c", False, False, False, None)),
     ],
 )
 def test_bad_records_never_take_the_fast_path(topic: str, rec: tuple) -> None:

@@ -39,21 +39,28 @@ from . import mcapwire
 from .mcapwire import MAGIC, MESSAGE_FIXED, MESSAGE_HEAD, Op
 from .summary import ChunkIndexSpool, write_summary
 
+_pack_message_head = MESSAGE_HEAD.pack
+_OP_MESSAGE = Op.MESSAGE
 
-def compressor(compression: CompressionType) -> tuple[str, Callable[[bytes], bytes]]:
-    """The Chunk record's compression name and the function that compresses a chunk (the
-    calls the ``mcap`` package makes: zstd at its default level, an LZ4 frame)."""
+
+def compressor(compression: CompressionType) -> tuple[str, Callable[[bytearray], bytes]]:
+    """The Chunk record's compression name and the function that compresses a chunk (what
+    the ``mcap`` package does: zstd at level 3, an LZ4 frame; the zstd context is kept)."""
     if compression == CompressionType.ZSTD:
         import zstandard
 
-        return "zstd", zstandard.compress
+        return "zstd", zstandard.ZstdCompressor(level=3).compress
     if compression == CompressionType.LZ4:
         import lz4.frame
 
         return "lz4", lz4.frame.compress
     if compression == CompressionType.NONE:
-        return "", bytes
+        return "", _as_is
     raise ValueError(f"compression {compression!r}; allowed: ZSTD, LZ4, NONE")
+
+
+def _as_is(data: bytes) -> bytes:
+    return data
 
 
 class McapFileWriter:
@@ -81,6 +88,9 @@ class McapFileWriter:
         self._stream = stream
         self._pos = stream.tell()
         self._chunk_size = int(chunk_size)
+        self._room = self._chunk_size - MESSAGE_HEAD.size
+        """A message whose data ends past this (offset + size) makes the chunk exceed
+        ``chunk_size``: the chunk is written."""
         self._compression, self._compress = compressor(compression)
         self._chunk = bytearray()
         self._index: dict[int, list[int]] = {}
@@ -136,10 +146,12 @@ class McapFileWriter:
     ) -> None:
         """Add one Message record to the chunk in progress (times: int ns, uint64); write the
         chunk when it exceeds ``chunk_size``. The hot path of the session log."""
-        head = MESSAGE_HEAD.pack(
-            Op.MESSAGE, MESSAGE_FIXED + len(data), channel_id, sequence, log_time, publish_time
+        size = len(data)
+        head = _pack_message_head(
+            _OP_MESSAGE, MESSAGE_FIXED + size, channel_id, sequence, log_time, publish_time
         )  # raises (struct.error) before anything changes on a value out of range
         chunk = self._chunk
+        pos = len(chunk)
         index = self._index.get(channel_id)
         if index is None:
             if channel_id not in self._channels:
@@ -147,10 +159,10 @@ class McapFileWriter:
             self._check_open()
             index = self._index[channel_id] = []
         index.append(log_time)
-        index.append(len(chunk))
+        index.append(pos)
         chunk += head
         chunk += data
-        if len(chunk) > self._chunk_size:
+        if pos + size > self._room:
             self._finish_chunk()
 
     def add_metadata(self, name: str, values: Mapping[str, str]) -> None:
@@ -255,9 +267,9 @@ class McapFileWriter:
         index = self._index
         if not index:
             return
-        raw = bytes(self._chunk)
-        start_ns = min(min(v[0::2]) for v in index.values())
-        end_ns = max(max(v[0::2]) for v in index.values())
+        raw = self._chunk  # not copied: a new buffer replaces it below
+        times = [v[0::2] for v in index.values()]
+        start_ns, end_ns = min(map(min, times)), max(map(max, times))
         data = self._compress(raw)
         chunk_start = self._pos
         self._write(

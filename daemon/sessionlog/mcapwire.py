@@ -14,7 +14,9 @@ The Message record, the one written per logged message, is packed inline by the 
 from __future__ import annotations
 
 import struct
+import sys
 import zlib
+from array import array
 from collections.abc import Iterable, Mapping
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -128,11 +130,25 @@ def chunk_head(
     return RECORD_HEAD.pack(Op.CHUNK, len(fixed) + 8 + compressed) + fixed + _U64.pack(compressed)
 
 
+_NATIVE_U64 = array("Q").itemsize == 8
+_SWAP = sys.byteorder != "little"
+
+
+def u64_array(values: list[int]) -> bytes:
+    """``values`` as consecutive little-endian uint64 (OverflowError if one does not fit)."""
+    if not _NATIVE_U64:
+        return struct.pack(f"<{len(values)}Q", *values)
+    packed = array("Q", values)
+    if _SWAP:
+        packed.byteswap()
+    return packed.tobytes()
+
+
 def message_index(channel_id: int, times_offsets: list[int]) -> bytes:
     """Message Index record of one channel in one chunk; ``times_offsets`` holds the
     ``(log time, offset in the uncompressed chunk)`` pairs flattened: ``[t0, o0, t1, o1, …]``."""
     n = len(times_offsets)
-    body = _U16.pack(channel_id) + _U32.pack(8 * n) + struct.pack(f"<{n}Q", *times_offsets)
+    body = _U16.pack(channel_id) + _U32.pack(8 * n) + u64_array(times_offsets)
     return record(Op.MESSAGE_INDEX, body)
 
 
