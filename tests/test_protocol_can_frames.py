@@ -29,9 +29,9 @@ from cmm_comp.protocol import (
     TemperatureSample,
     dbc_text,
     decode_message,
-    sent_by_daemon,
     encode_message,
     grid_id_from_sha256,
+    sent_by_daemon,
 )
 
 GOLDEN = Path(__file__).parent / "data" / "protocol_golden_frames.json"

@@ -87,9 +87,9 @@ def _replay_and_listen(path: Path) -> tuple[Counter[int], subprocess.CompletedPr
     """Run the documented ``replay --to-bus`` command on a fresh bus with the independent
     listener on it; returns the ids the listener saw and the replay's result."""
     port = free_udp_port()
+    bus = ["--interface", "udp_multicast", "--channel", MCAST_GROUP]
     listener = subprocess.Popen(
-        [sys.executable, str(LISTENER), "--interface", "udp_multicast"]
-        + ["--channel", MCAST_GROUP, "--option", f"port={port}"],
+        [sys.executable, str(LISTENER), *bus, "--option", f"port={port}"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
@@ -97,9 +97,18 @@ def _replay_and_listen(path: Path) -> tuple[Counter[int], subprocess.CompletedPr
     try:
         assert listener.stdout is not None and listener.stdout.readline().strip() == "ready"
         replay = subprocess.run(
-            [sys.executable, "-m", "cmm_comp.cli", "replay", str(path), "--to-bus"]
-            + ["--interface", "udp_multicast", "--channel", MCAST_GROUP]
-            + ["--bus-option", f"port={port}"],
+            # the documented command (docs/daemon.md), on the test's bus
+            [
+                sys.executable,
+                "-m",
+                "cmm_comp.cli",
+                "replay",
+                str(path),
+                "--to-bus",
+                *bus,
+                "--bus-option",
+                f"port={port}",
+            ],
             capture_output=True,
             text=True,
             timeout=300,

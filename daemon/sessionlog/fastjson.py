@@ -56,7 +56,8 @@ _FRAME_HEAD = (
     '"is_error_frame":%s,'
 )
 _FRAME_TAIL = '"stamp":{"sec":%d,"nsec":%d}}'
-_FRAME = {  # by the record's direction field (None: a 9-field record, no direction key)
+# by the record's direction field (None: a 9-field record, no direction key)
+_FRAME: dict[str | None, str] = {
     None: _FRAME_HEAD + _FRAME_TAIL,
     **{d: _FRAME_HEAD + f'"direction":"{d}",' + _FRAME_TAIL for d in FRAME_DIRECTIONS},
 }

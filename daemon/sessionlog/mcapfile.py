@@ -43,7 +43,11 @@ _pack_message_head = MESSAGE_HEAD.pack
 _OP_MESSAGE = Op.MESSAGE
 
 
-def compressor(compression: CompressionType) -> tuple[str, Callable[[bytearray], bytes]]:
+Compress = Callable[[bytearray], bytes | bytearray]
+"""Compresses one chunk's records (a buffer) into the bytes the Chunk record holds."""
+
+
+def compressor(compression: CompressionType) -> tuple[str, Compress]:
     """The Chunk record's compression name and the function that compresses a chunk (what
     the ``mcap`` package does: zstd at level 3, an LZ4 frame; the zstd context is kept)."""
     if compression == CompressionType.ZSTD:
@@ -59,7 +63,7 @@ def compressor(compression: CompressionType) -> tuple[str, Callable[[bytearray],
     raise ValueError(f"compression {compression!r}; allowed: ZSTD, LZ4, NONE")
 
 
-def _as_is(data: bytes) -> bytes:
+def _as_is(data: bytearray) -> bytearray:
     return data
 
 
