@@ -1,9 +1,9 @@
 """``cmm-comp replay --to-bus`` re-sends what the controller sent, never the daemon's answers.
 
 On ``udp_multicast`` every node receives its own frames back, so the daemon's ``/cmm/can_rx``
-holds its own answers, statuses and heartbeats too. A real session: the daemon as a
-subprocess, a controller whose bus counts every frame it sends (the oracle: the controller's
-side, not our log reader). Then the documented command re-sends the log, and an independent
+holds its own answers, statuses and heartbeats too. A real session (``udp_session`` in
+conftest.py): the daemon as a subprocess, a controller whose bus counts every frame it sends
+(the oracle: the controller's side, not our log reader). Then the documented command re-sends the log, and an independent
 listener (``tests/can_listener.py``: its own process and python-can bus, no cmm-comp import)
 records every frame id on the bus: it must see exactly what the controller sent, id by id.
 The same for a log without the ``direction`` field (written with the ``mcap`` library from
@@ -13,65 +13,19 @@ the session, as a log of an earlier version looks): replay sorts by CAN id and s
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 import sys
 from collections import Counter
 from pathlib import Path
-from typing import Any
 
-import can
-import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
-from test_daemon_support import MCAST_GROUP, daemon_subprocess, free_udp_port, npl_grid_path
+from test_daemon_support import MCAST_GROUP, free_udp_port
 
 from cmm_comp.protocol.can_ids import CanIds
-from cmm_comp.sim_controller.controller import RawReading
-from cmm_comp.sim_controller.sim_machine import Environment
 
 LISTENER = Path(__file__).resolve().parent / "can_listener.py"
-READINGS = 300
 IDS = CanIds()
-
-
-class CountingBus:
-    """The controller's bus, counting every frame sent through it by id."""
-
-    def __init__(self, bus: can.BusABC) -> None:
-        self._bus = bus
-        self.sent: Counter[int] = Counter()
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        self._bus.send(msg, timeout)
-        self.sent[msg.arbitration_id] += 1
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._bus, name)
-
-
-@pytest.fixture(scope="module")
-def session(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Counter[int]]:
-    """A 300-reading session of the daemon subprocess; the frames the controller sent."""
-    tmp = tmp_path_factory.mktemp("replay-bus")
-    counting: list[CountingBus] = []
-
-    def wrap(bus: can.BusABC) -> CountingBus:
-        counting.append(CountingBus(bus))
-        return counting[0]
-
-    env = Environment()
-    with daemon_subprocess(tmp, npl_grid_path(), wrap_bus=wrap) as (proc, ctl, mcap, log):
-        ctl.send_temperatures(env.samples(0.0))
-        for seq in range(READINGS):
-            probe = (0.0, 0.6, -0.8) if seq % 4 == 0 else None
-            reading = RawReading(seq, (100.0 + seq, 500.0, 200.0), (1, 0, 0), probe)
-            assert ctl.exchange(reading).status == "ok"
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(30) == 0, log.read_text()
-    sent = counting[0].sent
-    assert set(sent) <= IDS.controller_tx_ids() and sum(sent.values()) > 3 * READINGS
-    return mcap, sent
 
 
 def _daemon_frames_logged(path: Path) -> int:
@@ -124,11 +78,11 @@ def _replay_and_listen(path: Path) -> tuple[Counter[int], subprocess.CompletedPr
     return Counter({int(k): v for k, v in seen["ids"].items()}), replay
 
 
-def test_replay_sends_exactly_the_controllers_frames(session) -> None:
-    mcap, sent = session
+def test_replay_sends_exactly_the_controllers_frames(udp_session) -> None:
+    mcap, sent = udp_session.mcap, udp_session.sent
     # the bus echoed the daemon's frames and the daemon logged them: without the fix, replay
     # re-sent these (the test could fail)
-    assert _daemon_frames_logged(mcap) > 4 * READINGS
+    assert _daemon_frames_logged(mcap) > 4 * udp_session.readings
     seen, replay = _replay_and_listen(mcap)
     assert seen == sent
     assert f"re-sent {sum(sent.values())} frames the controller sent" in replay.stdout
@@ -163,8 +117,8 @@ def _without_direction(src: Path, dst: Path) -> int:
     return dropped
 
 
-def test_an_older_log_is_sorted_by_can_id_and_says_so(session, tmp_path) -> None:
-    mcap, sent = session
+def test_an_older_log_is_sorted_by_can_id_and_says_so(udp_session, tmp_path) -> None:
+    mcap, sent = udp_session.mcap, udp_session.sent
     old = tmp_path / "old.mcap"
     assert _without_direction(mcap, old) > 0
     seen, replay = _replay_and_listen(old)

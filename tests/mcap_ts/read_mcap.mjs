@@ -1,21 +1,27 @@
 // Read an MCAP file with the official TypeScript reader (@mcap/core, the library Foxglove and
 // Lichtblick use for local files) and print what it saw as one JSON object on stdout.
 //
-//   node read_mcap.mjs FILE.mcap
+//   node read_mcap.mjs FILE.mcap [--count KEY]...
 //
 // Both readers Foxglove uses are run: McapIndexedReader (seeks through the summary, chunk
 // indexes and message indexes: what opening a local file does) and McapStreamReader (reads
 // record by record from the start: what a stream or a remote file without a summary gets).
 // Decompression (zstd, lz4, bz2) comes from @mcap/support. Every message is parsed with
-// JSON.parse, as Foxglove does for the "json" message encoding. A reader that throws reports
-// {"error": "..."} instead of its counts; the script itself always exits 0 with valid JSON
-// unless it is called wrongly.
+// JSON.parse, as Foxglove does for the "json" message encoding; with --count KEY, the values
+// of that top-level key are counted per topic ("values": {topic: {KEY: {value: n}}}; a
+// missing key counts as "<absent>"). The indexed reader that throws reports {"error": "..."}
+// instead of its counts; the stream reader keeps what it read before the error (a file cut
+// by a crash: "done" false, "error" set). The script always exits 0 with one JSON line
+// unless it is called wrongly (exit 2).
 import { open, readFile } from "node:fs/promises";
 import { McapIndexedReader, McapStreamReader } from "@mcap/core";
 import { loadDecompressHandlers } from "@mcap/support";
 
+const countKeys = [];
+
 function newSummary() {
   return {
+    values: {}, // topic -> key -> value -> count (the --count keys)
     topics: {}, // topic -> message count
     schemas: {}, // topic -> schema name
     schema_encodings: {}, // topic -> schema encoding
@@ -37,10 +43,19 @@ function countMessage(out, channel, schema, message) {
   out.message_encodings[topic] = channel.messageEncoding;
   out.messages += 1;
   if (channel.messageEncoding === "json") {
+    let payload;
     try {
-      JSON.parse(new TextDecoder().decode(message.data));
+      payload = JSON.parse(new TextDecoder().decode(message.data));
     } catch {
       out.json_errors += 1;
+    }
+    if (payload !== undefined && countKeys.length > 0) {
+      const byKey = (out.values[topic] ??= {});
+      for (const key of countKeys) {
+        const value = key in payload ? JSON.stringify(payload[key]) : "<absent>";
+        const counts = (byKey[key] ??= {});
+        counts[value] = (counts[value] ?? 0) + 1;
+      }
     }
   }
   const t = message.logTime;
@@ -88,6 +103,17 @@ async function readStream(path, decompressHandlers) {
   const schemas = new Map();
   const channels = new Map();
   reader.append(new Uint8Array(await readFile(path)));
+  try {
+    readRecords(reader, out, schemas, channels);
+  } catch (err) {
+    out.error = String(err && err.message ? err.message : err);
+  }
+  out.done = reader.done(); // a complete file: the footer and closing magic were read
+  out.bytes_remaining = reader.bytesRemaining();
+  return out;
+}
+
+function readRecords(reader, out, schemas, channels) {
   for (let record; (record = reader.nextRecord()); ) {
     switch (record.type) {
       case "Header":
@@ -112,9 +138,6 @@ async function readStream(path, decompressHandlers) {
         break;
     }
   }
-  out.done = reader.done(); // a complete file: the footer and closing magic were read
-  out.bytes_remaining = reader.bytesRemaining();
-  return out;
 }
 
 async function guarded(fn) {
@@ -125,11 +148,17 @@ async function guarded(fn) {
   }
 }
 
-if (process.argv.length !== 3) {
-  console.error("usage: node read_mcap.mjs FILE.mcap");
+const args = process.argv.slice(2);
+let path = null;
+for (let i = 0; i < args.length; i++) {
+  if (args[i] === "--count" && i + 1 < args.length) countKeys.push(args[++i]);
+  else if (path === null && !args[i].startsWith("--")) path = args[i];
+  else path = undefined;
+}
+if (!path) {
+  console.error("usage: node read_mcap.mjs FILE.mcap [--count KEY]...");
   process.exit(2);
 }
-const path = process.argv[2];
 const decompressHandlers = await loadDecompressHandlers();
 const result = {
   file: path,
