@@ -35,6 +35,9 @@ from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS
 from cmm_comp.daemon.sessionlog.writer import LIBRARY
 
 ROOT = Path(__file__).resolve().parents[1]
+# the session fixtures (npm ci, a daemon run of 300 readings, the demo) run inside the first
+# test that uses them: more than the suite's default 120 s on a loaded 2-core machine
+pytestmark = pytest.mark.timeout(900)
 CLI = [sys.executable, "-m", "cmm_comp.cli"]
 
 

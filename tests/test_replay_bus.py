@@ -18,6 +18,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 from test_daemon_support import MCAST_GROUP, free_udp_port
@@ -25,6 +26,9 @@ from test_daemon_support import MCAST_GROUP, free_udp_port
 from cmm_comp.protocol.can_ids import CanIds
 
 LISTENER = Path(__file__).resolve().parent / "can_listener.py"
+# the session fixtures (npm ci, a daemon run of 300 readings, the demo) run inside the first
+# test that uses them: more than the suite's default 120 s on a loaded 2-core machine
+pytestmark = pytest.mark.timeout(900)
 IDS = CanIds()
 
 
