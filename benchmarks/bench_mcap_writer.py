@@ -18,7 +18,9 @@ flush at 1 kHz readings), written to a real file:
   optionally foxglove-sdk's MCAP writer (``--foxglove``, Rust, all indexes) for comparison;
 * **thread logger**: ``McapLogger`` end to end (JSON encoding of the compact records and the
   MCAP file), wall time from the first ``log()`` to the finished file and the process's CPU
-  time, per message. Each revision gets the records in the layout it logs.
+  time, per message. Each revision gets the records in the layout it logs (frames with their
+  ``direction`` here, when the base has none); this tree also gets the base's layout (no
+  ``direction``: the same JSON), which isolates the writer from the longer frame JSON.
 
 File sizes per message are reported too (message indexes add 16 bytes a message, uncompressed).
 """
@@ -241,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
         rows: dict[str, list[float]] = {
             f"{k}_{w}": [] for k in ("file", "filecpu") for w in ("base", "new", "fox")
         }
-        rows.update({k: [] for k in ("log_base", "log_new", "cpu_base", "cpu_new")})
+        rows.update({f"{k}_{w}": [] for k in ("log", "cpu") for w in ("base", "new", "same")})
         sizes: dict[str, int] = {}
         for r in range(args.rounds):
             order = [("base", "new"), ("new", "base")][r % 2]  # alternate who goes first
@@ -259,9 +261,14 @@ def main(argv: list[str] | None = None) -> int:
                 rows["filecpu_fox"].append(cpu / n * 1e6)
                 sizes["file_fox"] = p.stat().st_size
                 p.unlink()
-            for who in order:
+            three = ("base", "new", "same")
+            for who in three[r % 3 :] + three[: r % 3]:  # rotate who goes first
                 p = d / f"l-{who}-{r}.mcap"
-                cls, mix = (base_logger, base_mix) if who == "base" else (McapLogger, new_mix)
+                cls, mix = {
+                    "base": (base_logger, base_mix),
+                    "new": (McapLogger, new_mix),
+                    "same": (McapLogger, base_mix),
+                }[who]
                 wall, cpu = logger_run(cls, p, mix)
                 rows[f"log_{who}"].append(wall / len(mix) * 1e6)
                 rows[f"cpu_{who}"].append(cpu / len(mix) * 1e6)
@@ -283,6 +290,8 @@ def main(argv: list[str] | None = None) -> int:
         "file_cpu_new/base": ratio("filecpu_new", "filecpu_base"),
         "log_wall_new/base": ratio("log_new", "log_base"),
         "log_cpu_new/base": ratio("cpu_new", "cpu_base"),
+        "log_wall_same_records/base": ratio("log_same", "log_base"),
+        "log_cpu_same_records/base": ratio("cpu_same", "cpu_base"),
     }
     if rows["file_fox"]:
         ratios["file_foxglove/base"] = ratio("file_fox", "file_base")
@@ -296,6 +305,8 @@ def main(argv: list[str] | None = None) -> int:
         ("file writer (thread CPU)", "filecpu_base", "filecpu_new"),
         ("thread logger (wall)", "log_base", "log_new"),
         ("thread logger (CPU)", "cpu_base", "cpu_new"),
+        ("thread logger, base's records (wall)", "log_base", "log_same"),
+        ("thread logger, base's records (CPU)", "cpu_base", "cpu_same"),
     ):
         rt = ratio(b, a)
         print(

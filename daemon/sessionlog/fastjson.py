@@ -67,18 +67,15 @@ def frame_json(rec: tuple[Any, ...], t_ns: int) -> bytes | None:
     """The ``/cmm/can_rx`` / ``/cmm/can_tx`` message of a ``FrameRecord``, or None."""
     n = len(rec)
     if n == 10:
-        direction = rec[9]
-        if type(direction) is not str:
-            return None
-        fmt = _FRAME.get(direction)
+        can_id, ext, dlc, data, ts, channel, fd, remote, error, direction = rec
+        fmt = _FRAME.get(direction) if type(direction) is str else None
         if fmt is None:
             return None
-        rec = rec[:9]
     elif n == 9:
+        can_id, ext, dlc, data, ts, channel, fd, remote, error = rec
         fmt = _FRAME[None]
     else:
         return None
-    can_id, ext, dlc, data, ts, channel, fd, remote, error = rec
     if not (
         type(can_id) is int
         and 0 <= can_id <= 0x1FFFFFFF
