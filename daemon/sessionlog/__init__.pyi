@@ -2,6 +2,7 @@
 
 from .encoding import ERROR_TOPIC
 from .logger import LOW_PRIORITY_TOPICS, LoggerStats, LogSettings, SessionLogger
+from .mcapfile import McapFileWriter
 from .process_writer import McapProcessLogger, McapWriterProcessError
 from .reader import LoggedMessage, Session, load_session, read_messages, session_files
 from .records import CorrectedRecord, FrameRecord, RawRecord
@@ -27,6 +28,7 @@ __all__ = [
     "LogSettings",
     "LoggedMessage",
     "LoggerStats",
+    "McapFileWriter",
     "McapLogger",
     "McapProcessLogger",
     "McapWriterProcessError",
