@@ -140,6 +140,16 @@ port = 0
     return cfg
 
 
+def start_daemon_cli(config: Path, log: Path) -> subprocess.Popen:
+    """``cmm-comp daemon --config CONFIG`` as a subprocess, its output (events) to ``log``."""
+    with open(log, "w") as out:
+        return subprocess.Popen(
+            [sys.executable, "-m", "cmm_comp.cli", "daemon", "--config", str(config)],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+
+
 @contextmanager
 def daemon_subprocess(
     tmp: Path,
@@ -155,12 +165,7 @@ def daemon_subprocess(
     mcap = tmp / "session.mcap"
     cfg = write_udp_config(tmp, port, grid, mcap, writer)
     log = tmp / "daemon.log"
-    with open(log, "w") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "cmm_comp.cli", "daemon", "--config", str(cfg)],
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
+    proc = start_daemon_cli(cfg, log)
     bus = can.Bus(interface="udp_multicast", channel=MCAST_GROUP, port=port)
     try:
         with CanController(wrap_bus(bus), answer_timeout_s=10.0) as ctl:  # generous: load

@@ -20,8 +20,6 @@ None of the expected counts comes from the project's Python reader.
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -29,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_mcap_recover import THREAD_WRITER, _last_line_reader
+from test_mcap_recover import acknowledged, thread_writer
 
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS
 from cmm_comp.daemon.sessionlog.writer import LIBRARY
@@ -129,25 +127,11 @@ def test_recovered_daemon_log_reads_in_foxglove_s_reader(
 
 def test_log_of_a_killed_writer_recovers_for_foxglove_s_reader(mcap_ts, tmp_path) -> None:
     path = tmp_path / "killed.mcap"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(
-        [sys.executable, "-c", THREAD_WRITER, str(path)], stdout=subprocess.PIPE, text=True, env=env
-    )
-    lines, reader = _last_line_reader(proc)
-    try:
+    with thread_writer(path) as lines:  # SIGKILLed on leaving
         t0 = time.monotonic()  # generous: a loaded machine
-        while not any(x.isdigit() and int(x) >= 500 for x in lines) and time.monotonic() - t0 < 60:
+        while acknowledged(lines) < 500 and time.monotonic() - t0 < 60:
             time.sleep(0.01)
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
-    reader.join(5)
-    assert proc.stdout is not None
-    proc.stdout.close()
-    flushed = max((int(x) for x in lines if x.isdigit()), default=0)
+    flushed = acknowledged(lines)
     assert flushed >= 500, lines[-5:]
     cut = mcap_ts(path)
     fixed = tmp_path / "fixed.mcap"

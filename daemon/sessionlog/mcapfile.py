@@ -71,7 +71,8 @@ class McapFileWriter:
     """Write one chunked MCAP file with all indexes to ``stream`` (module docstring).
 
     :param stream: a binary stream whose ``write`` writes everything (a buffered file,
-        ``io.BytesIO``), positioned where the file starts; it is flushed, never closed.
+        ``io.BytesIO``, a pipe), positioned where the file starts; it is flushed, never closed
+        (the writer never seeks: it counts the bytes it wrote).
     :param chunk_size: a chunk is written once its uncompressed records exceed this, bytes.
     :param compression: chunk compression.
     :param spool_dir: directory of the chunk index spool's anonymous file (default: the
@@ -90,7 +91,10 @@ class McapFileWriter:
         spool_dir: str | Path | None = None,
     ) -> None:
         self._stream = stream
-        self._pos = stream.tell()
+        try:
+            self._pos = stream.tell()  # offsets in the file are from its start
+        except (OSError, ValueError):  # io.UnsupportedOperation: a pipe, written from its start
+            self._pos = 0
         self._chunk_size = int(chunk_size)
         self._room = self._chunk_size - MESSAGE_HEAD.size
         """A message whose data ends past this (offset + size) makes the chunk exceed
