@@ -12,6 +12,7 @@ import json
 import os
 import random
 import signal
+import struct
 import subprocess
 import sys
 import threading
@@ -76,8 +77,11 @@ def test_recover_keeps_every_chunk_before_the_cut(tmp_path: Path, capsys) -> Non
     rng = random.Random(12)
     for size in sorted({*rng.sample(range(len(data)), 25), 8, 40, len(data) - 1}):
         cut.write_bytes(data[:size])
-        with open(cut, "rb") as f, pytest.raises((McapError, OSError, ValueError)):
-            make_reader(f).get_summary()  # the seeking reader refuses the cut file
+        # the seeking reader refuses the cut file (it parses the bytes where the footer should
+        # be; when they read as another record's head, e.g. of an uncompressed message index,
+        # it runs off the end: struct.error)
+        with open(cut, "rb") as f, pytest.raises((McapError, OSError, ValueError, struct.error)):
+            make_reader(f).get_summary()
         assert main(["mcap", "recover", str(cut), "-o", str(fixed), "--force"]) == 0, size
         out = capsys.readouterr().out
         got, meta = _official(fixed)
