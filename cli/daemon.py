@@ -46,7 +46,9 @@ def add_parsers(subparsers: Any) -> None:
     p.add_argument("--grid", help="re-correct with this grid (default: the session's grid)")
     p.add_argument("--json", metavar="OUT", help="write the report as JSON")
     p.add_argument(
-        "--to-bus", action="store_true", help="re-send the raw stream at the recorded pace"
+        "--to-bus",
+        action="store_true",
+        help="re-send the frames the controller sent (never the daemon's own) at the recorded pace",
     )
     p.add_argument("--interface", default="socketcan", help="python-can interface (--to-bus)")
     p.add_argument("--channel", default="can0", help="python-can channel (--to-bus)")
@@ -134,8 +136,25 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if args.to_bus:
             opts = _bus_options(args.bus_option)
             with can.Bus(interface=args.interface, channel=args.channel, **opts) as bus:
-                n = replay_to_bus(args.session, bus, args.speed)
-            print(f"re-sent {n} frames to {args.interface}:{args.channel}")
+                sent = replay_to_bus(args.session, bus, args.speed)
+            print(
+                f"re-sent {sent.sent} frames the controller sent to "
+                f"{args.interface}:{args.channel}; not re-sent: {sent.skipped_own} of the "
+                f"daemon's own frames (answers, statuses, heartbeats echoed back by the bus)"
+                + (
+                    f", {sent.skipped_error_frames} error frames"
+                    if sent.skipped_error_frames
+                    else ""
+                )
+            )
+            if sent.note:
+                print(f"cmm-comp: note: {sent.note}", file=sys.stderr)
+            if sent.truncated:
+                print(
+                    f"cmm-comp: warning: session cut by a crash: re-sent the frames read before "
+                    f"the break ({sent.read_error or 'file ends without its footer'})",
+                    file=sys.stderr,
+                )
             return 0
         report = replay_offline(args.session, args.grid)
     except (ReplayError, ValueError, can.CanError) as exc:

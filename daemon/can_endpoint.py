@@ -99,9 +99,10 @@ def open_bus(cfg: CanSection, ids: CanIds) -> can.BusABC:
     )
 
 
-def frame_record(msg: can.Message, channel: str) -> FrameRecord:
+def frame_record(msg: can.Message, channel: str, direction: str) -> FrameRecord:
     """The compact ``/cmm/can_rx`` / ``/cmm/can_tx`` record of one frame (the MCAP writer
-    builds the JSON payload from it: :func:`daemon.sessionlog.records.frame_payload`)."""
+    builds the JSON payload from it: :func:`daemon.sessionlog.records.frame_payload`);
+    ``direction``: ``rx``, ``tx`` or ``tx_echo`` (:data:`.sessionlog.schemas.FRAME_DIRECTIONS`)."""
     return (
         msg.arbitration_id,
         msg.is_extended_id,
@@ -112,6 +113,7 @@ def frame_record(msg: can.Message, channel: str) -> FrameRecord:
         msg.is_fd,
         msg.is_remote_frame,
         msg.is_error_frame,
+        direction,
     )
 
 
@@ -165,6 +167,7 @@ class CanEndpoint(can.Listener):
             self.ids.id_of(MessageKind.CORRECTION_STATUS),
             self.ids.id_of(MessageKind.CORRECTION_UNCERTAINTY),
         )
+        self._own_tx_ids = self.ids.daemon_tx_ids()  # received back: our own frames (echo)
         self._send_u = config.send_uncertainty
         self._stop = threading.Event()
         self._connected = threading.Event()
@@ -359,8 +362,15 @@ class CanEndpoint(can.Listener):
             return
         ch = str(self.config.channel)
         backlog, self._log_backlog = self._log_backlog, []
-        rx = [frame_record(msg, ch) for topic, msg in backlog if topic == "/cmm/can_rx"]
-        tx = [frame_record(msg, ch) for topic, msg in backlog if topic != "/cmm/can_rx"]
+        own = self._own_tx_ids  # a frame on one of these came from us: the bus echoed it
+        rx = [
+            frame_record(
+                msg, ch, "tx_echo" if msg.arbitration_id in own and not msg.is_extended_id else "rx"
+            )
+            for topic, msg in backlog
+            if topic == "/cmm/can_rx"
+        ]
+        tx = [frame_record(msg, ch, "tx") for topic, msg in backlog if topic != "/cmm/can_rx"]
         self.logger.log_many("/cmm/can_rx", rx)
         self.logger.log_many("/cmm/can_tx", tx)
 
