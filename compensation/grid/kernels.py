@@ -23,7 +23,7 @@ import math
 import numpy as np
 from numba import prange
 
-from ..jit import njit_cached
+from ..jit import kernel_cache_dir, njit_cached
 
 SERIES_LIMIT2 = 1e-4  # θ² (or (|v|/w)²) below which the series branch is used
 _FAST = {
@@ -370,3 +370,9 @@ def eval_serial(  # type: ignore[no-untyped-def]
         q, sx, wq, ws, node, small, tx, ty, tz, spanx, spany, spanz, coef, ncomp,
         out, out_q, out_t, want_pose,
     )  # fmt: skip
+
+
+def kernels_cache_dir() -> str | None:
+    """Where these kernels' compiled code is cached, None when compiled anew in every process
+    (no writable cache folder: :mod:`..jit`)."""
+    return kernel_cache_dir(_qmul)
