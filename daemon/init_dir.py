@@ -30,7 +30,15 @@ from cmm_comp.compensation.errors import CmmCompError
 
 from .config import ConfigError, DaemonConfig, config_from_dict
 
-__all__ = ["CONFIG_NAME", "DEFAULT_CHANNELS", "InitError", "InitReport", "init_daemon_dir"]
+__all__ = [
+    "CONFIG_NAME",
+    "DEFAULT_CHANNELS",
+    "InitError",
+    "InitReport",
+    "config_text",
+    "daemon_dir_paths",
+    "init_daemon_dir",
+]
 
 CONFIG_NAME = "daemon.toml"
 MACHINE_NAME = "machine.toml"
@@ -124,6 +132,23 @@ def config_text(
     return "\n".join(lines)
 
 
+def daemon_dir_paths(folder: str | Path, logs: str | Path | None = None) -> dict[str, Path]:
+    """The absolute paths ``daemon init`` writes (``config``, ``machine``, ``grid``,
+    ``private_key``, ``public_key``) and the session-log folder (``logs``, default
+    ``folder/logs``) for the daemon folder ``folder``."""
+    from cmm_comp.compensation.grid.signing import PRIVATE_KEY_NAME, PUBLIC_KEY_NAME
+
+    d = Path(folder).absolute()
+    return {
+        "config": d / CONFIG_NAME,
+        "machine": d / MACHINE_NAME,
+        "grid": d / GRID_NAME,
+        "private_key": d / KEYS_DIR / PRIVATE_KEY_NAME,
+        "public_key": d / KEYS_DIR / PUBLIC_KEY_NAME,
+        "logs": Path(logs).absolute() if logs is not None else d / LOGS_DIR,
+    }
+
+
 def _refuse_existing(paths: Sequence[Path], folder: Path) -> None:
     there = [p for p in paths if p.exists() or p.is_symlink()]
     if there:
@@ -148,8 +173,6 @@ def init_daemon_dir(
     file or flag on bad input, nothing left behind."""
     from cmm_comp.compensation.grid import CorrectionGrid
     from cmm_comp.compensation.grid.signing import (
-        PRIVATE_KEY_NAME,
-        PUBLIC_KEY_NAME,
         generate_signing_key,
         key_id,
         load_public_key,
@@ -166,14 +189,7 @@ def init_daemon_dir(
             f"--can-interface {can_interface}: give --can-channel (defaults exist only for "
             f"{', '.join(DEFAULT_CHANNELS)})"
         )
-    paths = {
-        "config": folder / CONFIG_NAME,
-        "machine": folder / MACHINE_NAME,
-        "grid": folder / GRID_NAME,
-        "private_key": folder / KEYS_DIR / PRIVATE_KEY_NAME,
-        "public_key": folder / KEYS_DIR / PUBLIC_KEY_NAME,
-        "logs": Path(logs).absolute() if logs is not None else folder / LOGS_DIR,
-    }
+    paths = daemon_dir_paths(folder, logs)
     _refuse_existing([paths[k] for k in ("config", "machine", "grid", "private_key")], folder)
     _refuse_existing([paths["public_key"]], folder)
     machine = Machine.from_toml(machine_path)
