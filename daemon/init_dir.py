@@ -19,6 +19,7 @@ failed run wrote is removed again. Units: mm.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import tomllib
 from collections.abc import Callable, Mapping, Sequence
@@ -171,13 +172,9 @@ def init_daemon_dir(
 ) -> InitReport:
     """Build, sign and configure (see the module doc); InitError / MachineFileError naming the
     file or flag on bad input, nothing left behind."""
+    from cmm_comp.compensation.formats.atomic import write_text_atomic
     from cmm_comp.compensation.grid import CorrectionGrid
-    from cmm_comp.compensation.grid.signing import (
-        generate_signing_key,
-        key_id,
-        load_public_key,
-        sign_grid,
-    )
+    from cmm_comp.compensation.grid.signing import generate_signing_key, sign_grid
     from cmm_comp.compensation.machine import Machine
 
     folder = Path(directory).absolute()
@@ -194,44 +191,35 @@ def init_daemon_dir(
     _refuse_existing([paths["public_key"]], folder)
     machine = Machine.from_toml(machine_path)
     grid = CorrectionGrid.build(machine, steps=steps, progress=progress)  # before any write
-    created: list[Path] = []
+    text = config_text(
+        paths,
+        machine.name,
+        machine.identity_sha256(),
+        can_interface,
+        channel,
+        dict(can_options or {}),
+        list(grid.steps),
+    )
+    _check_config_text(text, paths["config"])  # a bad --can-option is refused before any write
+    keys = paths["private_key"].parent
+    # what this run creates, parents first (removed in reverse order if a step fails)
+    created = [p for p in (folder, keys) if not p.exists()]
+    created += [paths[k] for k in ("machine", "private_key", "public_key", "grid", "config")]
     try:
         folder.mkdir(parents=True, exist_ok=True)
         machine.to_toml(paths["machine"])
-        created.append(paths["machine"])
         copy = Machine.from_toml(paths["machine"])
         if copy.identity_sha256() != machine.identity_sha256():  # pragma: no cover - a bug
             raise InitError(f"{paths['machine']}: the copy does not describe the same machine")
-        keys_existed = paths["private_key"].parent.exists()
-        private, public = generate_signing_key(paths["private_key"].parent)
-        created += [private, public]
-        if not keys_existed:
-            created.append(private.parent)
+        private, public = generate_signing_key(keys)
         sha = grid.save(paths["grid"])
-        created.append(paths["grid"])
         kid = sign_grid(paths["grid"], private)
-        text = config_text(
-            paths,
-            machine.name,
-            machine.identity_sha256(),
-            can_interface,
-            channel,
-            dict(can_options or {}),
-            list(grid.steps),
-        )
-        _check_config_text(text, paths["config"])
-        from cmm_comp.compensation.formats.atomic import write_text_atomic
-
         write_text_atomic(paths["config"], text)
-        created.append(paths["config"])
     except BaseException:
         for path in reversed(created):
-            if path.is_dir():
-                path.rmdir()
-            else:
-                path.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # not made (or a file in the way): nothing to undo
+                path.rmdir() if path.is_dir() else path.unlink(missing_ok=True)
         raise
-    assert kid == key_id(load_public_key(public))
     return InitReport(
         config=paths["config"],
         machine=paths["machine"],
