@@ -40,13 +40,13 @@ from pathlib import Path
 
 import pytest
 from daemon_process import check_answers, controller_on, stop, wait_ready
+from source_copy import copy_sources
 from systemd_unit import API_PATHS, parse_unit
 from test_daemon_support import free_udp_port
 from test_systemd_unit import UNIT_PATH, install_command
 
 ROOT = Path(__file__).resolve().parents[1]
 NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
-FOLDERS = ("compensation", "protocol", "daemon", "sim_controller", "cli")
 SYSTEM_PYTHON = Path("/usr/bin/python3")
 USER = "nobody"
 READY_S = 900.0
@@ -115,13 +115,7 @@ def _install(tree: Tree) -> None:
     by pip (not editable) from a copy of the sources, then read-only."""
     venv = Path(tree.host("/opt/cmm-comp/.venv"))
     subprocess.run([SYSTEM_PYTHON, "-m", "venv", venv], check=True, timeout=300)
-    src = tree.root / "src"
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for name in (*FOLDERS, "pyproject.toml", "README.md"):
-        if (ROOT / name).is_dir():
-            shutil.copytree(ROOT / name, src / name, ignore=ignore)
-        else:
-            shutil.copy2(ROOT / name, src / name)
+    src = copy_sources(tree.root / "src")
     pip = subprocess.run(
         [venv / "bin" / "python", "-m", "pip", "install", "--no-cache-dir", "-q", str(src)],
         capture_output=True,
