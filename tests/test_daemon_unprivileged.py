@@ -180,7 +180,8 @@ def _run_and_check(tree: Tree, argv: list[str], env: dict[str, str], log: Path) 
         proc = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, env=env, cwd="/")
     try:
         with controller_on(tree.port) as ctl:
-            wait_ready(ctl, proc, log, READY_S)
+            ready_s = wait_ready(ctl, proc, log, READY_S)
+            print(f"{log.name}: ready after {ready_s:.1f} s")  # shown with pytest -s
             assert _uid_of(proc.pid) == pwd.getpwnam(USER).pw_uid
             assert check_answers(ctl, tree.grid) == 20
     finally:
