@@ -69,7 +69,7 @@ def stylus_note(
 ) -> str | None:
     """The line saying a configured ``grid.stylus_mm`` differs from the grid's probe offset
     (mm), or None when it is unset or equal."""
-    if configured is None:
+    if configured is None or len(configured) != 3:  # a bad length is a configuration problem
         return None
     if np.all(np.abs(np.asarray(configured, float) - np.asarray(probe_mm)) <= STYLUS_TOL_MM):
         return None
