@@ -46,8 +46,10 @@ class GridSection:
 
     path: str = ""
     """Grid file; empty = start without a grid (every answer says ``no_grid``)."""
-    stylus_mm: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    """Stylus tip offset used for every reading, mm (X, Y, Z)."""
+    stylus_mm: list[float] | None = None
+    """Stylus tip offset used for every reading, mm (X, Y, Z); None (not set) = the grid's
+    probe offset (the machine's ``[probe] offset_mm`` it was built with). A value that differs
+    from the grid's is used, and said at start and by ``--check``."""
     machine: str = ""
     """The machine description (TOML) the grid must have been built from: its sha256 is
     computed here and the grid's volume must lie inside the machine's."""
@@ -221,10 +223,12 @@ class DaemonConfig:
         return self
 
     def numeric_values(self) -> dict[str, Any]:
-        """``section.key`` → value of every numeric setting (ints, floats, lists of floats)."""
+        """``section.key`` → value of every numeric setting (ints, floats, lists of floats;
+        None for an optional one left unset)."""
         out: dict[str, Any] = {}
         for section in _SECTIONS:
             for key, hint in _section_types(section).items():
+                hint = _unwrap_optional(hint)
                 if hint in (int, float) or (
                     get_origin(hint) is list and get_args(hint)[0] is float
                 ):
@@ -314,6 +318,14 @@ def _section_types(section: str) -> dict[str, Any]:
     return get_type_hints(cls)
 
 
+def _unwrap_optional(hint: Any) -> Any:
+    """``X`` of ``X | None``; other hints unchanged."""
+    args = get_args(hint)
+    if type(None) in args and len(args) == 2:
+        return next(a for a in args if a is not type(None))
+    return hint
+
+
 def _short(value: Any, limit: int = 60) -> str:
     """``repr(value)``, cut to ``limit`` characters (a flag may be any length)."""
     text = repr(value)
@@ -368,6 +380,18 @@ def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> DaemonConf
     Every problem is collected (one line each: unknown section/key, wrong type, out of range,
     cross-field rule) and raised together as one :class:`ConfigError`.
     """
+    cfg, errors = config_and_problems(data, source)
+    if errors:
+        raise ConfigError(errors)
+    return cfg
+
+
+def config_and_problems(
+    data: dict[str, Any], source: str = "<dict>"
+) -> tuple[DaemonConfig, list[str]]:
+    """The config built from parsed TOML and every problem found (one line each), without
+    raising: what ``--check`` needs to go on checking the files the config names. A value of
+    the wrong type keeps the default; one out of range is kept as given (and listed)."""
     cfg = DaemonConfig(source=source)
     errors: list[str] = []
     reported: set[str] = set()
@@ -392,9 +416,7 @@ def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> DaemonConf
                 errors.append(str(exc))
                 reported.add(f"{section}.{key}")
     errors += cfg.problems(skip=reported)
-    if errors:
-        raise ConfigError(errors)
-    return cfg
+    return cfg, errors
 
 
 def add_override_flags(parser: argparse.ArgumentParser) -> None:
@@ -428,6 +450,24 @@ def _parse_flag(text: str, hint: Any) -> Any:
 
 def load_config(path: str | Path | None, args: argparse.Namespace | None = None) -> DaemonConfig:
     """Read ``path`` (None = defaults), then apply the override flags present in ``args``."""
+    data, source = _read_with_flags(path, args)
+    return config_from_dict(data, source)
+
+
+def load_config_and_problems(
+    path: str | Path | None, args: argparse.Namespace | None = None
+) -> tuple[DaemonConfig, list[str]]:
+    """:func:`load_config` that lists the problems instead of raising on them (``--check``);
+    ConfigError only when the file cannot be read as TOML at all."""
+    data, source = _read_with_flags(path, args)
+    return config_and_problems(data, source)
+
+
+def _read_with_flags(
+    path: str | Path | None, args: argparse.Namespace | None
+) -> tuple[dict[str, Any], str]:
+    """The parsed file (empty for None) with the override flags of ``args`` applied, and its
+    name; ConfigError (one line) when the file is missing or not TOML."""
     data: dict[str, Any] = {}
     source = "<defaults>"
     if path is not None:
@@ -451,4 +491,4 @@ def load_config(path: str | Path | None, args: argparse.Namespace | None = None)
             data.setdefault(section, {})[key] = (
                 _parse_flag(value, hint) if isinstance(value, str) else value
             )
-    return config_from_dict(data, source)
+    return data, source

@@ -108,7 +108,7 @@ def range_errors(where: str, values: dict[str, Any], skip: set[str]) -> dict[str
     """
     out = {}
     for name, value in values.items():
-        if name in skip:
+        if name in skip or value is None:  # None: an optional setting left unset
             continue
         rule = NUMERIC_RULES.get(name, FINITE_DEFAULT)
         if _bad(value, rule):

@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..formats.atomic import atomic_output
 from ..machine import Machine
 from ..parametric_errors import AXES
 from .maps import LineReport, VolumetricMap, diagonal_endpoints
@@ -18,13 +19,12 @@ from .maps import LineReport, VolumetricMap, diagonal_endpoints
 
 def save_png(fig: Figure, path: str | Path) -> Path:
     """Draw ``fig`` on an Agg canvas and write it to ``path`` as PNG (110 dpi) atomically (a
-    temporary sibling renamed over it), creating the folder; returns the path."""
+    temporary sibling renamed over it, mode as the umask gives), creating the folder; returns
+    the path."""
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     FigureCanvasAgg(fig)
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    tmp.replace(out)
+    with atomic_output(out, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     return out
 
 

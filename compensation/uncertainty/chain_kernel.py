@@ -13,9 +13,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 from numpy.typing import NDArray
 
+from ..jit import njit_cached
 from ..kinematics import Chain
 from ..parametric_errors import AXIS_INDEX
 
@@ -31,7 +32,7 @@ def chain_axes(chain: Chain) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     return tool, work
 
 
-@njit(cache=True)
+@njit_cached()
 def _rotation(ex, ey, ez, r):  # type: ignore[no-untyped-def]
     """r[:] = Rx(ex)·Ry(ey)·Rz(ez), angles rad."""
     cx, cy, cz = math.cos(ex), math.cos(ey), math.cos(ez)
@@ -47,7 +48,7 @@ def _rotation(ex, ey, ez, r):  # type: ignore[no-untyped-def]
     r[2, 2] = cx * cy
 
 
-@njit(cache=True)
+@njit_cached()
 def _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, slot, buf):  # type: ignore[no-untyped-def]
     """The exact error pose of one row into ``out_rot[slot]``, ``out_t[slot]`` (µm). ``buf``
     (5, 3, 3) scratch space (a heap allocation per row cost more than the chain itself)."""
@@ -104,7 +105,7 @@ def _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, slot, buf):  # typ
 _BLOCK_ROWS = 512  # rows per parallel task (one scratch allocation each)
 
 
-@njit(cache=True, parallel=True)
+@njit_cached(parallel=True)
 def _exact_rows(tool, work, u, errors, sq, out_rot, out_t):  # type: ignore[no-untyped-def]
     n = u.shape[0]
     for b in prange((n + _BLOCK_ROWS - 1) // _BLOCK_ROWS):
@@ -134,7 +135,7 @@ def exact_pose_compiled(
     return rot, t
 
 
-@njit(cache=True, parallel=True)
+@njit_cached(parallel=True)
 def _residual_rows(tool, work, u, errors, sq, rot0, t0, stylus, out):  # type: ignore[no-untyped-def]
     """Residual (µm) = t − t0 + 1000·(R − R0)·p of every row; row r belongs to point r mod N."""
     n_pts = rot0.shape[0]
@@ -153,7 +154,7 @@ def _residual_rows(tool, work, u, errors, sq, rot0, t0, stylus, out):  # type: i
                 out[row, i] = acc
 
 
-@njit(cache=True, parallel=True)
+@njit_cached(parallel=True)
 def _assemble_rows(base, delta_t, source, target, sigma, z, random_target, out):  # type: ignore[no-untyped-def]
     """out[i] = base + calibration errors + random parts of trial i (see :func:`assemble_errors`)."""
     for i in prange(out.shape[0]):
