@@ -18,6 +18,7 @@ __all__ = [
     "MachineFileError",
     "MeasurementFileError",
     "RealDataError",
+    "SchemaError",
 ]
 
 
@@ -34,6 +35,17 @@ class MachineFileError(CmmCompError, ValueError):
         self.problem = problem
         location = f"{source}: {where}" if where else source
         super().__init__(f"{location}: {problem}")
+
+
+class SchemaError(CmmCompError, ValueError):
+    """A TOML file's values break its rules (:mod:`.toml_schema`). ``lines``: one line per
+    problem, naming the file and the key path; ``locs``: the key path of each
+    (``("can", "bitrate")``)."""
+
+    def __init__(self, lines: list[str], locs: list[tuple[str | int, ...]] | None = None) -> None:
+        self.lines = list(lines)
+        self.locs = list(locs or [])
+        super().__init__("\n".join(self.lines))
 
 
 class MeasurementFileError(CmmCompError, ValueError):

@@ -29,6 +29,8 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, get_args
 
+from .errors import SchemaError
+
 if TYPE_CHECKING:
     from pydantic import TypeAdapter, ValidationError
     from pydantic_core import InitErrorDetails
@@ -61,16 +63,6 @@ _TYPE_WORDS = {
     "int_type": "an integer",
     "float_type": "a number",
 }
-
-
-class SchemaError(ValueError):
-    """A file's values break its rules. ``lines``: one line per problem, naming the file;
-    ``locs``: the key path of each (``("can", "bitrate")``)."""
-
-    def __init__(self, lines: list[str], locs: list[tuple[str | int, ...]] | None = None) -> None:
-        self.lines = list(lines)
-        self.locs = list(locs or [])
-        super().__init__("\n".join(self.lines))
 
 
 def shown(value: Any) -> str:
