@@ -41,6 +41,7 @@ __all__ = [
     "Problem",
     "Rule",
     "SchemaError",
+    "Spread",
     "Table",
     "Vec",
     "usable",
@@ -193,12 +194,17 @@ class Vec:
     n: int | None = None
     min_n: int = 0
     max_n: int | None = None
+    note: str = ""
 
     def describe(self) -> str:
-        count = f"{self.n}" if self.n is not None else f"at most {self.max_n}"
-        if self.n is None and self.max_n is None:
+        if self.n is not None:
+            count = f"{self.n}"
+        elif self.max_n is None:
             count = f"at least {self.min_n}" if self.min_n else "any number of"
-        return f"{count} values, each {self.item.describe()}"
+        else:
+            count = f"{self.min_n} to {self.max_n}" if self.min_n else f"at most {self.max_n}"
+        note = f" ({self.note})" if self.note else ""
+        return f"{count} values{note}, each {self.item.describe()}"
 
     def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> Any:
         from pydantic import ValidationError
@@ -213,7 +219,9 @@ class Vec:
             if not isinstance(value, list):
                 _raise([_problem(f": {short(value)} must be a list", value=value)])
             if len(value) < low or (high is not None and len(value) > high):
-                _raise([_problem(f" = {shown(value)}; allowed: {self.describe()}", value=value)])
+                text = shown(value)
+                text = text if len(text) <= 60 else f"{text[:59]}… ({len(value)} values)"
+                _raise([_problem(f" = {text}; allowed: {self.describe()}", value=value)])
             try:
                 return validate(value)
             except ValidationError as exc:
@@ -271,6 +279,34 @@ class Rule:
         return cs.with_info_after_validator_function(after, handler(source))
 
 
+@dataclass(frozen=True)
+class Spread:
+    """On a :class:`Table` of numbers keyed by ``names``: one number stands for all of them
+    (``squareness = 1.0`` is ``{alpha = 1.0, beta1 = 1.0, beta2 = 1.0}``); ``item`` its rule."""
+
+    names: tuple[str, ...]
+    item: Num
+
+    def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> Any:
+        from pydantic import ValidationError
+        from pydantic_core import core_schema as cs
+
+        from pydantic_core import SchemaValidator
+
+        number = SchemaValidator(self.item.core(integer=False))
+
+        def spread(value: Any) -> Any:
+            if isinstance(value, Mapping):
+                return value
+            try:
+                checked = number.validate_python(value)
+            except ValidationError:
+                _raise([_problem(self.item.tail(value, False), value=value)])
+            return dict.fromkeys(self.names, checked)
+
+        return cs.no_info_before_validator_function(spread, handler(source))
+
+
 def _raise_problems(problems: Iterable[Problem], value: Any) -> None:
     details = [
         _problem(p, value=value) if isinstance(p, str) else _problem(p[1], p[0], value)
@@ -297,7 +333,8 @@ class Table:
     def rules(self, context: Mapping[str, Any]) -> Iterable[Problem]:
         """Problems of the keys together (none here). Keys with a problem of their own are at
         their defaults then, and named in ``context["bad"]``: a rule judges only keys that are
-        :func:`usable`."""
+        :func:`usable`; ``context["unknown"]`` names the unknown keys (perhaps known ones
+        misspelt)."""
         return ()
 
     @classmethod
@@ -318,6 +355,10 @@ class Table:
         return cs.with_info_wrap_validator_function(cls._validate_table, schema)
 
     @classmethod
+    def _missing(cls, detail: InitErrorDetails) -> InitErrorDetails:
+        return _describe_missing(cls, detail)
+
+    @classmethod
     def _validate_table(cls, data: Any, handler: Callable[[Any], Any], info: Any) -> Any:
         from pydantic import ValidationError
 
@@ -329,18 +370,19 @@ class Table:
             why = None if k in keys else cls.unknown_key(k, v)
             if why is not None:
                 details.append(_problem(why, (str(k),), v))
+        unknown = frozenset(str(k) for k in data if k not in keys)
         known = {k: v for k, v in data.items() if k in keys}
         bad: set[str] = set()
         try:
             obj = handler(known)
         except ValidationError as exc:
-            details += _details(exc)
+            details += [cls._missing(d) for d in _details(exc)]
             bad = {str(d["loc"][0]) for d in details if d["loc"]}
             try:  # the keys with a problem at their defaults: the rules judge the others
                 obj = handler({k: v for k, v in known.items() if k not in bad})
             except ValidationError:
                 obj = None
-        context = {**(info.context or {}), "bad": frozenset(bad)}
+        context = {**(info.context or {}), "bad": frozenset(bad), "unknown": unknown}
         if obj is not None and context.get("rules", True):
             try:
                 _raise_problems(obj.rules(context), data)
@@ -349,6 +391,14 @@ class Table:
         if details:
             _raise(details, cls.__name__)
         return obj
+
+
+def _describe_missing(cls: type, detail: InitErrorDetails) -> InitErrorDetails:
+    if detail["type"] != "missing" or len(detail["loc"]) != 1:
+        return detail
+    rule = rule_of(cls, str(detail["loc"][0]))
+    what = f": {rule.describe()}" if rule is not None else ""
+    return _problem(f"{{path}} is required{what}", detail["loc"], None)
 
 
 def usable(context: Mapping[str, Any], *keys: str) -> bool:
@@ -394,7 +444,7 @@ def problem_lines(exc: ValidationError, source: str) -> list[str]:
         if kind == PROBLEM:
             text = str(err["ctx"]["text"])  # type: ignore[index]
         elif kind == "missing":
-            text = "missing (required)"
+            text = "{path} is required"
         elif kind in _TYPE_WORDS:
             text = f": {short(err['input'])} must be {_TYPE_WORDS[kind]}"
         else:
