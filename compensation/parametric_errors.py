@@ -95,7 +95,9 @@ def unknown_table_component(name: str) -> list[str]:
     """Why ``name`` is no table component (a :class:`..toml_schema.Rule` of table keys)."""
     canon = canonical_name(name)
     if canon is None or canon not in TABLE_COMPONENTS:
-        return [f"unknown error component; allowed: {', '.join(TABLE_COMPONENTS)} or ISO 230-1 names"]
+        return [
+            f"unknown error component; allowed: {', '.join(TABLE_COMPONENTS)} or ISO 230-1 names"
+        ]
     return []
 
 

@@ -89,7 +89,11 @@ def short(value: Any, limit: int = 60) -> str:
 def _problem(text: str, loc: tuple[str | int, ...] = (), value: Any = None) -> InitErrorDetails:
     from pydantic_core import PydanticCustomError
 
-    return {"type": PydanticCustomError(PROBLEM, "{text}", {"text": text}), "loc": loc, "input": value}
+    return {
+        "type": PydanticCustomError(PROBLEM, "{text}", {"text": text}),
+        "loc": loc,
+        "input": value,
+    }
 
 
 def _raise(details: list[InitErrorDetails], title: str = "value") -> None:
@@ -213,7 +217,9 @@ class Vec:
         integer = get_args(source) == (int,)
         low = self.n if self.n is not None else self.min_n
         high = self.n if self.n is not None else self.max_n
-        inner = cs.list_schema(self.item.core(integer), min_length=low, max_length=high, strict=True)
+        inner = cs.list_schema(
+            self.item.core(integer), min_length=low, max_length=high, strict=True
+        )
 
         def check(value: Any, validate: Callable[[Any], Any]) -> Any:
             if not isinstance(value, list):
@@ -267,6 +273,11 @@ class Rule:
 
     check: Callable[..., Iterable[Problem]]
     context: bool = False
+    doc: str = ""
+    """What the rule allows, for the documentation (empty: said by the key's docstring)."""
+
+    def describe(self) -> str:
+        return self.doc
 
     def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> Any:
         from pydantic_core import core_schema as cs
@@ -322,7 +333,10 @@ class Table:
     allowed ones), every scalar is strict, :meth:`rules` checks the keys together. Fields in
     ``NOT_IN_FILE`` are attributes of the object, not keys of the file."""
 
-    __pydantic_config__: ClassVar[dict[str, Any]] = {"use_attribute_docstrings": True}
+    __pydantic_config__: ClassVar[dict[str, Any]] = {
+        "use_attribute_docstrings": True,
+        "extra": "forbid",  # unknown keys are refused (and named) before pydantic sees them
+    }
     NOT_IN_FILE: ClassVar[frozenset[str]] = frozenset()
 
     @classmethod
@@ -474,13 +488,28 @@ def validate(cls: type, data: Any, source: str, context: Mapping[str, Any] | Non
         raise SchemaError(problem_lines(exc, source), locs) from None
 
 
-def rule_of(cls: type, key: str) -> Num | Vec | Choice | None:
-    """The :class:`Num`, :class:`Vec` or :class:`Choice` of ``cls``'s field ``key`` (or None)."""
+def rules_of(cls: type, key: str) -> list[Num | Vec | Choice | Rule]:
+    """The rules (:class:`Num`, :class:`Vec`, :class:`Choice`, :class:`Rule`) on ``cls``'s
+    field ``key``, in order."""
     import typing
 
     hint = typing.get_type_hints(cls, include_extras=True)[key]
+    found = []
     for arg in (hint, *get_args(hint)):
         for meta in getattr(arg, "__metadata__", ()):
-            if isinstance(meta, Num | Vec | Choice):
-                return meta
-    return None
+            if isinstance(meta, Num | Vec | Choice | Rule):
+                found.append(meta)
+            elif isinstance(meta, Spread):
+                found.append(meta.item)
+    return found
+
+
+def rule_of(cls: type, key: str) -> Num | Vec | Choice | None:
+    """The :class:`Num`, :class:`Vec` or :class:`Choice` of ``cls``'s field ``key`` (or None)."""
+    return next((r for r in rules_of(cls, key) if not isinstance(r, Rule)), None)
+
+
+def describe_rules(cls: type, key: str) -> str:
+    """What ``cls``'s field ``key`` allows, in words (``0 .. 2032; a multiple of 0x10``)."""
+    texts = [r.describe() for r in rules_of(cls, key) if r.describe()]
+    return "; ".join(texts)

@@ -81,6 +81,7 @@ def _low_high(pair: list[float]) -> Iterable[Problem]:
         yield f" = {shown(pair)} must be [low, high]"
 
 
+_LOW_HIGH = Rule(_low_high, doc="low < high")
 _STYLUS = Vec(Num(-2000.0, 2000.0, "mm"), n=3)
 _TEMP_C = Vec(Num(-100.0, 300.0, "°C"), n=2)
 _SECONDS = Num(0.0, 86400.0, "s", lo_open=True)
@@ -128,7 +129,9 @@ class CanSection(Table):
     """Node number: the daemon's ids are ``base_id + 0x10·node_id`` … ``+ 0xF`` (docs/can.md);
     they must stay 11-bit (0 .. 95 at base_id 0x200)."""
     base_id: Annotated[
-        int, Num(0, STANDARD_ID_MAX + 1 - NODE_STRIDE), Rule(_multiple_of_stride)
+        int,
+        Num(0, STANDARD_ID_MAX + 1 - NODE_STRIDE),
+        Rule(_multiple_of_stride, doc=f"a multiple of {NODE_STRIDE:#x}"),
     ] = 0x200
     """First id of node 0, a multiple of 0x10."""
     options: dict[str, Any] = field(default_factory=dict)
@@ -184,20 +187,20 @@ class ModbusSection(Table):
 class TemperaturesSection(Table):
     """Temperature sensors and the checks applied to them."""
 
-    sensors: Annotated[dict[str, str], Rule(_sensor_ids)] = field(
-        default_factory=lambda: {"0": "T_x", "1": "T_y", "2": "T_z", "3": "T_wp"}
-    )
+    sensors: Annotated[
+        dict[str, str], Rule(_sensor_ids, doc=f"ids 0..255, roles {', '.join(TEMPERATURE_ROLES)}")
+    ] = field(default_factory=lambda: {"0": "T_x", "1": "T_y", "2": "T_z", "3": "T_wp"})
     """Sensor id (as a string key, 0..255) → role (T_x, T_y, T_z, T_wp, T_top, T_bottom,
     T_air)."""
-    required: Annotated[list[str], Rule(_known_roles)] | None = None
+    required: Annotated[list[str], Rule(_known_roles, doc="roles as in sensors")] | None = None
     """Roles a reading needs; None (not set) = the ones the grid needs."""
     stale_s: Annotated[float, _SECONDS] = 10.0
     """A sensor whose sample counter has not changed for this long is stale, s."""
-    plausible_C: Annotated[list[float], _TEMP_C, Rule(_low_high)] = field(
+    plausible_C: Annotated[list[float], _TEMP_C, _LOW_HIGH] = field(
         default_factory=lambda: [-10.0, 60.0]
     )
     """Readings outside this range [low, high] are sensor faults (implausible), °C."""
-    valid_range_C: Annotated[list[float], _TEMP_C, Rule(_low_high)] = field(
+    valid_range_C: Annotated[list[float], _TEMP_C, _LOW_HIGH] = field(
         default_factory=lambda: [10.0, 40.0]
     )
     """Range [low, high] the compensation is valid for; outside it the reading is not
@@ -221,9 +224,7 @@ class LimitsSection(Table):
 
     def rules(self, context: Mapping[str, Any]) -> Iterable[Problem]:
         if usable(context, "warn_um", "error_um") and not self.warn_um <= self.error_um:
-            yield (
-                f"{{path}} need 0 < warn_um <= error_um, got {self.warn_um} and {self.error_um}"
-            )
+            yield (f"{{path}} need 0 < warn_um <= error_um, got {self.warn_um} and {self.error_um}")
 
 
 @dataclass

@@ -14,7 +14,7 @@ import csv
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 
@@ -326,6 +326,11 @@ _TABLES = (
 class MachineFile(Table):
     """``machine.toml``: one machine. Top-level keys besides these are kept as given (and
     written back); an unknown table is refused."""
+
+    __pydantic_config__: ClassVar[dict[str, Any]] = {
+        **Table.__pydantic_config__,
+        "extra": "ignore",  # other scalars are kept in the description, unchecked
+    }
 
     name: Annotated[str, Rule(_non_empty)]
     """Non-empty free text; also the prefix of seed-style file sets."""

@@ -84,6 +84,11 @@ PROBE_DEFAULT_UM = 0.5  # one probing, per component, when [probe] random_um is 
 STANDARD_U = Num(0.0, 1e9, note="a standard uncertainty, k = 1: check the unit")
 
 
+def _u(unit: str) -> Num:
+    """:data:`STANDARD_U` in ``unit``."""
+    return Num(STANDARD_U.lo, STANDARD_U.hi, unit, note=STANDARD_U.note)
+
+
 @dataclass
 class TableUncertaintySection(Table):
     """``[uncertainty.errors.<name>]`` or ``[uncertainty.<class>]``: one table's (or every table
@@ -103,9 +108,9 @@ class TableUncertaintySection(Table):
 class SquarenessUncertainty(Table):
     """u of α, β1, β2 (µrad), one number for all three or by name."""
 
-    alpha: Annotated[float, STANDARD_U] | None = None
-    beta1: Annotated[float, STANDARD_U] | None = None
-    beta2: Annotated[float, STANDARD_U] | None = None
+    alpha: Annotated[float, _u("µrad")] | None = None
+    beta1: Annotated[float, _u("µrad")] | None = None
+    beta2: Annotated[float, _u("µrad")] | None = None
 
 
 @dataclass
@@ -122,17 +127,17 @@ class UncertaintySection(Table):
     """``[uncertainty]`` of ``machine.toml``: standard uncertainties (k = 1) of the machine's
     inputs; a value not given is defaulted (:func:`resolve_uncertainty`)."""
 
-    probe_um: Annotated[float, STANDARD_U] | None = None
+    probe_um: Annotated[float, _u("µm")] | None = None
     """Probing error of one point, each component (σ), µm."""
-    squareness: Annotated[SquarenessUncertainty, Spread(SQUARENESS, STANDARD_U)] | None = None
+    squareness: Annotated[SquarenessUncertainty, Spread(SQUARENESS, _u("µrad"))] | None = None
     """u of α, β1, β2, µrad: a number or ``{alpha, beta1, beta2}``."""
-    scale_temperature_C: Annotated[AxisUncertainty, Spread(AXES, STANDARD_U)] | None = None
+    scale_temperature_C: Annotated[AxisUncertainty, Spread(AXES, _u("°C"))] | None = None
     """u of the temperature each scale sensor reads, °C: a number or ``{x, y, z}``."""
-    expansion: Annotated[AxisUncertainty, Spread(AXES, STANDARD_U)] | None = None
+    expansion: Annotated[AxisUncertainty, Spread(AXES, _u("µm/(m·°C)"))] | None = None
     """u of each scale's expansion coefficient, µm/(m·°C): a number or ``{x, y, z}``."""
-    workpiece_temperature_C: Annotated[float, STANDARD_U] | None = None
+    workpiece_temperature_C: Annotated[float, _u("°C")] | None = None
     """u of the workpiece sensor, °C."""
-    workpiece_expansion: Annotated[float, STANDARD_U] | None = None
+    workpiece_expansion: Annotated[float, _u("µm/(m·°C)")] | None = None
     """u of the workpiece coefficient, µm/(m·°C)."""
     errors: Annotated[
         dict[Annotated[str, Rule(unknown_table_component)], TableUncertaintySection],

@@ -22,6 +22,7 @@ from cmm_comp.compensation.toml_schema import (
     Choice,
     Num,
     Problem,
+    Rule,
     SchemaError,
     Table,
     usable,
@@ -43,6 +44,12 @@ class LiveConfigError(CmmCompError, ValueError):
 _RATE_HZ = Num(0.0, 1000.0, "Hz", lo_open=True)
 
 
+def _address(host: str) -> Iterable[Problem]:
+    why = host_problem(host, allow_remote=True)
+    if why is not None:
+        yield f" = {why}"
+
+
 @dataclass
 class LiveSection(Table):
     """Live view: the session-log topics and a 3-D scene of the corrections, streamed over the
@@ -50,7 +57,7 @@ class LiveSection(Table):
 
     enabled: bool = False
     """Start the WebSocket server (needs ``pip install 'cmm-comp[live]'``)."""
-    host: str = "127.0.0.1"
+    host: Annotated[str, Rule(_address, doc="an IP literal or localhost")] = "127.0.0.1"
     """Bind address: an IP literal or ``localhost``; loopback only unless ``allow_remote``."""
     port: Annotated[int, Num(0, 65535)] = 8765
     """TCP port (Foxglove's default 8765); 0 = any free port."""
