@@ -76,7 +76,7 @@ def shown(value: Any) -> str:
     return str(value)
 
 
-def _num(value: float) -> str:
+def _num(value: float | None) -> str:
     return str(value) if isinstance(value, int) else f"{value:g}"
 
 
@@ -133,16 +133,17 @@ class Num:
 
     def describe(self) -> str:
         """``> 0 and <= 60 s`` / ``0 .. 65535`` / ``a finite number``."""
-        if self.lo is None and self.hi is None:
+        lo, hi = self.lo, self.hi
+        if lo is None and hi is None:
             text = "a finite number"
-        elif self.hi is None:
-            text = f"{'>' if self.lo_open else '>='} {_num(self.lo)}"
-        elif self.lo is None:
-            text = f"<= {_num(self.hi)}"
+        elif hi is None:
+            text = f"{'>' if self.lo_open else '>='} {_num(lo)}"
+        elif lo is None:
+            text = f"<= {_num(hi)}"
         elif self.lo_open:
-            text = f"> {_num(self.lo)} and <= {_num(self.hi)}"
+            text = f"> {_num(lo)} and <= {_num(hi)}"
         else:
-            text = f"{_num(self.lo)} .. {_num(self.hi)}"
+            text = f"{_num(lo)} .. {_num(hi)}"
         text += f" {self.unit}" if self.unit else ""
         return text + (f" ({self.note})" if self.note else "")
 
@@ -150,13 +151,16 @@ class Num:
         """The pydantic-core schema of the number itself (its errors are worded by :meth:`tail`)."""
         from pydantic_core import core_schema as cs
 
-        lo: dict[str, float] = {}
-        if self.lo is not None:
-            lo = {"gt": self.lo} if self.lo_open else {"ge": self.lo}
-        hi = {} if self.hi is None else {"le": self.hi}
+        gt = self.lo if self.lo_open else None
+        ge = None if self.lo_open else self.lo
         if integer:
-            return cs.int_schema(strict=True, **lo, **hi)  # type: ignore[arg-type]
-        return cs.float_schema(strict=True, allow_inf_nan=False, **lo, **hi)
+            return cs.int_schema(
+                strict=True,
+                gt=None if gt is None else int(gt),
+                ge=None if ge is None else int(ge),
+                le=None if self.hi is None else int(self.hi),
+            )
+        return cs.float_schema(strict=True, allow_inf_nan=False, gt=gt, ge=ge, le=self.hi)
 
     def tail(self, value: Any, integer: bool) -> str:
         """What follows the key path when ``value`` breaks the rule."""
@@ -300,9 +304,8 @@ class Spread:
 
     def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> Any:
         from pydantic import ValidationError
-        from pydantic_core import core_schema as cs
-
         from pydantic_core import SchemaValidator
+        from pydantic_core import core_schema as cs
 
         number = SchemaValidator(self.item.core(integer=False))
 

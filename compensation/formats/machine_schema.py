@@ -371,12 +371,12 @@ class MachineFile(Table):
         return str(model_code(self.model or ""))
 
     def rules(self, context: Mapping[str, Any]) -> Iterable[Problem]:
-        if self.chain is None and usable(context, "model", "chain"):
-            if not isinstance(self.model, str) or model_code(self.model) is None:
-                yield (
-                    ("model",),
-                    f"unknown model {self.model!r}; allowed: {known_models()} (or give a [chain])",
-                )
+        known = isinstance(self.model, str) and model_code(self.model) is not None
+        if self.chain is None and usable(context, "model", "chain") and not known:
+            yield (
+                ("model",),
+                f"unknown model {self.model!r}; allowed: {known_models()} (or give a [chain])",
+            )
 
 
 def read_table_csv(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
