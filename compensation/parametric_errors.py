@@ -91,23 +91,17 @@ def canonical_name(name: str) -> str | None:
     return lower if lower in ALL_COMPONENTS else None
 
 
-def unknown_table_component(name: str) -> list[str]:
-    """Why ``name`` is no table component (a :class:`..toml_schema.Rule` of table keys)."""
-    canon = canonical_name(name)
-    if canon is None or canon not in TABLE_COMPONENTS:
-        return [
-            f"unknown error component; allowed: {', '.join(TABLE_COMPONENTS)} or ISO 230-1 names"
-        ]
-    return []
-
-
-def repeated_components(tables: Mapping[str, object]) -> list[tuple[tuple[str], str]]:
-    """The keys of ``tables`` naming a component already named (an alias counts)."""
+def bad_component_keys(tables: Mapping[str, object]) -> list[tuple[tuple[str], str]]:
+    """The keys of ``tables`` (a mapping by component name, ours or ISO 230-1) that name no
+    table component, or one already named (an alias counts): (key path, problem) each."""
     seen: set[str] = set()
     out = []
     for key in tables:
         canon = canonical_name(key)
-        if canon in seen:
+        if canon is None or canon not in TABLE_COMPONENTS:
+            allowed = ", ".join(TABLE_COMPONENTS)
+            out.append(((key,), f"unknown error component; allowed: {allowed} or ISO 230-1 names"))
+        elif canon in seen:
             out.append(((key,), f"component {canon} is given twice (aliases count)"))
         seen.add(str(canon))
     return out

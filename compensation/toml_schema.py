@@ -8,7 +8,8 @@ its rule as ``Annotated`` metadata:
   ``int`` field takes integers only, a ``float`` field any number (integers become floats);
 * :class:`Vec` — a list of such numbers (exactly ``n``, or at most ``max_n``);
 * :class:`Choice` — one of a few strings;
-* :class:`Rule` — any further check of one value (``check(value)`` yields the problems).
+* :class:`Rule` — any further check of one value (``check(value)`` yields the problems);
+* :class:`Spread` — one number standing for every key of a table of numbers.
 
 A :class:`Table` lists its cross-key rules in :meth:`Table.rules` (run once its keys are valid)
 and refuses unknown keys, naming the allowed ones. Every scalar is strict: ``1`` is not
@@ -279,11 +280,15 @@ class Rule:
     context: bool = False
     doc: str = ""
     """What the rule allows, for the documentation (empty: said by the key's docstring)."""
+    raw: bool = False
+    """Check the value as given, before (and besides) its own validation: e.g. the keys of a
+    table, whatever its values are."""
 
     def describe(self) -> str:
         return self.doc
 
     def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> Any:
+        from pydantic import ValidationError
         from pydantic_core import core_schema as cs
 
         def after(value: Any, info: Any) -> Any:
@@ -291,6 +296,22 @@ class Rule:
             _raise_problems(self.check(*args), value)
             return value
 
+        def first(value: Any, validate: Callable[[Any], Any], info: Any) -> Any:
+            details: list[InitErrorDetails] = []
+            try:
+                after(value, info)
+            except ValidationError as exc:
+                details += _details(exc)
+            try:
+                value = validate(value)
+            except ValidationError as exc:
+                details += _details(exc)
+            if details:
+                _raise(details)
+            return value
+
+        if self.raw:
+            return cs.with_info_wrap_validator_function(first, handler(source))
         return cs.with_info_after_validator_function(after, handler(source))
 
 

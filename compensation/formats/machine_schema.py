@@ -21,7 +21,7 @@ import numpy as np
 from ..effects.base import effect_from_table
 from ..kinematics import Chain
 from ..models import known_models, model_code
-from ..parametric_errors import SQUARENESS, repeated_components, unknown_table_component
+from ..parametric_errors import SQUARENESS, bad_component_keys
 from ..straightness import CRITERIA
 from ..tables import MAX_POLYNOMIAL_ORDER, fit_polynomial
 from ..toml_schema import Choice, Num, Problem, Rule, Table, Vec, usable
@@ -261,21 +261,15 @@ class ErrorTableSection(Table):
 
 
 def _reversal_positional(tables: Mapping[str, ErrorTableSection]) -> Iterable[Problem]:
-    from ..parametric_errors import parse_component
+    from ..parametric_errors import canonical_name, parse_component
 
     for key, table in tables.items():
-        if table.reversal is not None and not parse_component(key).is_positional:
+        known = canonical_name(key) is not None and not bad_component_keys({key: table})
+        if known and table.reversal is not None and not parse_component(key).is_positional:
             yield (
                 (key, "reversal"),
                 "a reversal applies to positional tables (dx_x, dy_y, dz_z) only",
             )
-
-
-def _error_tables(tables: Mapping[str, ErrorTableSection]) -> Iterable[Problem]:
-    repeated = repeated_components(tables)
-    yield from repeated
-    if not repeated:
-        yield from _reversal_positional(tables)
 
 
 @dataclass
@@ -344,8 +338,9 @@ class MachineFile(Table):
     thermal: ThermalSection = field(default_factory=ThermalSection)
     squareness: SquarenessSection = field(default_factory=SquarenessSection)
     errors: Annotated[
-        dict[Annotated[str, Rule(unknown_table_component)], ErrorTableSection],
-        Rule(_error_tables),
+        dict[str, ErrorTableSection],
+        Rule(bad_component_keys, raw=True),
+        Rule(_reversal_positional),
     ] = field(default_factory=dict)
     """One table per measured component (absent = zero)."""
     chain: ChainSection | None = None

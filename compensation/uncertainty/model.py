@@ -35,10 +35,9 @@ from ..parametric_errors import (
     AXES,
     SQUARENESS,
     TABLE_COMPONENTS,
+    bad_component_keys,
     canonical_name,
     parse_component,
-    repeated_components,
-    unknown_table_component,
 )
 from ..toml_schema import Num, Rule, Spread, Table, validate
 
@@ -139,10 +138,9 @@ class UncertaintySection(Table):
     """u of the workpiece sensor, °C."""
     workpiece_expansion: Annotated[float, _u("µm/(m·°C)")] | None = None
     """u of the workpiece coefficient, µm/(m·°C)."""
-    errors: Annotated[
-        dict[Annotated[str, Rule(unknown_table_component)], TableUncertaintySection],
-        Rule(repeated_components),
-    ] = field(default_factory=dict)
+    errors: Annotated[dict[str, TableUncertaintySection], Rule(bad_component_keys, raw=True)] = (
+        field(default_factory=dict)
+    )
     """Per table (our names or ISO 230-1 aliases)."""
     positional: TableUncertaintySection | None = None
     """For every positional table without its own entry."""
