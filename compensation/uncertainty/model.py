@@ -1,5 +1,7 @@
 """The uncertainty model of a machine: the ``[uncertainty]`` section of ``machine.toml``
-(docs/formats.md §1.11, docs/uncertainty.md), validated and with every default resolved.
+(docs/formats.md §1.11, docs/uncertainty.md): its keys and rules (:class:`UncertaintySection`,
+checked with the rest of the file, :mod:`..formats.machine_schema`) and the model with every
+default resolved (:func:`resolve_uncertainty`).
 
 Every value is a **standard** uncertainty (k = 1). Units: linear tables µm, angular tables and
 squareness µrad, temperatures °C, expansion coefficients µm/(m·°C), positions mm.
@@ -30,7 +32,6 @@ from typing import Annotated, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import MachineFileError, SchemaError
 from ..parametric_errors import (
     AXES,
     SQUARENESS,
@@ -39,7 +40,7 @@ from ..parametric_errors import (
     canonical_name,
     parse_component,
 )
-from ..toml_schema import Num, Rule, Spread, Table, validate
+from ..toml_schema import Num, Rule, Spread, Table
 
 __all__ = [
     "EXPANSION_DEFAULT_FRACTION",
@@ -53,7 +54,6 @@ __all__ = [
     "TableUncertainty",
     "UncertaintyModel",
     "UncertaintySection",
-    "parse_uncertainty",
     "resolve_uncertainty",
     "table_class",
 ]
@@ -249,45 +249,6 @@ class UncertaintyModel:
             "defaulted": list(self.defaulted),
             "notes": list(self.notes),
         }
-
-
-@dataclass
-class _UncertaintyFile(Table):
-    """A file holding only ``[uncertainty]`` (messages name ``uncertainty.<key>``)."""
-
-    uncertainty: UncertaintySection = field(default_factory=UncertaintySection)
-
-
-def parse_uncertainty(
-    data: Mapping[str, Any] | None,
-    *,
-    source: str,
-    tables: Mapping[str, Any],
-    lower_mm: FloatArray,
-    upper_mm: FloatArray,
-    reference_mm: FloatArray,
-    expansion: FloatArray,
-    workpiece_expansion: float | None,
-    probe_random_um: float,
-) -> UncertaintyModel:
-    """Validate the ``[uncertainty]`` table ``data`` (None: absent) and resolve it
-    (:func:`resolve_uncertainty`); :class:`MachineFileError` listing every problem (naming
-    ``source`` and the key)."""
-    try:
-        section = validate(_UncertaintyFile, {"uncertainty": data or {}}, source).uncertainty
-    except SchemaError as exc:
-        raise MachineFileError.from_schema(exc, source) from None
-    return resolve_uncertainty(
-        section,
-        tables=tables,
-        lower_mm=lower_mm,
-        upper_mm=upper_mm,
-        reference_mm=reference_mm,
-        expansion=expansion,
-        workpiece_expansion=workpiece_expansion,
-        probe_random_um=probe_random_um,
-        given=dict(data or {}),
-    )
 
 
 def resolve_uncertainty(
