@@ -273,11 +273,9 @@ class Choice:
 @dataclass(frozen=True)
 class Rule:
     """A further check of a value that is valid on its own: ``check(value)`` yields every
-    :data:`Problem` (none: the value is good); ``context``: it is called as
-    ``check(value, context)`` with the validation context (e.g. the folder of the file)."""
+    :data:`Problem` (none: the value is good)."""
 
-    check: Callable[..., Iterable[Problem]]
-    context: bool = False
+    check: Callable[[Any], Iterable[Problem]]
     doc: str = ""
     """What the rule allows, for the documentation (empty: said by the key's docstring)."""
     raw: bool = False
@@ -291,15 +289,14 @@ class Rule:
         from pydantic import ValidationError
         from pydantic_core import core_schema as cs
 
-        def after(value: Any, info: Any) -> Any:
-            args = (value, info.context or {}) if self.context else (value,)
-            _raise_problems(self.check(*args), value)
+        def after(value: Any) -> Any:
+            _raise_problems(self.check(value), value)
             return value
 
-        def first(value: Any, validate: Callable[[Any], Any], info: Any) -> Any:
+        def first(value: Any, validate: Callable[[Any], Any]) -> Any:
             details: list[InitErrorDetails] = []
             try:
-                after(value, info)
+                after(value)
             except ValidationError as exc:
                 details += _details(exc)
             try:
@@ -311,8 +308,8 @@ class Rule:
             return value
 
         if self.raw:
-            return cs.with_info_wrap_validator_function(first, handler(source))
-        return cs.with_info_after_validator_function(after, handler(source))
+            return cs.no_info_wrap_validator_function(first, handler(source))
+        return cs.no_info_after_validator_function(after, handler(source))
 
 
 @dataclass(frozen=True)
