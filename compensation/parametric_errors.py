@@ -95,7 +95,9 @@ def bad_component_keys(tables: Mapping[str, object]) -> list[tuple[tuple[str], s
     """The keys of ``tables`` (a mapping by component name, ours or ISO 230-1) that name no
     table component, or one already named (an alias counts): (key path, problem) each."""
     seen: set[str] = set()
-    out = []
+    out: list[tuple[tuple[str], str]] = []
+    if not isinstance(tables, Mapping):  # not a table: said by the table's own check
+        return out
     for key in tables:
         canon = canonical_name(key)
         if canon is None or canon not in TABLE_COMPONENTS:
