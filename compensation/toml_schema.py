@@ -355,7 +355,6 @@ class Table:
     ``NOT_IN_FILE`` are attributes of the object, not keys of the file."""
 
     __pydantic_config__: ClassVar[dict[str, Any]] = {
-        "use_attribute_docstrings": True,
         "extra": "forbid",  # unknown keys are refused (and named) before pydantic sees them
     }
     NOT_IN_FILE: ClassVar[frozenset[str]] = frozenset()
@@ -507,6 +506,26 @@ def validate(cls: type, data: Any, source: str, context: Mapping[str, Any] | Non
     except ValidationError as exc:
         locs = [tuple(e["loc"]) for e in exc.errors(include_url=False)]
         raise SchemaError(problem_lines(exc, source), locs) from None
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring under each field of the dataclass ``cls`` (and its bases), whitespace
+    folded: what the documentation says of each key."""
+    import ast
+    import inspect
+    import itertools
+
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__[:-1]):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        body = ast.parse(inspect.getsource(klass).lstrip()).body[0].body  # type: ignore[attr-defined]
+        for node, after in itertools.pairwise(body):
+            doc = getattr(after, "value", None)
+            text = doc.value if isinstance(doc, ast.Constant) else None
+            if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and text:
+                docs[node.target.id] = " ".join(str(text).split())
+    return docs
 
 
 def rules_of(cls: type, key: str) -> list[Num | Vec | Choice | Rule]:

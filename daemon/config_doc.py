@@ -13,7 +13,7 @@ import types
 from pathlib import Path
 from typing import Any, Union, get_args, get_origin
 
-from cmm_comp.compensation.toml_schema import adapter, describe_rules
+from cmm_comp.compensation.toml_schema import describe_rules, field_docs
 
 from .config import DaemonConfig, section_types
 
@@ -51,19 +51,18 @@ def _default(value: Any) -> str:
 
 def reference_markdown() -> str:
     """One table per section: key, type, default, allowed (with unit), meaning."""
-    schema = adapter(DaemonConfig).json_schema()
     defaults = DaemonConfig()
     out = [BEGIN, ""]
     for section in DaemonConfig.toml_keys():
         obj = getattr(defaults, section)
         cls = type(obj)
-        props = schema["$defs"][cls.__name__]["properties"]
+        docs = field_docs(cls)
         doc = " ".join((cls.__doc__ or "").split())
         out += [f"**`[{section}]`**: {doc}", ""]
         out += ["| key | type | default | allowed | meaning |", "|---|---|---|---|---|"]
         for key, hint in section_types(section).items():
             allowed = describe_rules(cls, key) or ("true, false" if hint is bool else "any")
-            meaning = " ".join(props[key].get("description", "").split()).replace("|", "\\|")
+            meaning = docs.get(key, "").replace("|", "\\|")
             value = getattr(obj, key)
             out.append(
                 f"| `{key}` | {type_name(hint)} | `{_default(value)}` | {allowed} | {meaning} |"
