@@ -440,16 +440,19 @@ def usable(context: Mapping[str, Any], *keys: str) -> bool:
     return not set(keys) & context.get("bad", frozenset())
 
 
-def _strict_scalars(schema: Any) -> None:
-    """Make every bool/int/float/str schema in ``schema`` (a core-schema tree) strict."""
+def _strict_scalars(schema: Any, root: bool = True) -> None:
+    """Make every bool/int/float/str schema in ``schema`` (a core-schema tree) strict; a
+    nested table is left to its own :class:`Table` hook."""
     if isinstance(schema, dict):
         if schema.get("type") in ("bool", "int", "float", "str"):
             schema["strict"] = True
+        if schema.get("type") == "dataclass" and not root:
+            return
         for value in schema.values():
-            _strict_scalars(value)
+            _strict_scalars(value, root=False)
     elif isinstance(schema, list):
         for value in schema:
-            _strict_scalars(value)
+            _strict_scalars(value, root=False)
 
 
 # ------------------------------------------------------------------------------------ checking
