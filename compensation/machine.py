@@ -286,11 +286,10 @@ class Machine:
         defaults resolved; built from the defaults alone for a machine made without a file."""
         if self.uncertainty is not None:
             return self.uncertainty
-        from .uncertainty.model import parse_uncertainty
+        from .uncertainty.model import resolve_uncertainty
 
-        return parse_uncertainty(
+        return resolve_uncertainty(
             None,
-            source=self.source,
             tables=self.tables,
             lower_mm=self.volume.lower_mm,
             upper_mm=self.volume.upper_mm,
@@ -426,9 +425,10 @@ MAX_ANGLE_URAD = 1e6
 
 
 def _check_magnitudes(machine: Machine) -> None:
-    """MachineFileError naming the first error table (systematic or random part) or squareness
+    """MachineFileError naming every error table (systematic or random part) and squareness
     whose value within the working volume is not finite or beyond the limits above."""
     lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
+    problems: list[tuple[str, str]] = []
     for name, table in machine.tables.items():
         c = table.component
         k = AXIS_INDEX[c.axis]
@@ -442,21 +442,27 @@ def _check_magnitudes(machine: Machine) -> None:
                 bad = ~(np.abs(values) <= limit)
             if bad.any():
                 i = int(np.argmax(bad))
-                raise MachineFileError(
-                    machine.source,
-                    f"errors.{name}",
-                    f"{part} reaches {values[i]:g} {c.unit} at {c.axis} = {q[i]:g} mm: beyond "
-                    f"±{limit:g} {c.unit} it is no machine error (check the values and the unit, "
-                    f"{c.unit})",
+                problems.append(
+                    (
+                        f"errors.{name}",
+                        f"{part} reaches {values[i]:g} {c.unit} at {c.axis} = {q[i]:g} mm: beyond "
+                        f"±{limit:g} {c.unit} it is no machine error (check the values and the "
+                        f"unit, {c.unit})",
+                    )
                 )
     for what, values in (
         ("squareness", machine.squareness_urad),
         ("squareness random", machine.squareness_random_urad),
     ):
         if not np.all(np.abs(values) <= MAX_ANGLE_URAD):
-            raise MachineFileError(
-                machine.source,
-                what,
-                f"{np.asarray(values).tolist()} urad: beyond ±{MAX_ANGLE_URAD:g} urad it is no "
-                "machine error (check the values and the unit, urad)",
+            problems.append(
+                (
+                    what,
+                    f"{np.asarray(values).tolist()} urad: beyond ±{MAX_ANGLE_URAD:g} urad it is "
+                    "no machine error (check the values and the unit, urad)",
+                )
             )
+    if problems:
+        where, problem = problems[0]
+        lines = [f"{machine.source}: {w}: {p}" for w, p in problems]
+        raise MachineFileError(machine.source, where, problem, lines=lines)

@@ -111,6 +111,24 @@ def canonical_name(name: str) -> str | None:
     return lower if lower in ALL_COMPONENTS else None
 
 
+def bad_component_keys(tables: Mapping[str, object]) -> list[tuple[tuple[str], str]]:
+    """The keys of ``tables`` (a mapping by component name, ours or ISO 230-1) that name no
+    table component, or one already named (an alias counts): (key path, problem) each."""
+    seen: set[str] = set()
+    out: list[tuple[tuple[str], str]] = []
+    if not isinstance(tables, Mapping):  # not a table: said by the table's own check
+        return out
+    for key in tables:
+        canon = canonical_name(key)
+        if canon is None or canon not in TABLE_COMPONENTS:
+            allowed = ", ".join(TABLE_COMPONENTS)
+            out.append(((key,), f"unknown error component; allowed: {allowed} or ISO 230-1 names"))
+        elif canon in seen:
+            out.append(((key,), f"component {canon} is given twice (aliases count)"))
+        seen.add(str(canon))
+    return out
+
+
 def parse_component(name: str) -> Component:
     """The table component ``name`` (ours or ISO alias); ValueError naming the allowed ones."""
     canon = canonical_name(name)
