@@ -1,9 +1,12 @@
 """A pytest plugin: the CPU time each test spends, its own and its children's.
 
-``pytest -p cpu_durations`` (tests/ on ``sys.path``, as pytest puts it for the suite) prints
-the tests that used the most CPU, and writes every test's figures to the JSON file named by
-``CMM_COMP_CPU_DURATIONS`` when set. CPU time, unlike ``--durations``' wall time, barely moves
-with the machine's load, so figures from a shared 2-core machine compare across runs.
+``PYTHONPATH=tests python -m pytest -p cpu_durations`` (the plugin is loaded before pytest puts
+tests/ on ``sys.path``) prints the tests that used the most CPU, and writes every test's figures
+to the JSON file named by ``CMM_COMP_CPU_DURATIONS`` when set. CPU time, unlike
+``--durations``' wall time, barely moves with the machine's load, so figures from a shared
+2-core machine compare across runs. Under pytest-xdist (``-n 2``) each worker writes
+``<name>.<worker>.json`` beside that file when its session ends, and the controller (which runs
+no test) merges them into the file and prints the same summary.
 
 A test's CPU is this process's ``time.process_time()`` over setup + call + teardown, plus the
 user + system time of the child processes it waited for (``RUSAGE_CHILDREN``: a child that is
@@ -45,7 +48,22 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: Any) -> Generator[None,
     }
 
 
+def _worker_file(out: Path, worker: str) -> Path:
+    return out.with_name(f"{out.stem}.{worker}{out.suffix}")
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    out, worker = os.environ.get(ENV), os.environ.get("PYTEST_XDIST_WORKER")
+    if out and worker:
+        _worker_file(Path(out), worker).write_text(json.dumps(_figures))
+
+
 def pytest_terminal_summary(terminalreporter: Any) -> None:
+    out = os.environ.get(ENV)
+    if not _figures and out:  # the xdist controller: its workers' files
+        for part in sorted(Path(out).parent.glob(_worker_file(Path(out), "gw*").name)):
+            _figures.update(json.loads(part.read_text()))
+            part.unlink()
     if not _figures:
         return
     total = {k: sum(f[k] for f in _figures.values()) for k in ("own_s", "children_s", "wall_s")}
@@ -62,8 +80,5 @@ def pytest_terminal_summary(terminalreporter: Any) -> None:
         f"total: own {total['own_s']:.1f} s + children {total['children_s']:.1f} s CPU, "
         f"{total['wall_s']:.1f} s wall over {len(_figures)} tests"
     )
-    out = os.environ.get(ENV)
     if out:
-        worker = os.environ.get("PYTEST_XDIST_WORKER", "")
-        path = Path(out.replace("{worker}", worker))
-        path.write_text(json.dumps(_figures, indent=1, sort_keys=True) + "\n")
+        Path(out).write_text(json.dumps(_figures, indent=1, sort_keys=True) + "\n")

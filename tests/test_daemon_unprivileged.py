@@ -55,7 +55,7 @@ READY_S = 900.0
 """A start without a cache compiles every kernel: ~20 s of CPU alone, minutes on a machine
 whose 2 cores are shared by other test runs."""
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(3600)]
+pytestmark = pytest.mark.timeout(3600)
 
 
 def _why_not() -> str | None:

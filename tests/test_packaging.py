@@ -58,7 +58,6 @@ def test_python_daemon_and_cmm_comp_daemon_coexist(tmp_path: Path) -> None:
     assert "site-packages" in run.stdout
 
 
-@pytest.mark.slow
 def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(
     tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
