@@ -24,9 +24,14 @@ from cmm_comp.protocol.can_ids import NODE_STRIDE, STANDARD_ID_MAX
 from .config_checks import range_errors
 from .live.settings import LIVE_RULES, LiveSection, live_problems
 
-MCAP_WRITERS = ("thread", "process")
-MCAP_WRITER_PRIORITIES = ("idle", "normal")
 MCAP_COMPRESSIONS = ("zstd", "lz4", "none")
+REMOVED_KEYS: dict[str, tuple[str, str]] = {
+    "mcap.writer": ("process", "the session log is always written in a child process"),
+    "mcap.writer_priority": ("idle", "the session log's writer always runs at SCHED_IDLE"),
+    "live.sender": ("process", "the live view always runs in a child process"),
+}
+"""Keys of earlier versions: ``key → (the only behaviour left, why)``. A file giving that value
+loads with a note to delete the line; any other value is an error."""
 
 
 class ConfigError(CmmCompError, ValueError):
@@ -159,14 +164,6 @@ class McapSection:
     """Roll files at this age, s (directories only; 0 = never)."""
     flush_s: float = 1.0
     """Cut a chunk at least this often: the most a crash loses, s."""
-    writer: str = "process"
-    """Where JSON + MCAP writing runs: ``process`` (a child process, off the reply path's GIL
-    and CPU; also finishes the file if the daemon is killed) or ``thread`` (a thread of the
-    daemon process: shares the GIL with the reply path, adds to its p99). See docs/mcap.md."""
-    writer_priority: str = "idle"
-    """CPU priority of the ``process`` writer: ``idle`` (Linux ``SCHED_IDLE``: runs only on CPU
-    time nothing else wants, so it never delays a reply; under sustained 100 % CPU load the
-    queue fills and messages are dropped and counted) or ``normal``."""
     compression: str = "zstd"
     """Chunk compression: ``zstd`` (smallest files), ``lz4`` (faster, less CPU and cache per
     chunk) or ``none``."""
@@ -213,6 +210,8 @@ class DaemonConfig:
     log: LogSection = field(default_factory=LogSection)
     live: LiveSection = field(default_factory=LiveSection)
     source: str = "<defaults>"
+    notes: list[str] = field(default_factory=list)
+    """Warnings about the file that do not stop it loading (a removed key, :data:`REMOVED_KEYS`)."""
 
     def check(self) -> DaemonConfig:
         """Validate ranges and cross-field rules; ConfigError listing every problem (one line
@@ -288,15 +287,6 @@ class DaemonConfig:
             )
         if not (self.can.enabled or self.modbus.enabled):
             out.append(f"{where}: enable at least one of can.enabled, modbus.enabled")
-        if self.mcap.writer not in MCAP_WRITERS:
-            out.append(
-                f"{where}: mcap.writer = {self.mcap.writer!r}; allowed: {', '.join(MCAP_WRITERS)}"
-            )
-        if self.mcap.writer_priority not in MCAP_WRITER_PRIORITIES:
-            out.append(
-                f"{where}: mcap.writer_priority = {self.mcap.writer_priority!r}; allowed: "
-                f"{', '.join(MCAP_WRITER_PRIORITIES)}"
-            )
         if self.mcap.compression not in MCAP_COMPRESSIONS:
             out.append(
                 f"{where}: mcap.compression = {self.mcap.compression!r}; allowed: "
@@ -310,7 +300,7 @@ class DaemonConfig:
         return {int(k): v for k, v in self.temperatures.sensors.items()}
 
 
-_SECTIONS = [f.name for f in dataclasses.fields(DaemonConfig) if f.name != "source"]
+_SECTIONS = [f.name for f in dataclasses.fields(DaemonConfig) if f.name not in ("source", "notes")]
 
 
 def _section_types(section: str) -> dict[str, Any]:
@@ -405,6 +395,9 @@ def config_and_problems(
         types = _section_types(section)
         obj = getattr(cfg, section)
         for key, value in table.items():
+            if f"{section}.{key}" in REMOVED_KEYS:
+                _removed(f"{section}.{key}", value, source, cfg.notes, errors)
+                continue
             if key not in types:
                 errors.append(
                     f"{source}: unknown key {section}.{key}; allowed: {', '.join(sorted(types))}"
@@ -417,6 +410,18 @@ def config_and_problems(
                 reported.add(f"{section}.{key}")
     errors += cfg.problems(skip=reported)
     return cfg, errors
+
+
+def _removed(name: str, value: Any, source: str, notes: list[str], errors: list[str]) -> None:
+    """A key of :data:`REMOVED_KEYS`: a note when ``value`` is the behaviour left, else an error."""
+    kept, why = REMOVED_KEYS[name]
+    if value == kept:
+        notes.append(f"{source}: {name} is no longer a setting ({why}): delete the line")
+    else:
+        errors.append(
+            f"{source}: {name} = {_short(value)} was removed ({why}; {kept!r} was the default): "
+            "delete the line"
+        )
 
 
 def add_override_flags(parser: argparse.ArgumentParser) -> None:

@@ -1,11 +1,10 @@
 """Public API of ``live`` (read by lazy_loader: names load on first use)."""
 
 from .fanout import LiveFanOut
-from .process import LiveChildError, LiveDownError, LiveProcessSink, live_sink
+from .process import LiveChildError, LiveDownError, LiveProcessSink
 from .server import SUBPROTOCOL, LiveServer, LiveStartError, open_live_server
 from .settings import (
     LIVE_RULES,
-    SENDERS,
     LiveConfigError,
     LiveSection,
     host_problem,
@@ -24,7 +23,6 @@ __all__ = [
     "LATCHED_TOPICS",
     "LIVE_RULES",
     "SCENE_TOPIC",
-    "SENDERS",
     "STREAMED_TOPICS",
     "SUBPROTOCOL",
     "LiveChildError",
@@ -40,6 +38,5 @@ __all__ = [
     "host_problem",
     "live_problems",
     "live_section_from_table",
-    "live_sink",
     "open_live_server",
 ]

@@ -49,10 +49,9 @@ class LiveSection:
     """Allow a non-loopback ``host`` (the protocol has no authentication: anyone who reaches the
     port sees every reading)."""
     queue: int = 4096
-    """Messages the live view holds between two updates (the sender's queue: when full the
-    oldest are dropped; with ``sender = "process"`` also the size of the shared-memory ring
-    between the daemon and the process, 256 bytes a message: when full the newest are
-    dropped); every drop is counted."""
+    """Messages the live view holds between two updates (its process's queue: when full the
+    oldest are dropped; also the size of the shared-memory ring between the daemon and the
+    process, 256 bytes a message: when full the newest are dropped); every drop is counted."""
     update_rate_hz: float = 10.0
     """Updates sent to clients per second, at most (what arrived in between goes out
     together, the high-rate topics decimated). 10 by default: a viewer on the daemon's host
@@ -71,11 +70,6 @@ class LiveSection:
     newest always included): bounds the scene's cost at high reading rates."""
     arrow_mm_per_um: float = 5.0
     """Magnification of the correction arrows: drawn length, mm, per µm of correction."""
-    sender: str = "process"
-    """Where the JSON encoding, the scene and the WebSocket server run: ``process`` (a child
-    process at ``SCHED_IDLE``: its own GIL, only spare CPU; the daemon only copies the records
-    of watched topics into shared memory, no thread, no system call) or ``thread`` (a thread
-    of the daemon: shares the reply path's GIL and costs it measurably; docs/live.md)."""
 
 
 LIVE_RULES: dict[str, Range] = {
@@ -89,10 +83,6 @@ LIVE_RULES: dict[str, Range] = {
     "arrow_mm_per_um": Range(0.0, 1e6, lo_open=True, unit="mm/µm"),
 }
 """Allowed range of every numeric ``[live]`` key (NaN and ±inf never allowed)."""
-
-
-SENDERS = ("process", "thread")
-"""Allowed values of ``live.sender``."""
 
 
 def _section_types() -> dict[str, Any]:
@@ -138,8 +128,6 @@ def live_problems(section: LiveSection, where: str, skip: set[str] | None = None
         if _bad_number(value, rule):
             shown = repr(value) if isinstance(value, float) else str(value)
             out.append(f"{where}: live.{key} = {shown}; allowed: {rule.describe()}")
-    if "live.sender" not in skip and section.sender not in SENDERS:
-        out.append(f"{where}: live.sender = {section.sender!r}; allowed: {', '.join(SENDERS)}")
     if "live.host" not in skip and "live.allow_remote" not in skip:
         why = host_problem(section.host, section.allow_remote)
         if why is not None:
