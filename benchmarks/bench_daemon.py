@@ -280,33 +280,51 @@ def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> d
     }
 
 
-def bench_throughput(grid: Path, args: Any, tmp: Path) -> dict[str, Any]:
-    """The floods, interleaved; best round of each (the least disturbed), all rounds listed."""
-    frames = raw_frames(readings(args.flood, np.random.default_rng(2)))
-    paced = raw_frames(readings(args.sustain_n, np.random.default_rng(3)))
+def flood_one(name: str, grid: Path, n: int, rate_hz: float, tmp: Path) -> dict[str, Any]:
+    """One flood of ``n`` readings (``rate_hz`` 0: unpaced) against the batch echo or the
+    daemon (``daemon_no_mcap``: logging off), in this process; for the daemon, the MCAP log's
+    own counts once it has stopped (every answer in the file? drops per topic)."""
+    frames = raw_frames(readings(n, np.random.default_rng(2)))
+    ch = f"bench-{uuid.uuid4().hex[:8]}"
+    if name == "echo":
+        with virtual_echo(ch, True), can.Bus(interface="virtual", channel=ch) as bus:
+            return flood(bus, frames)
+    path = "" if name == "daemon_no_mcap" else str(tmp / f"{ch}.mcap")
+    with (
+        DaemonService(config(grid, ch, path), events_stream=None) as d,
+        can.Bus(interface="virtual", channel=ch) as bus,
+    ):
+        CanController(bus).send_temperatures(Environment().samples(0.0))
+        r = flood(bus, frames, rate_hz)
+    if d.logger is not None:  # stopped with the service: its counts are final
+        st = d.logger.stats()
+        r["mcap_dropped_by_topic"] = dict(st.dropped_by_topic)
+        answered = r["readings"] - r["lost"]
+        r["answers_not_logged"] = answered - st.written_by_topic.get("/cmm/corrected", 0)
+        Path(path).unlink(missing_ok=True)
+    return r
+
+
+def bench_throughput(grid: Path, args: Any, tmp: Path, pythonpath: str) -> dict[str, Any]:
+    """The floods, each in a fresh process (this tree's, or with ``pythonpath`` the
+    baseline's: ``baseline_*`` cases), in 2 interleaved rounds; best round of each (the least
+    disturbed) and all rounds."""
     cases = ["echo", "daemon_mcap", "daemon_no_mcap", "sustained"]
+    if pythonpath:
+        cases += ["baseline_daemon_mcap", "baseline_sustained"]
     runs: dict[str, list[dict[str, Any]]] = {c: [] for c in cases}
     for k in range(2):
         for name in cases[k % len(cases) :] + cases[: k % len(cases)]:
-            ch = f"bench-{uuid.uuid4().hex[:8]}"
-            if name == "echo":
-                with virtual_echo(ch, True), can.Bus(interface="virtual", channel=ch) as bus:
-                    runs[name].append(flood(bus, frames))
-                continue
-            path = "" if name == "daemon_no_mcap" else str(tmp / f"{ch}.mcap")
-            with (
-                DaemonService(config(grid, ch, path), events_stream=None) as d,
-                can.Bus(interface="virtual", channel=ch) as bus,
-            ):
-                CanController(bus).send_temperatures(Environment().samples(0.0))
-                r = flood(bus, *((paced, args.sustain_hz) if name == "sustained" else (frames,)))
-            if d.logger is not None:  # stopped with the service: its counts are final
-                st = d.logger.stats()
-                r["mcap_dropped_by_topic"] = dict(st.dropped_by_topic)
-                answered = r["readings"] - r["lost"]
-                r["answers_not_logged"] = answered - st.written_by_topic.get("/cmm/corrected", 0)
-                Path(path).unlink(missing_ok=True)
-            runs[name].append(r)
+            case = name.removeprefix("baseline_")
+            paced = case == "sustained"
+            cmd = [sys.executable, __file__, "--flood-one", "daemon_mcap" if paced else case,
+                   "--grid", str(grid), "--flood", str(args.sustain_n if paced else args.flood),
+                   "--rate", str(args.sustain_hz if paced else 0.0)]  # fmt: skip
+            env = {**os.environ, "PYTHONPATH": pythonpath} if name != case else None
+            done = subprocess.run(
+                cmd, env=env, cwd="/" if env else ROOT, capture_output=True, text=True, check=True
+            )
+            runs[name].append(json.loads(done.stdout.strip().splitlines()[-1]))
     out: dict[str, Any] = {}
     for name in cases:
         best = max(runs[name], key=lambda r: r["readings_per_s"])
@@ -452,18 +470,19 @@ def udp_round(
             proc.stdout.close()
 
 
-def bench_udp(grid: Path, rs: list[RawReading], args: Any, tmp: Path) -> dict[str, Any]:
-    """The udp_multicast cases in interleaved rounds; with a baseline, the per-round ratios."""
+def bench_udp(
+    grid: Path, rs: list[RawReading], args: Any, tmp: Path, pythonpath: str
+) -> dict[str, Any]:
+    """The udp_multicast cases in interleaved rounds; with a baseline (its ``pythonpath``),
+    the per-round ratios daemon / baseline."""
     cases = ["echo", "daemon", "daemon_reloads"]
-    extra: dict[str, Any] = {}
-    if args.baseline:
-        extra["pythonpath"] = baseline_path(Path(args.baseline), tmp)
-        check_imports(extra["pythonpath"], Path(args.baseline))
+    extra: dict[str, Any] = {"pythonpath": pythonpath}
+    if pythonpath:
         cases.append("baseline")
     chunk = rs[: 200 + args.n]
     out = interleaved(cases, args.rounds, lambda c: udp_round(c, grid, chunk, args, tmp, extra))
     out.update({k: v for k, v in extra.items() if k != "pythonpath"})
-    if args.baseline:
+    if pythonpath:
         for q in ("p50", "p99"):
             per = [
                 d[q] / b[q]
@@ -591,9 +610,16 @@ def main() -> int:
     ap.add_argument("--settle-max-s", type=float, default=20.0, help="udp: wait for quiet, s")
     ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--echo-server", type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--flood-one", help=argparse.SUPPRESS)
+    ap.add_argument("--grid", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.echo_server:
         echo_main(args.echo_server)
+        return 0
+    if args.flood_one:
+        with tempfile.TemporaryDirectory() as tmpd:
+            r = flood_one(args.flood_one, args.grid, args.flood, args.rate, Path(tmpd))
+        print(json.dumps(r))
         return 0
     parts = set(args.cases.split(","))
     sys.setswitchinterval(0.0005)  # as the daemon process (cli/daemon.py)
@@ -609,8 +635,12 @@ def main() -> int:
         grid = tmp / "npl.grid"
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
         rs = readings(args.n + 200, np.random.default_rng(1))
+        pythonpath = ""
+        if args.baseline:
+            pythonpath = baseline_path(Path(args.baseline), tmp)
+            check_imports(pythonpath, Path(args.baseline))
         if "udp" in parts:
-            result["udp"] = bench_udp(grid, rs, args, tmp)
+            result["udp"] = bench_udp(grid, rs, args, tmp, pythonpath)
         if "virtual" in parts:
             from cmm_comp.compensation.uncertainty.grid_field import add_uncertainty
 
@@ -619,7 +649,7 @@ def main() -> int:
             add_uncertainty(g, machine, rng=np.random.default_rng(13), seed=13, trials=300).save(u_grid)  # fmt: skip
             result["virtual"] = bench_virtual(grid, u_grid, rs, args, tmp)
         if "throughput" in parts:
-            result["throughput"] = bench_throughput(grid, args, tmp)
+            result["throughput"] = bench_throughput(grid, args, tmp, pythonpath)
         if "modbus" in parts:
             result["modbus"] = bench_modbus(grid, args.modbus_n)
     result["loadavg_end"] = os.getloadavg()

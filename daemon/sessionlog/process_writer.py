@@ -83,32 +83,38 @@ class _PlainPickler(pickle.Pickler):
         return NotJson, (safe_repr(obj),)
 
 
-def pack(batch: tuple[str, Sequence[Payload], int, dict[str, int] | None]) -> bytes:
-    """The bytes of one ring record ``(topic, payloads, log_time_ns, parent drops or None)``.
-    Plain data takes ``pickle`` as it is (no global in it: no ``STACK_GLOBAL`` opcode,
-    byte 0x93, in the pickle); anything else goes through :class:`_PlainPickler`, and a payload
-    that cannot be pickled at all (nested too deep) becomes a :class:`.encoding.NotJson`."""
-    try:
-        data = pickle.dumps(batch, protocol=pickle.HIGHEST_PROTOCOL)
-        if b"\x93" not in data:
-            return data
-    except Exception:
-        pass
-    topic, payloads, t_ns, drops = batch
-    safe: list[Any] = []
-    for p in payloads:
+class Packer:
+    """Pickles ring records ``(topic, payloads, log_time_ns, parent drops or None)`` with one
+    reused :class:`_PlainPickler` (a new pickler per record cost twice as much). A payload that
+    cannot be pickled at all (nested too deep) becomes a :class:`.encoding.NotJson`. Not
+    thread-safe: the caller holds its lock."""
+
+    def __init__(self) -> None:
+        self._buf = io.BytesIO()
+        self._pickler = _PlainPickler(self._buf, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def __call__(self, batch: tuple[str, Sequence[Payload], int, dict[str, int] | None]) -> bytes:
         try:
-            _plain(p)
-            safe.append(p)
-        except Exception as exc:
-            safe.append(NotJson(f"<not picklable: {type(exc).__name__}> {safe_repr(p, 200)}"))
-    return _plain((topic, safe, t_ns, drops))
+            return self._dump(batch)
+        except Exception:
+            pass
+        topic, payloads, t_ns, drops = batch
+        safe: list[Any] = []
+        for p in payloads:
+            try:
+                self._dump(p)
+                safe.append(p)
+            except Exception as exc:
+                safe.append(NotJson(f"<not picklable: {type(exc).__name__}> {safe_repr(p, 200)}"))
+        return self._dump((topic, safe, t_ns, drops))
 
-
-def _plain(obj: Any) -> bytes:
-    buf = io.BytesIO()
-    _PlainPickler(buf, protocol=pickle.HIGHEST_PROTOCOL).dump(obj)
-    return buf.getvalue()
+    def _dump(self, obj: Any) -> bytes:
+        buf = self._buf
+        buf.seek(0)
+        buf.truncate()
+        self._pickler.clear_memo()
+        self._pickler.dump(obj)
+        return buf.getvalue()
 
 
 class McapProcessLogger(LoggerBase):
@@ -147,6 +153,7 @@ class McapProcessLogger(LoggerBase):
         )  # fmt: skip
         super().__init__(settings, on_error, "MCAP writer process")
         self._lock = threading.Lock()
+        self._pack = Packer()
         self._capacity = ring_bytes(queue_size)
         self._sent_by: dict[str, int] = {}
         self._drops_sent = 0
@@ -183,9 +190,10 @@ class McapProcessLogger(LoggerBase):
         drops = None
         if self._dropped != self._drops_sent:  # the file's counters include ours
             drops, self._drops_sent = self._dropped_snapshot(), self._dropped
-        data = pack((topic, payloads, log_time_ns, drops))
         with self._lock:
-            ok = not self._closed and self._proc.write(data, n)
+            ok = not self._closed and self._proc.write(
+                self._pack((topic, payloads, log_time_ns, drops)), n
+            )
             if ok:
                 self._enqueued += n
                 self._sent_by[topic] = self._sent_by.get(topic, 0) + n
