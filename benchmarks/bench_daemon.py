@@ -175,10 +175,14 @@ def config(grid: Path, ch: str, mcap: str = "", send_u: bool = False) -> DaemonC
 
 
 def interleaved(
-    cases: list[str], rounds: int, one_round: Callable[[str], tuple[list[float], int]]
+    cases: list[str],
+    rounds: int,
+    one_round: Callable[[str], tuple[list[float], int]],
+    progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Every case in ``rounds`` rounds, the order rotated each round; percentiles over the
-    pooled latencies (``name``), per round (``name_per_round``), answers lost (``name_lost``)."""
+    pooled latencies (``name``), per round (``name_per_round``), answers lost (``name_lost``);
+    ``progress`` is told each round's number when it is done."""
     lat: dict[str, list[float]] = {c: [] for c in cases}
     out: dict[str, Any] = {"rounds": rounds, **{f"{c}_per_round": [] for c in cases}}
     lost = dict.fromkeys(cases, 0)
@@ -188,6 +192,8 @@ def interleaved(
             lat[name] += values
             out[f"{name}_per_round"].append(pct(values))
             lost[name] += n_lost
+        if progress is not None:
+            progress(k + 1)
         print(f"round {k + 1}/{rounds} done, load {os.getloadavg()[0]:.1f}", file=sys.stderr)
     for c in cases:
         out[c], out[f"{c}_lost"] = pct(lat[c]), lost[c]
