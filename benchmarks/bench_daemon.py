@@ -481,22 +481,22 @@ def bench_udp(
 ) -> dict[str, Any]:
     """The udp_multicast cases in interleaved rounds; with a baseline (its ``pythonpath``),
     the per-round ratios daemon / baseline."""
-    cases = ["echo", "daemon", "daemon_reloads"]
+    cases = ["echo", "daemon", "daemon_reloads"] + (["daemon_aa"] if args.aa else [])
     extra: dict[str, Any] = {"pythonpath": pythonpath}
     if pythonpath:
         cases.append("baseline")
     chunk = rs[: 200 + args.n]
     out = interleaved(cases, args.rounds, lambda c: udp_round(c, grid, chunk, args, tmp, extra))
     out.update({k: v for k, v in extra.items() if k != "pythonpath"})
-    if pythonpath:
+    for other, tag in (("baseline", ""), ("daemon_aa", "aa_")):  # daemon / other, per round
+        if other not in cases:
+            continue
         for q in ("p50", "p99"):
-            per = [
-                d[q] / b[q]
-                for d, b in zip(out["daemon_per_round"], out["baseline_per_round"], strict=True)
-            ]
-            out[f"{q}_ratio_per_round"] = per
-            out[f"{q}_ratio_median"] = float(np.median(per))
-            out[f"{q}_ratio_pooled"] = out["daemon"][q] / out["baseline"][q]
+            pairs = zip(out["daemon_per_round"], out[f"{other}_per_round"], strict=True)
+            per = [d[q] / b[q] for d, b in pairs]
+            out[f"{tag}{q}_ratio_per_round"] = per
+            out[f"{tag}{q}_ratio_median"] = float(np.median(per))
+            out[f"{tag}{q}_ratio_pooled"] = out["daemon"][q] / out[other][q]
     return out
 
 
@@ -573,18 +573,19 @@ def print_table(result: dict[str, Any]) -> None:
     print(f"{'case':<44} {'p50 µs':>8} {'p99 µs':>8} {'n':>6} lost")
     for part in ("udp", "virtual"):
         r = result.get(part, {})
-        for name in ("echo", "daemon", "daemon_reloads", "baseline", "daemon_no_mcap", "daemon_mcap", "daemon_mcap_u"):  # fmt: skip
+        for name in ("echo", "daemon", "daemon_aa", "daemon_reloads", "baseline", "daemon_no_mcap", "daemon_mcap", "daemon_mcap_u"):  # fmt: skip
             if name in r:
                 c = r[name]
                 print(f"{part}: {name:<38} {c['p50']:>8.0f} {c['p99']:>8.0f} {c['n']:>6} {r[name + '_lost']}")  # fmt: skip
     u = result.get("udp", {})
-    if "p50_ratio_median" in u:
+    for tag, other in (("", "baseline"), ("aa_", "daemon_aa (A/A: the noise)")):
         for q in ("p50", "p99"):
-            per = ", ".join(f"{v:.2f}" for v in u[f"{q}_ratio_per_round"])
-            print(
-                f"udp daemon / baseline {q}: median {u[f'{q}_ratio_median']:.3f}× over rounds "
-                f"({per}), pooled {u[f'{q}_ratio_pooled']:.3f}×"
-            )
+            if f"{tag}{q}_ratio_median" in u:
+                per = ", ".join(f"{v:.2f}" for v in u[f"{tag}{q}_ratio_per_round"])
+                print(
+                    f"udp daemon / {other} {q}: median {u[f'{tag}{q}_ratio_median']:.3f}× over "
+                    f"rounds ({per}), pooled {u[f'{tag}{q}_ratio_pooled']:.3f}×"
+                )
     for name, v in u.get("cpu_us_per_reading", {}).items():
         tree = np.median(u["tree_cpu_us_per_reading"][name])
         print(f"CPU per reading, {name}: {np.median(v):.0f} µs (with its children {tree:.0f} µs)")
@@ -606,6 +607,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cases", default="udp,virtual,throughput,modbus", help="parts to run")
     ap.add_argument("--baseline", default="", help="a source tree to compare with over udp")
+    ap.add_argument("--aa", action="store_true", help="udp: this daemon twice (A/A: the noise)")
     ap.add_argument("--n", type=int, default=3000, help="paced readings per udp round")
     ap.add_argument("--rate", type=float, default=1000.0, help="pace of the latency cases, Hz")
     ap.add_argument("--rounds", type=int, default=6, help="interleaved rounds")

@@ -56,7 +56,7 @@ def shared_file(size: int) -> int:
     """A file descriptor of ``size`` zeroed bytes that another process can map: a ``memfd``
     (Linux; no backing store) or else an unlinked temporary file."""
     try:
-        fd = os.memfd_create("cmm-comp-live", 0)
+        fd = os.memfd_create("cmm-comp-child", 0)
     except (AttributeError, OSError):
         shm = "/dev/shm" if os.path.isdir("/dev/shm") else None
         with tempfile.TemporaryFile(dir=shm) as f:
