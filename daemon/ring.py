@@ -69,11 +69,11 @@ def shared_file(size: int) -> int:
     return fd
 
 
-def ring_bytes(queue: int) -> int:
-    """Ring capacity for ``queue`` messages: 256 bytes each (a pickled one-record batch is
-    ~150-250), at least 64 KiB, a multiple of 16 (every record starts 16-byte aligned, so a
-    wrap marker always fits)."""
-    return _padded(max(64 * 1024, 256 * int(queue)))
+def ring_bytes(queue: int, message_bytes: int = 256) -> int:
+    """Ring capacity for ``queue`` messages of ``message_bytes`` each (a pickled one-record
+    batch is ~150-250 bytes; a compact record within a batch ~60), at least 64 KiB, a multiple
+    of 16 (every record starts 16-byte aligned, so a wrap marker always fits)."""
+    return _padded(max(64 * 1024, message_bytes * int(queue)))
 
 
 class SharedRing:

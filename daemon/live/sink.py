@@ -20,7 +20,7 @@ WebSocket server on its own threads) with the log time as the message time; it a
 ``/cmm/scene`` (:mod:`.scene`) at most ``scene_rate_hz`` times a second.
 
 Errors never stop the daemon: a message that cannot be encoded is counted and passed to
-``on_error``, an unexpected error in the sender loop is reported and the loop goes on. A server
+``on_error``, an unexpected error in an update is reported and the next one goes on. A server
 that cannot listen raises :class:`LiveStartError` (one line) from :meth:`LiveSink.start`.
 """
 
@@ -72,9 +72,8 @@ class LiveStats:
     encoded), ``decimated`` (left out of an update, :mod:`.decimate`), ``dropped`` (a queue
     was full), ``sent`` (encoded and handed to the server) or ``encode_errors`` (could not be
     built or encoded), or still waits (``queue_len``); so ``offered = not_encoded + decimated +
-    dropped + sent + encode_errors + queue_len``. ``up``: the view runs (with
-    ``sender = "process"``: its process is alive and has looped within
-    :data:`.process.STALL_S`).
+    dropped + sent + encode_errors + queue_len``. ``up``: the view runs (its process is alive
+    and has looped within :data:`.process.STALL_S`).
     ``nulled``: non-finite numbers sent as ``null``. ``replayed``: latched messages sent again
     to new subscribers. Scene: ``scene_updates`` sent, ``scene_points`` drawn, ``scene_decimated``
     left out by the per-update limit, ``scene_skipped`` not drawable (a missing or non-finite

@@ -58,6 +58,9 @@ REPORT_S = 0.1
 HELP_HIGH, HELP_LOW = 8192, 1024
 """Backlog (messages) at which the child's main thread starts writing itself, and until
 how many are left."""
+MESSAGE_BYTES = 64
+"""Ring bytes per message of ``queue_size``: the daemon logs batches of compact records, which
+pickle to ~40-70 bytes a message."""
 FILES_REPORTED = 64
 """Newest file names in each status (the daemon keeps the whole list)."""
 _EMPTY = LoggerStats(0, 0, 0, 0, (), 0)
@@ -121,7 +124,8 @@ class McapProcessLogger(LoggerBase):
     """Log JSON messages to MCAP from a hot path; the writing happens in a child process.
 
     Arguments: see :class:`~.logger.LogSettings`; ``metadata``'s ``pid`` is the daemon's,
-    ``writer_pid`` the child's. ``queue_size`` sizes the ring (256 bytes a message). Besides:
+    ``writer_pid`` the child's. ``queue_size`` sizes the ring (:data:`MESSAGE_BYTES` a
+    message: 6.4 MB at the default 100 000). Besides:
 
     :param on_error: called from the watch thread with every error the child meets (its own
         exception type when it pickles, else :class:`McapWriterProcessError`), with every
@@ -154,7 +158,7 @@ class McapProcessLogger(LoggerBase):
         super().__init__(settings, on_error, "MCAP writer process")
         self._lock = threading.Lock()
         self._pack = Packer()
-        self._capacity = ring_bytes(queue_size)
+        self._capacity = ring_bytes(queue_size, MESSAGE_BYTES)
         self._sent_by: dict[str, int] = {}
         self._drops_sent = 0
         self._child: dict[str, Any] = {"stats": _EMPTY, "healthy": True, "received": 0}
@@ -351,7 +355,7 @@ def _serve(end: ChildEnd) -> None:
     received = 0
 
     def status() -> dict[str, Any]:
-        st = logger.own_stats()  # the daemon adds its own drops
+        st = logger.stats(upstream=False)  # the daemon adds its own drops
         st = dataclasses.replace(st, files=st.files[-FILES_REPORTED:])
         return {"stats": st, "healthy": logger.healthy, "received": received}
 

@@ -12,6 +12,7 @@ finishes the file (summary and indexes). Errors in the writer thread reach ``on_
 from __future__ import annotations
 
 import collections
+import dataclasses
 import json
 import logging
 import os
@@ -83,38 +84,9 @@ class McapLogger(LoggerBase):
         writer_setup: Callable[[], object] | None = None,
     ) -> None:
         settings = LogSettings(
-            Path(target),
-            roll_bytes,
-            roll_s,
-            flush_period_s,
-            chunk_size,
-            queue_size,
-            compression,
-            fsync,
-            metadata or {},
-        )
-        self._start(settings, on_error, opener, writer_setup)
-
-    @classmethod
-    def from_settings(
-        cls,
-        settings: LogSettings,
-        on_error: Callable[[BaseException], None] | None = None,
-        opener: Callable[[Path], IO[bytes]] = open_exclusive,
-        writer_setup: Callable[[], object] | None = None,
-    ) -> McapLogger:
-        """A logger for ``settings`` (what the process writer's child runs)."""
-        self = cls.__new__(cls)
-        self._start(settings, on_error, opener, writer_setup)
-        return self
-
-    def _start(
-        self,
-        settings: LogSettings,
-        on_error: Callable[[BaseException], None] | None,
-        opener: Callable[[Path], IO[bytes]],
-        writer_setup: Callable[[], object] | None,
-    ) -> None:
+            Path(target), roll_bytes, roll_s, flush_period_s, chunk_size, queue_size,
+            compression, fsync, metadata or {},
+        )  # fmt: skip
         super().__init__(settings, on_error, "MCAP writer")
         self._queue: collections.deque[QueuedMessage] = collections.deque()
         self._queue_size = settings.queue_size
@@ -158,6 +130,17 @@ class McapLogger(LoggerBase):
         self._open_next()
         self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
         self._thread.start()
+
+    @classmethod
+    def from_settings(
+        cls,
+        settings: LogSettings,
+        on_error: Callable[[BaseException], None] | None = None,
+        writer_setup: Callable[[], object] | None = None,
+    ) -> McapLogger:
+        """A logger for ``settings`` (what the writer child runs)."""
+        fields = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)}
+        return cls(**fields, on_error=on_error, writer_setup=writer_setup)
 
     # ------------------------------------------------------------------ producers
 
@@ -242,7 +225,7 @@ class McapLogger(LoggerBase):
         work lands in the gap between readings, not on top of the next one."""
         self._wake.set()
 
-    # ------------------------------------------------------------------ status (log(), error: HotPathQueue)
+    # ------------------------------------------------------------------ status
 
     @property
     def healthy(self) -> bool:
@@ -254,11 +237,12 @@ class McapLogger(LoggerBase):
         """Files written so far, in order."""
         return tuple(self._files)
 
-    def stats(self) -> LoggerStats:
-        """A snapshot of the counters (drops include those reported by
-        :meth:`set_upstream_drops`)."""
+    def stats(self, upstream: bool = True) -> LoggerStats:
+        """A snapshot of the counters; the drops include those reported by
+        :meth:`set_upstream_drops` unless ``upstream`` is False (what the writer child reports
+        to the daemon, which adds its own)."""
         dropped_by = self._dropped_snapshot()
-        for topic, n in self._upstream_dropped.items():
+        for topic, n in self._upstream_dropped.items() if upstream else ():
             dropped_by[topic] = dropped_by.get(topic, 0) + n
         return LoggerStats(
             enqueued=self._enqueued,
@@ -268,22 +252,6 @@ class McapLogger(LoggerBase):
             files=tuple(self._files),
             queue_len=len(self._queue),
             dropped_by_topic=dropped_by,
-            encode_errors_by_topic=dict(self._encode_errors_by),
-            written_by_topic=dict(self._written_by),
-            flushed=self._flushed,
-        )
-
-    def own_stats(self) -> LoggerStats:
-        """Like :meth:`stats` without the upstream drops (what the process writer's child
-        reports to its parent, which adds its own)."""
-        return LoggerStats(
-            enqueued=self._enqueued,
-            written=self._written,
-            dropped=self._dropped,
-            encode_errors=self._encode_errors,
-            files=tuple(self._files),
-            queue_len=len(self._queue),
-            dropped_by_topic=self._dropped_snapshot(),
             encode_errors_by_topic=dict(self._encode_errors_by),
             written_by_topic=dict(self._written_by),
             flushed=self._flushed,
