@@ -4,11 +4,9 @@ from .fanout import LiveFanOut
 from .process import LiveChildError, LiveDownError, LiveProcessSink
 from .server import SUBPROTOCOL, LiveServer, LiveStartError, open_live_server
 from .settings import (
-    LIVE_RULES,
     LiveConfigError,
     LiveSection,
     host_problem,
-    live_problems,
     live_section_from_table,
 )
 from .sink import (
@@ -21,7 +19,6 @@ from .sink import (
 
 __all__ = [
     "LATCHED_TOPICS",
-    "LIVE_RULES",
     "SCENE_TOPIC",
     "STREAMED_TOPICS",
     "SUBPROTOCOL",
@@ -36,7 +33,6 @@ __all__ = [
     "LiveStartError",
     "LiveStats",
     "host_problem",
-    "live_problems",
     "live_section_from_table",
     "open_live_server",
 ]
