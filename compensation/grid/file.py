@@ -343,6 +343,7 @@ def load_grid(
                     "probe_offset_mm",
                     "signal_filters",
                     "nonlinearity",
+                    "unresolved_effects",
                     "built_utc",
                     "library_version",
                 )
