@@ -19,7 +19,7 @@ from cmm_comp.compensation.grid import CorrectionGrid
 from cmm_comp.compensation.grid.field import AnalyticErrorField
 from cmm_comp.compensation.uncertainty.grid_field import add_uncertainty
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 STAMP = {"built_utc": "2026-11-27T00:00:00+00:00", "library_version": "0.1.0"}
 
 

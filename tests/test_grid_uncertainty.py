@@ -261,7 +261,7 @@ def test_compiled_U_equals_the_numpy_formulas(with_u: CorrectionGrid) -> None:
     assert np.all(status == "ok")
     cov = np.empty((n, 15))
     tables = with_u._u_tables()
-    eval_spline(pts, *tables, gu.coefficients(with_u.axes), cov)
+    eval_spline(pts, tables, gu.coefficients(with_u.axes), cov)
     full = {k: np.broadcast_to(np.asarray(v, float), (n,)) for k, v in temps.items()}
     var = variance_from_covariance(cov, sty) + gu.thermal.variance_um2(pts, full) + gu.probe_um**2
     assert np.allclose(u, 2.0 * np.sqrt(var), rtol=1e-12, atol=1e-12)

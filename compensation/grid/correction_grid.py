@@ -212,21 +212,9 @@ class CorrectionGrid:
             self.sensitivity_rotation_urad,
             self.axes,
         )
-        q, sx, wq, ws, coef, knots, spans = t.q, t.sx, t.wq, t.ws, t.coef, t.knots, t.spans
+        self._tables = t
+        self._args = t.args()
         self._small = t.small
-        self._node = np.ascontiguousarray(np.concatenate([q, sx, wq, ws], axis=-1))
-        self._q = np.ascontiguousarray(q)
-        self._sx = np.ascontiguousarray(sx)
-        self._wq = wq
-        self._ws = ws
-        self._coef = np.ascontiguousarray(coef)
-        self._knots = knots
-        self._spans = spans
-        self._lo = self.lower_mm.copy()
-        self._inv_d = np.array(
-            [(self.steps[k] - 1) / (self.upper_mm[k] - self.lower_mm[k]) for k in range(3)]
-        )
-        self._shape = np.array(self.steps, dtype=np.int64)
         self._needed = np.array([s.needed for s in self.signals], dtype=bool)
         self._derived_lobes = lobing_orders(self.signals)
         self._lo_list = self.lower_mm.tolist()
@@ -244,8 +232,8 @@ class CorrectionGrid:
         self._ncomp_all = 3 + 6 * len(self.signals)
         self._lock = threading.Lock()
         self._dummy_q = np.zeros((1, 4))
-        self._u_tab = (self._lo, self._inv_d, self._shape, *self._knots, *self._spans)
         self._dummy_t = np.zeros((1, 3))
+        self._outputs1 = (self._o1, self._dummy_q, self._dummy_t)
         if not _WARM["done"]:  # compile or load the cached kernels now, not on first use
             p = np.array([0.5 * (self.lower_mm + self.upper_mm)])
             self._run(p, np.zeros((1, 3)), np.zeros((1, len(self.signals))), 3, parallel=False)
@@ -272,17 +260,13 @@ class CorrectionGrid:
         out = np.empty((n, 3))
         out_q = np.empty((n, 4)) if want_pose else self._dummy_q
         out_t = np.empty((n, 3)) if want_pose else self._dummy_t
-        args = (
-            points, stylus, dev, self._lo, self._inv_d, self._shape,
-            self._q, self._sx, self._wq, self._ws, self._node, self._small, *self._knots, *self._spans,
-            self._coef, ncomp, out, out_q, out_t, want_pose,
-        )  # fmt: skip
+        outputs = (out, out_q, out_t)
         if parallel:
             threads = max(1, (os.cpu_count() or 1))
             chunk = max(512, math.ceil(n / (8 * threads)))
-            kern.eval_parallel(*args, chunk)  # type: ignore[call-arg]
+            kern.eval_parallel(self._args, points, stylus, dev, outputs, ncomp, want_pose, chunk)
         else:
-            kern.eval_serial(*args)  # type: ignore[call-arg]
+            kern.eval_serial(self._args, points, stylus, dev, outputs, ncomp, want_pose)
         return out, out_q, out_t
 
     def _evaluate(
@@ -492,11 +476,7 @@ class CorrectionGrid:
             p1[0, 0], p1[0, 1], p1[0, 2] = cx, cy, cz
             s1[0, 0], s1[0, 1], s1[0, 2] = px, py, pz
             ncomp = self._ncomp_all if active else 3
-            kern.eval_serial(  # type: ignore[call-arg]
-                p1, s1, dev, self._lo, self._inv_d, self._shape,
-                self._q, self._sx, self._wq, self._ws, self._node, self._small, *self._knots,
-                *self._spans, self._coef, ncomp, o1, self._dummy_q, self._dummy_t, False,
-            )  # fmt: skip
+            kern.eval_serial(self._args, p1, s1, dev, self._outputs1, ncomp, False)
             out = (
                 float(o1[0, 0]) + (x - cx),
                 float(o1[0, 1]) + (y - cy),
@@ -537,7 +517,7 @@ class CorrectionGrid:
         return out
 
     def _u_tables(self) -> tuple[Any, ...]:
-        return self._u_tab
+        return self._args[0]
 
     def _correct_with_uncertainty(
         self,
