@@ -8,7 +8,7 @@
 * build: ``CorrectionGrid.build`` at 50×50×50 on the example machine (target < 10 s);
 * uncertainty (issue 13): the same 20×20×10 grid carrying U per node — its correction path with
   U not asked for vs the grid without U (the hot path may not slow down by more than 10 %), and
-  with ``with_uncertainty=True`` (the extra cost of U), batch and single point, interleaved in
+  with ``correct_with_uncertainty`` (the extra cost of U), batch and single point, interleaved in
   the same run.
 """
 
@@ -60,7 +60,7 @@ def main() -> int:
     pts = rng.uniform(machine.volume.lower_mm, machine.volume.upper_mm, size=(n, 3))
     stylus = np.array([0.0, 0.0, -120.0])
     ugrid = add_uncertainty(grid, machine, rng=np.random.default_rng(0), trials=200)
-    ugrid.correct(pts[:1000], stylus, temps, with_uncertainty=True)
+    ugrid.correct_with_uncertainty(pts[:1000], stylus, temps)
     rgi3 = RegularGridInterpolator(grid.axes, grid.translation_um, method="linear")
     pose7 = np.concatenate([grid.q_work_stylus, grid.translation_um], axis=-1)
     rgi7 = RegularGridInterpolator(grid.axes, pose7, method="linear")
@@ -80,7 +80,7 @@ def main() -> int:
         runs["grid"].append(_median_time(lambda: grid.correct(pts, stylus, temps), 1))
         runs["ugrid_no_u"].append(_median_time(lambda: ugrid.correct(pts, stylus, temps), 1))
         runs["ugrid_with_u"].append(
-            _median_time(lambda: ugrid.correct(pts, stylus, temps, with_uncertainty=True), 1)
+            _median_time(lambda: ugrid.correct_with_uncertainty(pts, stylus, temps), 1)
         )
         runs["rgi7"].append(_median_time(lambda: rgi7(pts), 1))
         runs["grid_temps"].append(_median_time(lambda: grid.correct(pts, stylus, t_shift), 1))

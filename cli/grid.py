@@ -171,8 +171,8 @@ def cmd_correct(args: argparse.Namespace) -> int:
     signals = {c: cols[c] for c in _signal_columns() if c in cols}
     temps = {k: v for k, v in signals.items() if k.startswith("T_")}
     inputs = {k: v for k, v in signals.items() if not k.startswith("T_")}
-    corrected, status, u_um = grid.correct(
-        pts, stylus, temps or None, inputs or None, with_uncertainty=True
+    corrected, status, u_um = grid.correct_with_uncertainty(
+        pts, stylus, temps or None, inputs or None
     )
     out = Path(args.output)
     buf = io.StringIO(newline="")
