@@ -170,13 +170,6 @@ def run_monte_carlo(
     trials); see the module docstring. ``progress(trials_done, worst)`` after every run
     (``worst`` = max 2s/δ, NaN before the second run). Non-finite outputs raise ValueError."""
     s = settings or MonteCarloSettings()
-    size = s.run_size()
-    if s.trials is not None:  # a fixed number in runs as equal as possible (none tiny)
-        n_runs = max(1, round(s.trials / size))
-        base, extra = divmod(s.trials, n_runs)  # np.array_split's sizes, without an arange of
-        plan = [base + (i < extra) for i in range(n_runs)]  # all trials (1e9: a 7.45 GiB array)
-    else:  # adaptive: runs of one size, as many as fit under max_trials
-        plan = [size] * max(1, s.max_trials // size) if s.max_trials >= size else [s.max_trials]
     stats: list[FloatArray] = []
     sizes: list[int] = []
     kept: list[FloatArray] = []
@@ -185,7 +178,7 @@ def run_monte_carlo(
     worst = math.nan
     stable = False
     tol = np.zeros(0)
-    for m in plan:
+    for m in _run_sizes(s):
         y = np.asarray(draw(m, rng), dtype=float)
         if y.ndim != 2 or y.shape[0] != m:
             raise ValueError(f"a run must give ({m}, K) values, got {y.shape}")
@@ -199,17 +192,8 @@ def run_monte_carlo(
         else:
             keep, kept = False, []
         if len(stats) >= 2:
-            u_all = _pooled(stats, sizes)[1]
-            tol = (
-                np.full(u_all.shape, s.tolerance)
-                if s.tolerance is not None
-                else numerical_tolerance(u_all, s.ndig)
-            )
-            arr = np.stack(stats)  # (h, 5, K)
-            h = arr.shape[0]
-            sd = arr[:, :4].std(axis=0, ddof=1) / math.sqrt(h)  # (4, K)
-            ratio = np.where(np.isfinite(tol), 2.0 * sd / tol, 0.0)
-            worst = float(ratio.max()) if ratio.size else 0.0
+            tol = _tolerance(s, _pooled(stats, sizes)[1])
+            worst = _worst(stats, tol)
             stable = worst <= 1.0
         if progress is not None:
             progress(done, worst)
@@ -217,22 +201,9 @@ def run_monte_carlo(
             break
     if not stats:
         raise ValueError("no trials were run")
-    arr = np.stack(stats)
     mean, u = _pooled(stats, sizes)
-    if kept:
-        values = np.concatenate(kept)
-        st = _run_stats(values, s.probability)
-        low, high, u95, method = st[2], st[3], st[4], "all trials"
-    else:
-        values = None
-        low, high, u95 = arr[:, 2].mean(axis=0), arr[:, 3].mean(axis=0), arr[:, 4].mean(axis=0)
-        method = "mean of the runs' quantiles"
-    if tol.size == 0:
-        tol = (
-            np.full(mean.shape, s.tolerance)
-            if s.tolerance is not None
-            else numerical_tolerance(u, s.ndig)
-        )
+    values = np.concatenate(kept) if kept else None
+    low, high, u95, method = _interval(stats, values, s.probability)
     return McResult(
         mean=mean,
         u=u,
@@ -242,12 +213,53 @@ def run_monte_carlo(
         trials=done,
         runs=len(stats),
         stable=bool(stable),
-        tolerance=tol,
+        tolerance=tol if tol.size else _tolerance(s, u),
         worst=worst,
         probability=s.probability,
         interval_method=method,
         values=values,
     )
+
+
+def _run_sizes(s: MonteCarloSettings) -> list[int]:
+    """Trials per run: a fixed number in runs as equal as possible (none tiny), or (adaptive)
+    runs of one size, as many as fit under ``max_trials``."""
+    size = s.run_size()
+    if s.trials is not None:
+        n_runs = max(1, round(s.trials / size))
+        base, extra = divmod(s.trials, n_runs)  # np.array_split's sizes, without an arange of
+        return [base + (i < extra) for i in range(n_runs)]  # all trials (1e9: a 7.45 GiB array)
+    return [size] * max(1, s.max_trials // size) if s.max_trials >= size else [s.max_trials]
+
+
+def _tolerance(s: MonteCarloSettings, u: FloatArray) -> FloatArray:
+    """The numerical tolerance δ of each output: the given one, else from ``ndig`` digits of u."""
+    if s.tolerance is not None:
+        return np.full(u.shape, s.tolerance)
+    return numerical_tolerance(u, s.ndig)
+
+
+def _worst(stats: list[FloatArray], tol: FloatArray) -> float:
+    """max 2s/δ over the outputs and the four statistics (s: standard deviation of the runs'
+    means, deviations and interval ends divided by √runs); 0 with no outputs."""
+    arr = np.stack(stats)  # (h, 5, K)
+    sd = arr[:, :4].std(axis=0, ddof=1) / math.sqrt(arr.shape[0])  # (4, K)
+    ratio = np.where(np.isfinite(tol), 2.0 * sd / tol, 0.0)
+    return float(ratio.max()) if ratio.size else 0.0
+
+
+def _interval(
+    stats: list[FloatArray], values: FloatArray | None, p: float
+) -> tuple[FloatArray, FloatArray, FloatArray, str]:
+    """Low and high ends of the probabilistically symmetric interval, the zero-centred U95 and
+    how they were found: from all trials' ``values`` when kept, else the runs' quantiles
+    averaged."""
+    if values is not None:
+        st = _run_stats(values, p)
+        return st[2], st[3], st[4], "all trials"
+    arr = np.stack(stats)
+    low, high, u95 = arr[:, 2].mean(axis=0), arr[:, 3].mean(axis=0), arr[:, 4].mean(axis=0)
+    return low, high, u95, "mean of the runs' quantiles"
 
 
 def _pooled(stats: list[FloatArray], sizes: list[int]) -> tuple[FloatArray, FloatArray]:
