@@ -84,7 +84,8 @@ class GridTrust:
             try:
                 m = Machine.from_toml(self.machine)
             except (CmmCompError, ValueError, OSError, RecursionError) as exc:
-                raise GridTrustError(f"grid.machine: {exc}") from None
+                lines = str(exc).splitlines() or [""]  # one line per problem of the file
+                raise GridTrustError("\n".join(f"grid.machine: {x}" for x in lines)) from None
             sha = m.identity_sha256()
             if self.expect_machine_sha256 and self.expect_machine_sha256 != sha:
                 raise GridTrustError(

@@ -127,7 +127,7 @@ def _trusted_machine(
     try:
         machine = trust.resolve_machine()
     except CmmCompError as exc:
-        out.problems.append(f"{where}: {exc}")
+        out.problems += [f"{where}: {line}" for line in str(exc).splitlines()]
         return None, False
     if machine is None and not trust.allow_any_machine:
         out.problems.append(

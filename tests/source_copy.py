@@ -17,7 +17,7 @@ FOLDERS = ("compensation", "protocol", "daemon", "sim_controller", "cli")
 def copy_sources(dst: Path) -> Path:
     """Copy what pip needs to build the project into ``dst`` (created); return ``dst``."""
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for name in (*FOLDERS, "pyproject.toml", "README.md"):
+    for name in (*FOLDERS, "pyproject.toml", "README.md", "LICENSE"):
         if (ROOT / name).is_dir():
             shutil.copytree(ROOT / name, dst / name, ignore=ignore)
         else:

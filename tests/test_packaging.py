@@ -96,6 +96,11 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
         timeout=300,
     )
     (wheel,) = wheel_dir.glob("cmm_comp-*.whl")
+    import zipfile
+
+    with zipfile.ZipFile(wheel) as whl:  # the licence travels with the wheel's metadata
+        licences = [n for n in whl.namelist() if ".dist-info/" in n and "LICENSE" in n]
+        assert licences and b"Apache License" in whl.read(licences[0]), whl.namelist()
     subprocess.run(
         [
             sys.executable,
