@@ -1,0 +1,111 @@
+"""Sequential multilateration (docs/formats.md §10.4): ``station,point,x,y,z,length_mm`` (and
+optionally ``T_x,T_y,T_z,T_wp``), read and checked.
+
+The machine moves the reflector to the indicated point (x, y, z) mm; the tracking
+interferometer at ``station`` reports a length (mm) with an unknown dead-path offset per
+station, so a length may be negative. Stations are numbered in order of first appearance; the
+plan gives one rough position per station (``station_guess_mm``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import CalibrationError
+from ..parametric_errors import AXES
+from .csvtable import read_csv_table
+from .plan import MultilaterationSpec
+
+__all__ = ["MIN_POINTS_PER_STATION", "MIN_STATIONS", "MultilaterationData", "read_multilateration"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+MIN_POINTS_PER_STATION = 4
+MIN_STATIONS = 4
+
+
+@dataclass(frozen=True)
+class MultilaterationData:
+    """One ``[[multilateration]]`` entry: ``stations`` (names, order of first appearance),
+    ``station`` index per row, ``q_mm`` (N, 3) indicated points, ``length_mm`` (N,)."""
+
+    spec: MultilaterationSpec
+    stations: tuple[str, ...]
+    station: IntArray
+    q_mm: FloatArray
+    length_mm: FloatArray
+    lines: tuple[int, ...]
+    temps_C: dict[str, FloatArray] = field(default_factory=dict)
+
+    @property
+    def source(self) -> str:
+        return str(self.spec.file)
+
+    @property
+    def n(self) -> int:
+        return int(self.q_mm.shape[0])
+
+
+def read_multilateration(
+    spec: MultilaterationSpec,
+    lower_mm: FloatArray,
+    upper_mm: FloatArray,
+    *,
+    need_values: bool = True,
+) -> MultilaterationData:
+    """Read one ``[[multilateration]]`` entry: ≥ 4 stations, ≥ 4 points each, one guess per
+    station, points within the plan's volume. ``need_values`` False (the planner): empty
+    ``length_mm`` cells are allowed (NaN)."""
+    table = read_csv_table(
+        spec.file,
+        ("station", "point", "x", "y", "z", "length_mm"),
+        ("T_x", "T_y", "T_z", "T_wp"),
+    )
+    q = np.column_stack([table.numbers(a) for a in AXES])
+    length = table.numbers("length_mm", allow_empty=not need_values)
+    names = table.text("station")
+    table.text("point")  # required, any label
+    stations: list[str] = []
+    first: list[int] = []
+    idx = np.empty(len(table), dtype=np.intp)
+    for i, s in enumerate(names):
+        if s not in stations:
+            stations.append(s)
+            first.append(i)
+        idx[i] = stations.index(s)
+    for k, name in enumerate(stations):
+        count = int(np.sum(idx == k))
+        if count < MIN_POINTS_PER_STATION:
+            raise table.fail(
+                first[k], "station", f"station {name!r} has {count} point(s); a station's "
+                f"position and dead path need ≥ {MIN_POINTS_PER_STATION}",
+            )
+    if len(stations) < MIN_STATIONS:
+        raise table.fail(
+            None, "station", f"{len(stations)} station(s) ({', '.join(stations)}); "
+            f"multilateration with unknown station positions needs ≥ {MIN_STATIONS}",
+        )
+    if spec.station_guess_mm.shape[0] != len(stations):
+        raise CalibrationError(
+            f"{spec.file}: the file has {len(stations)} stations ({', '.join(stations)}) but "
+            f"{spec.where}.station_guess_mm gives {spec.station_guess_mm.shape[0]} positions: "
+            "one per station, in order of first appearance"
+        )
+    tol = 1e-6 * max(1.0, float(np.max(upper_mm - lower_mm)))
+    outside = np.flatnonzero(np.any((q < lower_mm - tol) | (q > upper_mm + tol), axis=1))
+    if outside.size:
+        i = int(outside[0])
+        raise table.fail(i, "x", f"point {q[i].tolist()} mm is outside the plan's volume")
+    temps = {t: table.numbers(t) for t in ("T_x", "T_y", "T_z", "T_wp") if table.has(t)}
+    return MultilaterationData(
+        spec=spec,
+        stations=tuple(stations),
+        station=idx,
+        q_mm=q,
+        length_mm=length,
+        lines=table.lines,
+        temps_C=temps,
+    )
