@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from .model import MachineModel
 
-__all__ = ["grid_points", "rigid_basis", "rotation_directions"]
+__all__ = ["grid_points", "line_basis", "rigid_basis", "rotation_directions"]
 
 FloatArray = NDArray[np.float64]
 _STYLI_MM = (
@@ -48,16 +48,48 @@ def rigid_basis(points_mm: FloatArray) -> FloatArray:
     return b.reshape(3 * n, 6)
 
 
-def rotation_directions(model: MachineModel) -> tuple[FloatArray, float]:
-    """(P, 3) θ producing a rigid rotation of 1 µrad about x, y, z, and the worst relative
-    misfit of those fields (≈ 0 when the identified functions can express a rotation; large
-    when they cannot, e.g. when straightness or angular errors are not identified)."""
+def line_basis(model: MachineModel) -> FloatArray:
+    """(P, L) θ directions that make one function (or a squareness) a straight line: its
+    constant (unless fixed at the reference) and its slope — what a rigid motion is built of."""
     lay = model.layout
+    cols = []
+    for fn in lay.functions:
+        if fn.is_reversal:
+            continue
+        if fn.basis == "spline":
+            assert fn.nodes_mm is not None
+            s = (fn.nodes_mm - fn.lo_mm) / (fn.hi_mm - fn.lo_mm)
+            shapes = [s] if fn.fixed_reference else [np.ones_like(s), s]
+            values = [v[1:] if fn.fixed_reference else v for v in shapes]
+        else:  # Legendre: P1 (and P0 when free)
+            values = []
+            for k in ([1] if fn.fixed_reference else [0, 1]):
+                v = np.zeros(fn.size)
+                v[k - 1 if fn.fixed_reference else k] = 1.0
+                values.append(v)
+        for v in values:
+            col = np.zeros(lay.n)
+            col[fn.cols] = v
+            cols.append(col)
+    for j in lay.squareness.values():
+        col = np.zeros(lay.n)
+        col[j] = 1.0
+        cols.append(col)
+    return np.array(cols).T if cols else np.zeros((lay.n, 0))
+
+
+def rotation_directions(model: MachineModel) -> tuple[FloatArray, float]:
+    """(P, 3) θ producing a rigid rotation of 1 µrad about x, y, z — made of straight lines
+    (:func:`line_basis`) — and the worst relative misfit of those fields on a grid at several
+    styli (≈ 0 when the identified functions can express a rotation; large when they cannot,
+    e.g. when straightness or angular errors are not identified)."""
+    lay = model.layout
+    lines = line_basis(model)
     q = grid_points(lay.lower_mm, lay.upper_mm, (4, 4, 4))
     rows, target = [], []
     for stylus in _STYLI_MM:
         pts = model.points(q, np.asarray(stylus))
-        rows.append(model.error_jacobian(pts).reshape(-1, lay.n))
+        rows.append(model.error_jacobian(pts).reshape(-1, lay.n) @ lines)
         arm = (q - model.reference_mm + np.asarray(stylus)) / 1000.0
         field = np.zeros((q.shape[0], 3, 3))
         for k in range(3):
@@ -67,8 +99,8 @@ def rotation_directions(model: MachineModel) -> tuple[FloatArray, float]:
         target.append(field.reshape(-1, 3))
     g = np.vstack(rows)
     t = np.vstack(target)
-    if lay.n == 0:
-        return np.zeros((0, 3)), float("inf")
+    if lines.shape[1] == 0:
+        return np.zeros((lay.n, 3)), float("inf")
     sol, *_ = np.linalg.lstsq(g, t, rcond=None)
     misfit = np.linalg.norm(g @ sol - t, axis=0) / np.linalg.norm(t, axis=0)
-    return sol, float(np.max(misfit))
+    return lines @ sol, float(np.max(misfit))

@@ -142,8 +142,8 @@ class Problem:
     def find_null_space(
         self, stats: list[tuple[FloatArray, FloatArray, float]], lam: dict[str, float]
     ) -> None:
-        """The θ directions neither the data (first order, nuisance marginalised) nor the
-        smoothness prior constrain — only the weak prior does — in its whitened metric:
+        """The θ directions the data (first order, nuisance marginalised) add less than
+        :data:`NULL_RATIO` of the prior's information to (the prior's whitened metric):
         ``null`` (P, k), orthonormal. They are pinned at the prior's zero while iterating
         (:attr:`pins`): a second-order term of the exact model must not push θ along a
         direction no reading constrains. The final covariance keeps their prior variance."""
@@ -155,8 +155,7 @@ class Problem:
         schur = info[:p, :p]
         if self.n > p:
             schur = schur - info[:p, p:] @ np.linalg.solve(nu, info[p:, :p])
-        schur = schur + np.diag(self.precision(lam)[:p] - self.ridge_internal)
-        root = np.sqrt(self.ridge_internal)
+        root = np.sqrt(self.precision(lam)[:p])  # whitened by the whole prior
         w, v = np.linalg.eigh(schur / np.outer(root, root))
         self.null = v[:, w < NULL_RATIO]
         self.null_ratio = w
@@ -356,9 +355,8 @@ def _hyper_step(
 ) -> tuple[dict[str, float], float, FloatArray]:
     """One fixed-point update of σ_g and λ_c on the linearised problem; returns the new λ,
     the largest relative change and the step δ."""
-    normal = _Normal(problem, stats, x_abs, lam)
-    delta = normal.step()
-    cov = normal.inverse()
+    delta = _Normal(problem, stats, x_abs, lam).step()
+    cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()  # the real posterior
     change = 0.0
     for g, (a, b, c) in zip(problem.groups, stats, strict=True):
         rss = c + 2.0 * float(b @ delta) + float(delta @ a @ delta)
@@ -412,15 +410,16 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         res, jac = problem.linearize(theta, states)
         x_abs = problem.absolute(theta, states)
         stats = problem.group_stats(res, jac)
-        change = 1.0
+        total = 0.0  # what σ and λ moved in this round (they change the fit: refit if so)
         for _ in range(40):
             lam, change, delta = _hyper_step(problem, stats, x_abs, lam, estimate)
+            total += change
             if change < 1e-4:
                 break
-        history.append({"round": rnd + 1, "lm_iterations": it, "hyper_change": change})
+        history.append({"round": rnd + 1, "lm_iterations": it, "hyper_change": total})
         if progress is not None:
-            progress(f"fit round {rnd + 1}: {it} step(s), σ/λ change {change:.1e}")
-        if ok and change < 1e-3 and it <= 3:
+            progress(f"fit round {rnd + 1}: {it} step(s), σ/λ change {total:.1e}")
+        if ok and total < 2e-3 and it <= 3 and rnd > 0:
             converged = True
             break
     res, jac = problem.linearize(theta, states)
