@@ -27,7 +27,7 @@ from .plate import PlateData
 if TYPE_CHECKING:
     from ..machine import Machine
 
-__all__ = ["simulate_laser", "simulate_multilateration", "simulate_plate"]
+__all__ = ["random_pose", "run_values", "simulate_laser", "simulate_multilateration", "simulate_plate"]
 
 FloatArray = NDArray[np.float64]
 
@@ -41,7 +41,7 @@ def _inputs(run: LaserRun) -> dict[str, FloatArray]:
     return {name: run.direction} if run.kind != "squareness" else {}
 
 
-def _run_values(machine: Machine, run: LaserRun) -> FloatArray:
+def run_values(machine: Machine, run: LaserRun) -> FloatArray:
     """The run's noise-free readings (µm, µrad), relative as the instrument reports them."""
     temps = dict(run.temps_C) or None
     if run.kind == "squareness":
@@ -87,7 +87,7 @@ def simulate_laser(
     }
     runs = []
     for run in data.runs:
-        values = _run_values(machine, run) + _noise(rng, sigma[run.kind], (run.n,))
+        values = run_values(machine, run) + _noise(rng, sigma[run.kind], (run.n,))
         runs.append(replace(run, value=values))
     return replace(data, runs=tuple(runs))
 

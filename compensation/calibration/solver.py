@@ -46,6 +46,7 @@ STEP_TOL = 1e-6  # µm, µrad (scaled): a step this small ends the iteration
 FLAT_PRECISION = 1e-12  # a "flat" nuisance prior (poses, stations): keeps H positive definite
 GAUGE_PRECISION = 1e8  # 1/µrad²: the rigid rotations no data see are pinned at zero in θ
 NULL_RATIO = 1e-3  # a direction whose data information is below 1e-3 of the weak prior's: unseen
+STRAIGHTNESS_SLOPE_WEIGHT = 1e4  # the weak prior on a straightness' slope: 100× tighter
 DECREASE_TOL = 1e-8  # χ²: a step that promises less than this ends the iteration
 
 
@@ -70,15 +71,18 @@ class Solution:
     covariance of θ and of each block's nuisance, residuals per block and how it went."""
 
     theta: FloatArray
+    theta_internal: FloatArray
     states: list[Any]
     groups: list[GroupFit]
     lam: dict[str, float]
     covariance_theta: FloatArray
+    covariance_theta_pinned: FloatArray
     covariance_nuisance: list[FloatArray]
     residuals: list[FloatArray]
     iterations: int
     converged: bool
     history: list[dict[str, float]] = field(default_factory=list)
+    stats: list[Any] = field(default_factory=list)  # per group (JᵀJ, Jᵀr, rᵀr) at the solution
 
 
 class Problem:
@@ -119,15 +123,20 @@ class Problem:
         self.shape_class: list[str | None] = [None] * self.p
         self.rank: dict[str, int] = {}
         for fn in model.layout.functions:
+            # a slope no data see goes to the squareness, not the straightness (the laser's
+            # convention: a straightness has its line removed, the squareness carries the angle)
+            line_ridge = self.ridge * (STRAIGHTNESS_SLOPE_WEIGHT if fn.kind == "straightness" else 1.0)
             k = fn.curvature()
             if not np.any(k):
+                if fn.kind == "straightness" and fn.basis == "polynomial":
+                    self.ridge_internal[fn.start] = line_ridge  # the P1 coefficient
                 continue
             w, u = np.linalg.eigh(k)
             shape = w > 1e-9 * w.max()
             t = np.hstack([u[:, ~shape], u[:, shape] / np.sqrt(w[shape])])
             self.t_blocks.append((fn.cols, t))
             n_line = int(np.sum(~shape))
-            ridge = np.concatenate([np.full(n_line, self.ridge), self.ridge / w[shape]])
+            ridge = np.concatenate([np.full(n_line, line_ridge), self.ridge / w[shape]])
             self.ridge_internal[fn.cols] = ridge
             for j in range(fn.start + n_line, fn.start + fn.size):
                 self.shape_class[j] = fn.kind
@@ -356,7 +365,8 @@ def _hyper_step(
     """One fixed-point update of σ_g and λ_c on the linearised problem; returns the new λ,
     the largest relative change and the step δ."""
     delta = _Normal(problem, stats, x_abs, lam).step()
-    cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()  # the real posterior
+    cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()
+    pinned = _Normal(problem, stats, x_abs, lam).inverse()[: problem.p, : problem.p]  # the real posterior
     change = 0.0
     for g, (a, b, c) in zip(problem.groups, stats, strict=True):
         rss = c + 2.0 * float(b @ delta) + float(delta @ a @ delta)
@@ -426,12 +436,15 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
     stats = problem.group_stats(res, jac)
     x_abs = problem.absolute(theta, states)
     cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()
+    pinned = _Normal(problem, stats, x_abs, lam).inverse()[: problem.p, : problem.p]
     return Solution(
         theta=problem.theta(theta),
+        theta_internal=theta,
         states=states,
         groups=problem.groups,
         lam=lam,
         covariance_theta=problem.theta_covariance(cov[: problem.p, : problem.p]),
+        covariance_theta_pinned=problem.theta_covariance(pinned),
         covariance_nuisance=[
             cov[problem.offsets[i] : problem.offsets[i + 1], problem.offsets[i] : problem.offsets[i + 1]]
             for i in range(len(problem.blocks))
@@ -440,6 +453,7 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         iterations=total_it,
         converged=converged,
         history=history,
+        stats=stats,
     )
 
 
