@@ -46,8 +46,10 @@ STEP_TOL = 1e-6  # µm, µrad (scaled): a step this small ends the iteration
 FLAT_PRECISION = 1e-12  # a "flat" nuisance prior (poses, stations): keeps H positive definite
 GAUGE_PRECISION = 1e8  # 1/µrad²: the rigid rotations no data see are pinned at zero in θ
 NULL_RATIO = 1e-3  # a direction whose data information is below 1e-3 of the weak prior's: unseen
+MIN_GAMMA = 1.0  # degrees of freedom a function needs for its own smoothness estimate
+COST_NOISE = 1e-4  # χ²: below this a cost change is numerical noise
 STRAIGHTNESS_SLOPE_WEIGHT = 1e4  # the weak prior on a straightness' slope: 100× tighter
-DECREASE_TOL = 1e-8  # χ²: a step that promises less than this ends the iteration
+DECREASE_TOL = 1e-6  # χ² (plus 1e-9 of the cost): a step promising less ends the iteration
 
 
 @dataclass
@@ -120,8 +122,9 @@ class Problem:
         """θ = T·θ_int per function: [straight lines | shapes scaled to unit roughness]."""
         self.t_blocks: list[tuple[slice, FloatArray]] = []
         self.ridge_internal = np.full(self.p, self.ridge)
-        self.shape_class: list[str | None] = [None] * self.p
+        self.shape_class: list[str | None] = [None] * self.p  # the function of each shape
         self.rank: dict[str, int] = {}
+        self.kind_of: dict[str, str] = {}
         for fn in model.layout.functions:
             # a slope no data see goes to the squareness, not the straightness (the laser's
             # convention: a straightness has its line removed, the squareness carries the angle)
@@ -139,8 +142,9 @@ class Problem:
             ridge = np.concatenate([np.full(n_line, line_ridge), self.ridge / w[shape]])
             self.ridge_internal[fn.cols] = ridge
             for j in range(fn.start + n_line, fn.start + fn.size):
-                self.shape_class[j] = fn.kind
-            self.rank[fn.kind] = self.rank.get(fn.kind, 0) + int(np.sum(shape))
+                self.shape_class[j] = fn.name
+            self.rank[fn.name] = int(np.sum(shape))
+            self.kind_of[fn.name] = fn.kind
         self.classes = tuple(self.rank)
         self.gamma: dict[str, float] = {}  # degrees of freedom each class uses (last update)
         self.null = np.zeros((self.p, 0))
@@ -343,14 +347,15 @@ def _lm(
             res_new, jac_new = problem.linearize(t_new, s_new)
             x_new = problem.absolute(t_new, s_new)
             cost_new = problem.cost(res_new, x_new, lam)
-            if cost_new <= cost * (1 + 1e-9) or mu > 1e8:
+            # χ² changes below ~1e-4 are rounding and second-order noise, not a worse fit
+            if cost_new <= cost * (1 + 1e-9) + COST_NOISE or mu > 1e8:
                 break
             mu = max(mu * 10.0, 1e-4)
         theta, states, res, jac, x_abs, cost = t_new, s_new, res_new, jac_new, x_new, cost_new
         mu = mu / 10.0 if mu > 1e-6 else 0.0
         promised = -float(normal.grad @ delta)  # the decrease of χ² the step aimed at
         small = float(np.max(np.abs(delta), initial=0.0)) < STEP_TOL
-        if (small or promised < DECREASE_TOL) and mu == 0.0:
+        if small or promised < DECREASE_TOL + 1e-9 * cost:
             return theta, states, it, True
     return theta, states, max_iter, False
 
@@ -381,21 +386,30 @@ def _hyper_step(
     if estimate_lambda:
         theta = x_abs[: problem.p] + delta[: problem.p]
         diag = np.diag(cov)
-        for cls in problem.classes:
-            idx = [j for j, c in enumerate(problem.shape_class) if c == cls]
-            gamma = problem.rank[cls] - lam[cls] * float(np.sum(diag[idx]))
-            rough = float(np.sum(theta[idx] ** 2))
-            value = gamma / rough if rough > 0 and gamma > 0 else LAMBDA_RANGE[1]
+        gamma, rough = {}, {}
+        for f in problem.classes:
+            idx = [j for j, c in enumerate(problem.shape_class) if c == f]
+            gamma[f] = problem.rank[f] - lam[f] * float(np.sum(diag[idx]))
+            rough[f] = float(np.sum(theta[idx] ** 2))
+        pooled: dict[str, tuple[float, float]] = {}
+        for f, kind in problem.kind_of.items():
+            g0, r0 = pooled.get(kind, (0.0, 0.0))
+            pooled[kind] = (g0 + gamma[f], r0 + rough[f])
+        for f in problem.classes:
+            # each function its own smoothness where the data determine it (γ ≥ 1 degree of
+            # freedom), else its class' (the pooled estimate of e.g. all angular errors)
+            g, r = (gamma[f], rough[f]) if gamma[f] >= MIN_GAMMA else pooled[problem.kind_of[f]]
+            value = g / r if r > 0 and g > 0 else LAMBDA_RANGE[1]
             value = float(np.clip(value, *LAMBDA_RANGE))
             # converged when the shapes the data use (γ, a number of degrees of freedom) no
             # longer change: λ may still creep towards "straight" where that changes nothing
-            previous = problem.gamma.get(cls)
-            problem.gamma[cls] = gamma
+            previous = problem.gamma.get(f)
+            problem.gamma[f] = gamma[f]
             if previous is None:
                 change = max(change, 1.0)
             else:
-                change = max(change, abs(gamma - previous) / max(1.0, problem.rank[cls] * 0.01))
-            new_lam[cls] = value
+                change = max(change, abs(gamma[f] - previous) / max(1.0, problem.rank[f] * 0.01))
+            new_lam[f] = value
     return new_lam, change, delta
 
 
