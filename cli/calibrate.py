@@ -24,7 +24,7 @@ __all__ = ["add_parsers", "cmd_calibrate"]
 USAGE = """\
 cmm-comp calibrate PLAN.toml -o MACHINE.toml [--report DIR] [--quiet]
        cmm-comp calibrate plan PLAN.toml [PLAN.toml ...] --machine GUESS.toml [--json OUT] [--trials N] [--seed S]
-       cmm-comp calibrate apply MACHINE.toml RUN.dat --axis {x,y,z} [--line X Y Z] [--optic X Y Z] [--cycles C ...] -o OUT.dat"""
+       cmm-comp calibrate apply MACHINE.toml RUN.dat --axis {x,y,z} [--line X Y Z] [--optic X Y Z] [--cycles C ...] [--uncorrected] -o OUT.dat"""
 
 
 def _say(args: argparse.Namespace) -> Any:
@@ -114,13 +114,11 @@ def _apply(args: argparse.Namespace, words: list[str]) -> int:
         line_mm=args.line,
         optic_mm=args.optic,
         cycles=tuple(args.cycles) if args.cycles else None,
+        correct=not args.uncorrected,
     )
     cycles = "all cycles" if not args.cycles else f"cycles {' '.join(map(str, args.cycles))}"
-    write_iso230_dat(
-        run,
-        args.output,
-        f"{words[1]} ({cycles}) corrected by {words[0]}: reference − (target + model error)",
-    )
+    what = "uncorrected (for comparison)" if args.uncorrected else f"corrected by {words[0]}"
+    write_iso230_dat(run, args.output, f"{words[1]} ({cycles}) {what}")
     print(f"wrote {args.output}: {run.fwd_mm.shape[0]} targets × {run.fwd_mm.shape[1]} cycles; "
           f"evaluate with: cmm-comp iso230 {args.output}")
     return 0
@@ -166,5 +164,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
                    help="apply: the optic's offset, mm (default 0 0 0)")
     p.add_argument("--cycles", nargs="+", type=int, metavar="C",
                    help="apply: the cycles to correct (default all): use those not calibrated on")
+    p.add_argument("--uncorrected", action="store_true",
+                   help="apply: write the chosen cycles without the correction (the 'before')")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=cmd_calibrate)

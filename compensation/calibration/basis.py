@@ -112,9 +112,10 @@ class FunctionBasis:
         series = legendre.Legendre(coef, domain=[self.lo_mm, self.hi_mm])
         return np.asarray(series.convert(kind=np.polynomial.Polynomial).coef, dtype=float)
 
-    def curvature(self) -> FloatArray:
-        """(size, size) roughness penalty ``L³·∫ f''(q)² dq`` of the free parameters (zero for
-        polynomials: their order is the smoothness)."""
+    def curvature(self, order: int = 2) -> FloatArray:
+        """(size, size) roughness penalty ``L^(2·order−1)·∫ (d^order f / dq^order)² dq`` of the
+        free parameters: order 2 the curvature (straight lines are free), order 3 the change of
+        curvature (parabolas are free); zero for polynomials (their order is the smoothness)."""
         if self.basis in ("polynomial", "linear") or self.nodes_mm is None:
             return np.zeros((self.size, self.size))
         nodes = self.nodes_mm
@@ -123,21 +124,26 @@ class FunctionBasis:
         span = float(nodes[-1] - nodes[0])
         if self.basis == "spline":
             d2 = np.asarray(CubicSpline(nodes, np.eye(m), bc_type="not-a-knot")(nodes, 2))
-            q = np.zeros((m, m))  # ∫ of a piecewise linear f'' squared (exact)
-            for i, hi in enumerate(h):
-                q[i, i] += hi / 3.0
-                q[i + 1, i + 1] += hi / 3.0
-                q[i, i + 1] += hi / 6.0
-                q[i + 1, i] += hi / 6.0
-            k = d2.T @ q @ d2
-        else:  # hat: squared second differences
+            if order == 3:  # the third derivative is constant on each interval
+                d3 = (d2[1:] - d2[:-1]) / h[:, None]
+                k = d3.T @ np.diag(h) @ d3
+            else:
+                q = np.zeros((m, m))  # the integral of a piecewise linear f'' squared (exact)
+                for i, hi in enumerate(h):
+                    q[i, i] += hi / 3.0
+                    q[i + 1, i + 1] += hi / 3.0
+                    q[i, i + 1] += hi / 6.0
+                    q[i + 1, i] += hi / 6.0
+                k = d2.T @ q @ d2
+        else:  # hat (piecewise linear): squared second differences
             if m < 3:
                 return np.zeros((self.size, self.size))
             d = np.zeros((m - 2, m))
             for i in range(m - 2):
                 d[i, i : i + 3] = np.array([1.0, -2.0, 1.0]) / (h[i] * h[i + 1])
             k = d.T @ np.diag(0.5 * (h[:-1] + h[1:])) @ d
-        k = k * span**3
+            order = 2
+        k = k * span ** (2 * order - 1)
         return k[1:, 1:] if self.fixed_reference else k
 
 

@@ -40,6 +40,7 @@ __all__ = ["CalibrationResult", "calibrate", "dataset_summary"]
 
 FloatArray = NDArray[np.float64]
 MIN_PLATE_PLACEMENTS = 4
+REVERSAL_P = 0.01  # a reversal is written when the data show one at this significance
 MISFIT_WARNING = 3.0  # estimated σ more than this × the a-priori σ: the model does not fit
 
 
@@ -136,6 +137,11 @@ def _calibrate(
         f"{sum(b.n_rows for b in problem.blocks)} readings")
     before = residuals_without_errors(problem)
     sol = solve(problem, progress=say)
+    kept, dropped = _significant_reversals(problem, sol)
+    if dropped:  # a reversal the data do not show is not written (it would need dir signals)
+        say("no significant reversal on " + ", ".join(dropped) + ": fitted again without")
+        problem = build_problem(plan, datasets, reversal=kept)
+        sol = solve(problem, progress=say)
     layout = problem.model.layout
     cov = sol.covariance_theta
     kinds = [b.kind for b in problem.blocks]
@@ -183,6 +189,28 @@ def _calibrate(
     )
     result.warnings = _warnings(result)
     return result
+
+
+def _significant_reversals(problem: Problem, sol: Solution) -> tuple[tuple[int, ...], list[str]]:
+    """The axes whose estimated reversal is significant (Wald test, p < REVERSAL_P) and the
+    names of those that are not."""
+    from scipy.stats import chi2
+
+    kept, dropped = [], []
+    cov = sol.covariance_theta_pinned
+    for fn in problem.model.layout.functions:
+        if not fn.is_reversal:
+            continue
+        h = sol.theta[fn.cols]
+        c = cov[fn.cols, fn.cols]
+        w, v = np.linalg.eigh(c)
+        ok = w > 1e-12 * max(float(w.max()), 1e-300)
+        stat = float(np.sum((v[:, ok].T @ h) ** 2 / w[ok]))
+        if chi2.sf(stat, int(np.sum(ok))) < REVERSAL_P:
+            kept.append(fn.axis)
+        else:
+            dropped.append(fn.component)
+    return tuple(kept), dropped
 
 
 def _warnings(r: CalibrationResult) -> list[str]:

@@ -78,10 +78,15 @@ def reversal_axes(plan: Plan, datasets: list[Dataset]) -> tuple[int, ...]:
 
 
 def build_problem(
-    plan: Plan, datasets: list[Dataset], *, smoothness: Any = "plan"
+    plan: Plan,
+    datasets: list[Dataset],
+    *,
+    smoothness: Any = "plan",
+    reversal: tuple[int, ...] | None = None,
 ) -> Problem:
     """The least-squares problem of ``datasets`` with the plan's fit settings (``smoothness``
-    overrides the plan's: None = estimate, a number = fixed τ)."""
+    overrides the plan's: None = estimate, a number = fixed τ; ``reversal`` the axes whose
+    reversal is estimated, default :func:`reversal_axes`)."""
     vol = plan.base.volume
     layout = Layout(
         vol.lower_mm,
@@ -90,7 +95,7 @@ def build_problem(
         nodes=plan.fit.nodes,
         order=plan.fit.order,
         components=plan.fit.components,
-        reversal_axes=reversal_axes(plan, datasets),
+        reversal_axes=reversal_axes(plan, datasets) if reversal is None else reversal,
     )
     model = MachineModel(layout, plan.base.chain, vol.reference_mm, plan.base)
     blocks: list[Block] = []

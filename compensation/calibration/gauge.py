@@ -37,20 +37,14 @@ _ONE = 1.0 - 1e-6  # a principal cosine above this: the subspaces share that dir
 _SEEN_UM = 1e-3  # a field below this (µm per unit whitened step) is "nothing"
 
 
-def _information(
-    problem: Problem, stats: list[Any], blocks: set[int], lam: dict[str, float]
-) -> FloatArray:
-    """θ's information (P, P) from the given blocks, nuisance marginalised, whitened by the
-    prior (weak prior and smoothness, λ of the fit): eigenvalues are data/prior information."""
-    p, n = problem.p, problem.n
-    info = np.zeros((n, n))
-    for g, (a, _, _) in zip(problem.groups, stats, strict=True):
-        if g.block in blocks:
-            info += a / g.sigma**2
-    nu = info[p:, p:] + np.diag(np.maximum(problem.base_precision[p:], 1e-12))
-    schur = info[:p, :p] - info[:p, p:] @ np.linalg.solve(nu, info[p:, :p])
-    root = np.sqrt(problem.precision(lam)[:p])
-    return schur / np.outer(root, root)
+def _null_of(problem: Problem, stats: list[Any], blocks: set[int], lam: dict[str, float]) -> FloatArray:
+    """(P, k) the roughness-free directions the data of ``blocks`` do not see (whitened by the
+    weak prior, orthonormal; zero on the shapes, which the smoothness prior carries)."""
+    free, info = problem.free_information(stats, lam, blocks)
+    w, v = np.linalg.eigh(info)
+    out = np.zeros((problem.p, int(np.sum(w < NULL_RATIO))))
+    out[free] = v[:, w < NULL_RATIO]
+    return out
 
 
 class _Fields:
@@ -67,7 +61,7 @@ class _Fields:
         lay = problem.model.layout
         q = grid_points(lay.lower_mm, lay.upper_mm, steps)
         self.problem = problem
-        self.root = np.sqrt(problem.precision(lam)[: lay.n])
+        self.root = np.sqrt(problem.ridge_internal)
         b = rigid_basis(q)
         proj = np.eye(b.shape[0]) - b @ np.linalg.pinv(b)
         g = problem.model.error_jacobian(problem.model.points(q, stylus_mm)).reshape(-1, lay.n)
@@ -89,11 +83,6 @@ class _Fields:
         base = self.other[0] @ x  # fields at other styli differ from each other by the Abbe terms
         others = max(float(np.sqrt(np.mean((o @ x - base) ** 2))) for o in self.other[1:])
         return at_cal, others
-
-
-def _null(info: FloatArray) -> FloatArray:
-    w, v = np.linalg.eigh(info)
-    return v[:, w < NULL_RATIO]
 
 
 def _describe(problem: Problem, null: FloatArray, fields: _Fields) -> list[dict[str, Any]]:
@@ -178,20 +167,19 @@ def analyse_gauge(
     (``kinds`` the kind of each block), the condition numbers."""
     fields = _Fields(problem, np.asarray(stylus_mm, dtype=float), (4, 4, 4), lam)
     all_blocks = set(range(len(problem.blocks)))
-    info_all = _information(problem, stats, all_blocks, lam)
+    free, info_all = problem.free_information(stats, lam, all_blocks)
     w = np.linalg.eigvalsh(info_all)
     seen = w[w >= NULL_RATIO]
     rigid = _rigid(problem, stats, kinds, lam)
     per_kind = {}
     for kind in sorted(set(kinds)):
         blocks = {i for i, k in enumerate(kinds) if k == kind}
-        null = _null(_information(problem, stats, blocks, lam))
-        null = _without_rotations(problem, null, lam)
+        null = _without_rotations(problem, _null_of(problem, stats, blocks, lam), lam)
         per_kind[kind] = {
             "null_dimension": int(null.shape[1]),
             "freedoms": _describe(problem, null, fields),
         }
-    null_all = _without_rotations(problem, _null(info_all), lam)
+    null_all = _without_rotations(problem, _null_of(problem, stats, all_blocks, lam), lam)
     return {
         "rigid_body": rigid,
         "all_data": {
@@ -202,20 +190,23 @@ def analyse_gauge(
         "per_data_kind": per_kind,
         "condition": {
             "parameters": int(problem.p),
+            "free_directions": int(free.size),
             "identified_directions": int(seen.size),
             "data_information": float(seen.max() / seen.min()) if seen.size else None,
             "note": "ratio of the largest to the smallest eigenvalue of the data's information "
-            "about θ (nuisance marginalised, whitened by the weak prior), over the directions "
-            "the data see",
+            "about the errors' roughness-free parts (constants, slopes, parabolas, squareness; "
+            "shapes and nuisance marginalised, whitened by the weak prior), over the directions "
+            "the data see; the shapes are carried by the smoothness prior (smoothness_tau)",
         },
     }
 
 
 def _without_rotations(problem: Problem, null: FloatArray, lam: dict[str, float]) -> FloatArray:
     """The null space less the rigid rotations (reported separately)."""
+    del lam  # the whitening is the weak prior's
     if null.shape[1] == 0 or problem.rotation_misfit > 1e-6:
         return null
-    root = np.sqrt(problem.precision(lam)[: problem.p])
+    root = np.sqrt(problem.ridge_internal)
     r = problem.rotations.copy()
     for cols, t in problem.t_blocks:
         r[cols] = np.linalg.solve(t, problem.rotations[cols])
@@ -240,15 +231,16 @@ def _rigid(
     for k, axis in enumerate("xyz"):
         seen_by = []
         if representable:
-            root = np.sqrt(problem.precision(lam)[: problem.p])
+            root = np.sqrt(problem.ridge_internal)
             r = problem.rotations[:, k].copy()
             for cols, t in problem.t_blocks:
                 r[cols] = np.linalg.solve(t, problem.rotations[cols, k])
-            v = r * root
-            v /= np.linalg.norm(v)
             for kind in sorted(set(kinds)):
                 blocks = {i for i, kk in enumerate(kinds) if kk == kind}
-                if float(v @ _information(problem, stats, blocks, lam) @ v) >= NULL_RATIO:
+                free, info = problem.free_information(stats, lam, blocks)
+                v = (r * root)[free]
+                v = v / max(float(np.linalg.norm(v)), 1e-300)
+                if float(v @ info @ v) >= NULL_RATIO:
                     seen_by.append(kind)
         out.append({
             "freedom": f"rigid rotation about {axis}",

@@ -37,8 +37,10 @@ def corrected_iso230(
     line_mm: FloatArray | None = None,
     optic_mm: FloatArray | None = None,
     cycles: tuple[int, ...] | None = None,
+    correct: bool = True,
 ) -> Iso230Run:
-    """The run of ``dat_path`` (its ``cycles``, default all) corrected by ``machine``."""
+    """The run of ``dat_path`` (its ``cycles``, default all) corrected by ``machine``
+    (``correct`` False: the same cycles uncorrected, the comparison's "before")."""
     from ..formats.realdata import Iso230Run, read_iso230_dat
 
     try:
@@ -67,7 +69,7 @@ def corrected_iso230(
     corr = {}
     for name, d in (("fwd", 1.0), ("bwd", -1.0)):
         err = machine.volumetric_error(pts, optic, inputs={f"dir_{axis}": np.full(len(pts), d)})
-        corr[name] = err[:, k] / 1000.0
+        corr[name] = err[:, k] / 1000.0 if correct else np.zeros(len(pts))
     return Iso230Run(
         target_mm=run.target_mm.copy(),
         fwd_mm=run.fwd_mm[:, idx] - corr["fwd"][:, None],

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import cho_factor, cho_solve, lapack
 
 from ..errors import CalibrationError
 from .model import MachineModel
@@ -46,9 +46,15 @@ STEP_TOL = 1e-6  # µm, µrad (scaled): a step this small ends the iteration
 FLAT_PRECISION = 1e-12  # a "flat" nuisance prior (poses, stations): keeps H positive definite
 GAUGE_PRECISION = 1e8  # 1/µrad²: the rigid rotations no data see are pinned at zero in θ
 NULL_RATIO = 1e-3  # a direction whose data information is below 1e-3 of the weak prior's: unseen
-MIN_GAMMA = 1.0  # degrees of freedom a function needs for its own smoothness estimate
+PENALTY_ORDER = int(__import__("os").environ.get("CAL_PENALTY", "3"))
+HYPER_ITERATIONS = 30  # fixed-point updates of σ and λ per linearisation
+HYPER_TOL = 3e-3  # relative σ change, γ change (dof): below this σ and λ have settled
+HYPER_DOF = 1.0  # degrees of freedom of the smoothness hyperprior of each class
+HYPER_TAU_PER_AMPLITUDE = 6.0  # τ0 = this × the class' RMS value: a cubic of that amplitude
+HYPER_TAU0_MIN = 0.1  # µm or µrad: the smallest τ0
+CLASS_WEIGHT = 1.0  # degrees of freedom of the class' smoothness in each function's estimate
 COST_NOISE = 1e-4  # χ²: below this a cost change is numerical noise
-STRAIGHTNESS_SLOPE_WEIGHT = 1e4  # the weak prior on a straightness' slope: 100× tighter
+STRAIGHTNESS_SLOPE_WEIGHT = 1e2  # the weak prior on a straightness slope: 10× tighter
 DECREASE_TOL = 1e-6  # χ² (plus 1e-9 of the cost): a step promising less ends the iteration
 
 
@@ -126,54 +132,81 @@ class Problem:
         self.rank: dict[str, int] = {}
         self.kind_of: dict[str, str] = {}
         for fn in model.layout.functions:
-            # a slope no data see goes to the squareness, not the straightness (the laser's
-            # convention: a straightness has its line removed, the squareness carries the angle)
-            line_ridge = self.ridge * (STRAIGHTNESS_SLOPE_WEIGHT if fn.kind == "straightness" else 1.0)
-            k = fn.curvature()
+            k = fn.curvature(PENALTY_ORDER)
             if not np.any(k):
                 if fn.kind == "straightness" and fn.basis == "polynomial":
-                    self.ridge_internal[fn.start] = line_ridge  # the P1 coefficient
+                    # a slope no data see goes to the squareness, not the straightness (the
+                    # laser's convention: a straightness has its line removed)
+                    self.ridge_internal[fn.start] *= STRAIGHTNESS_SLOPE_WEIGHT  # P1
                 continue
             w, u = np.linalg.eigh(k)
             shape = w > 1e-9 * w.max()
-            t = np.hstack([u[:, ~shape], u[:, shape] / np.sqrt(w[shape])])
+            free = _slope_first(fn, u[:, ~shape])  # the functions without roughness
+            t = np.hstack([free, u[:, shape] / np.sqrt(w[shape])])
             self.t_blocks.append((fn.cols, t))
-            n_line = int(np.sum(~shape))
-            ridge = np.concatenate([np.full(n_line, line_ridge), self.ridge / w[shape]])
+            n_line = free.shape[1]
+            ridge = np.concatenate([np.full(n_line, self.ridge), self.ridge / w[shape]])
+            if fn.kind == "straightness":  # as above: the unseen slope goes to the squareness
+                ridge[0] *= STRAIGHTNESS_SLOPE_WEIGHT
             self.ridge_internal[fn.cols] = ridge
             for j in range(fn.start + n_line, fn.start + fn.size):
                 self.shape_class[j] = fn.name
             self.rank[fn.name] = int(np.sum(shape))
             self.kind_of[fn.name] = fn.kind
         self.classes = tuple(self.rank)
+        self.shape_index = {
+            f: np.array([j for j, c in enumerate(self.shape_class) if c == f], dtype=np.intp)
+            for f in self.classes
+        }
         self.gamma: dict[str, float] = {}  # degrees of freedom each class uses (last update)
         self.null = np.zeros((self.p, 0))
         self.null_ratio = np.zeros(0)
         self._gauge(model)
         self.pins = self.gauge  # gauge + the null directions while iterating
 
+    def free_information(
+        self,
+        stats: list[tuple[FloatArray, FloatArray, float]],
+        lam: dict[str, float],
+        blocks: set[int] | None = None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """The data's information (of ``blocks``, default all) about the roughness-free
+        coordinates of θ — each function's constant, slope (and parabola), the squareness —
+        with every shape (its smoothness prior at ``lam``) and every nuisance parameter
+        marginalised, whitened by the weak prior: (indices into θ, (F, F) matrix). Its
+        eigenvalues are data/weak-prior information ratios."""
+        info = np.zeros((self.n, self.n))
+        for g, (a, _, _) in zip(self.groups, stats, strict=True):
+            if blocks is None or g.block in blocks:
+                info += a / g.sigma**2
+        free = np.array([j for j in range(self.p) if self.shape_class[j] is None], dtype=np.intp)
+        rest = np.setdiff1d(np.arange(self.n), free)
+        prec = self.precision(lam)
+        prec[self.p :] = np.maximum(prec[self.p :], FLAT_PRECISION)
+        schur = info[np.ix_(free, free)]
+        if rest.size:
+            nu = info[np.ix_(rest, rest)] + np.diag(prec[rest])
+            cross = info[np.ix_(free, rest)]
+            schur = schur - cross @ np.linalg.solve(nu, cross.T)
+        root = np.sqrt(self.ridge_internal[free])
+        return free, schur / np.outer(root, root)
+
     def find_null_space(
         self, stats: list[tuple[FloatArray, FloatArray, float]], lam: dict[str, float]
     ) -> None:
-        """The θ directions the data (first order, nuisance marginalised) add less than
-        :data:`NULL_RATIO` of the prior's information to (the prior's whitened metric):
-        ``null`` (P, k), orthonormal. They are pinned at the prior's zero while iterating
-        (:attr:`pins`): a second-order term of the exact model must not push θ along a
-        direction no reading constrains. The final covariance keeps their prior variance."""
-        info = np.zeros((self.n, self.n))
-        for g, (a, _, _) in zip(self.groups, stats, strict=True):
-            info += a / g.sigma**2
-        p = self.p
-        nu = info[p:, p:] + np.diag(np.maximum(self.base_precision[p:], FLAT_PRECISION))
-        schur = info[:p, :p]
-        if self.n > p:
-            schur = schur - info[:p, p:] @ np.linalg.solve(nu, info[p:, :p])
-        root = np.sqrt(self.precision(lam)[:p])  # whitened by the whole prior
-        w, v = np.linalg.eigh(schur / np.outer(root, root))
-        self.null = v[:, w < NULL_RATIO]
+        """The roughness-free θ directions (:meth:`free_information`) the data add less than
+        :data:`NULL_RATIO` of the weak prior's information to: ``null`` (P, k) in the weak
+        prior's whitened metric, orthonormal. They are pinned at the prior's zero while
+        iterating (:attr:`pins`): a second-order term of the exact model must not push θ along
+        a direction no reading constrains. The final covariance keeps their prior variance."""
+        free, info = self.free_information(stats, lam)
+        w, v = np.linalg.eigh(info)
+        self.null = np.zeros((self.p, int(np.sum(w < NULL_RATIO))))
+        self.null[free] = v[:, w < NULL_RATIO]
         self.null_ratio = w
+        root = np.sqrt(self.ridge_internal)
         pins = np.zeros((self.null.shape[1], self.n))
-        pins[:, : p] = (self.null * root[:, None]).T  # a·x = the null coordinate (whitened)
+        pins[:, : self.p] = (self.null * root[:, None]).T  # a·x = the null coordinate (whitened)
         self.pins = np.vstack([self.gauge, pins])
 
     def _gauge(self, model: MachineModel) -> None:
@@ -221,9 +254,8 @@ class Problem:
     def precision(self, lam: dict[str, float]) -> FloatArray:
         """(n,) the prior's diagonal precision in internal coordinates."""
         out = self.base_precision.copy()
-        for j, cls in enumerate(self.shape_class):
-            if cls is not None:
-                out[j] += lam[cls]
+        for f, idx in self.shape_index.items():
+            out[idx] += lam[f]
         return out
 
     def absolute(self, theta_int: FloatArray, states: list[Any]) -> FloatArray:
@@ -282,6 +314,36 @@ class Problem:
         return theta_int + delta[: self.p], new_states
 
 
+def _slope_first(fn: Any, free: FloatArray) -> FloatArray:
+    """An orthonormal basis of the roughness-free functions of ``fn`` (columns, parameter
+    space) whose first column is the straight line through the reference (the slope)."""
+    if fn.nodes_mm is None or free.shape[1] == 0:
+        return free
+    line = (fn.nodes_mm - fn.lo_mm) / (fn.hi_mm - fn.lo_mm)
+    if fn.fixed_reference:
+        line = line[1:]
+    slope = free @ (free.T @ line)  # the line, within the free functions
+    if np.linalg.norm(slope) < 1e-9:
+        return free
+    q, _ = np.linalg.qr(np.column_stack([slope, free]))
+    return q[:, : free.shape[1]]
+
+
+def _class_scale(problem: Problem, theta_int: FloatArray) -> dict[str, float]:
+    """Per class of smoothed function, the hyperprior's roughness scale τ0 (µm, µrad):
+    :data:`HYPER_TAU_PER_AMPLITUDE` × the RMS of the class' identified values at their nodes
+    (a cubic of amplitude A has roughness 6·A, :meth:`.basis.FunctionBasis.curvature`)."""
+    theta = problem.theta(theta_int)
+    sums: dict[str, list[float]] = {}
+    for fn in problem.model.layout.functions:
+        if fn.name in problem.kind_of:
+            sums.setdefault(fn.kind, []).append(float(np.mean(theta[fn.cols] ** 2)))
+    return {
+        k: max(HYPER_TAU_PER_AMPLITUDE * float(np.sqrt(np.mean(v))), HYPER_TAU0_MIN)
+        for k, v in sums.items()
+    }
+
+
 class _Normal:
     """H and the gradient at a linearisation point, factorised after scaling H to a unit
     diagonal (Jacobi): solves and the inverse stay accurate across the parameters' scales."""
@@ -319,7 +381,12 @@ class _Normal:
         return -self.scale * np.asarray(cho_solve(self.chol, self.scale * self.grad))
 
     def inverse(self) -> FloatArray:
-        inv = np.asarray(cho_solve(self.chol, np.eye(self.scale.shape[0])))
+        """H⁻¹ from the factor (LAPACK potri: a third of a general solve's work)."""
+        factor, lower = self.chol
+        inv, info = lapack.dpotri(factor, lower=lower)
+        if info != 0:  # pragma: no cover - the factor exists, so its inverse does
+            raise CalibrationError(f"inverting the normal matrix failed (LAPACK info {info})")
+        inv = np.tril(inv) + np.tril(inv, -1).T if lower else np.triu(inv) + np.triu(inv, 1).T
         return inv * np.outer(self.scale, self.scale)
 
 
@@ -369,9 +436,11 @@ def _hyper_step(
 ) -> tuple[dict[str, float], float, FloatArray]:
     """One fixed-point update of σ_g and λ_c on the linearised problem; returns the new λ,
     the largest relative change and the step δ."""
-    delta = _Normal(problem, stats, x_abs, lam).step()
-    cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()
-    pinned = _Normal(problem, stats, x_abs, lam).inverse()[: problem.p, : problem.p]  # the real posterior
+    # one linear problem: its solution has no cause to wander along unseen directions (that is
+    # the re-linearisation's doing), so the real posterior gives both the step and the traces
+    normal = _Normal(problem, stats, x_abs, lam, pinned=False)
+    delta = normal.step()
+    cov = normal.inverse()
     change = 0.0
     for g, (a, b, c) in zip(problem.groups, stats, strict=True):
         rss = c + 2.0 * float(b @ delta) + float(delta @ a @ delta)
@@ -388,17 +457,27 @@ def _hyper_step(
         diag = np.diag(cov)
         gamma, rough = {}, {}
         for f in problem.classes:
-            idx = [j for j, c in enumerate(problem.shape_class) if c == f]
+            idx = problem.shape_index[f]
             gamma[f] = problem.rank[f] - lam[f] * float(np.sum(diag[idx]))
             rough[f] = float(np.sum(theta[idx] ** 2))
         pooled: dict[str, tuple[float, float]] = {}
         for f, kind in problem.kind_of.items():
             g0, r0 = pooled.get(kind, (0.0, 0.0))
             pooled[kind] = (g0 + gamma[f], r0 + rough[f])
+        tau0 = _class_scale(problem, theta)
         for f in problem.classes:
-            # each function its own smoothness where the data determine it (γ ≥ 1 degree of
-            # freedom), else its class' (the pooled estimate of e.g. all angular errors)
-            g, r = (gamma[f], rough[f]) if gamma[f] >= MIN_GAMMA else pooled[problem.kind_of[f]]
+            # each function its own smoothness, shrunk towards its class' (the pooled estimate
+            # of e.g. all angular errors) by CLASS_WEIGHT degrees of freedom: where the data
+            # say little about one function, its class speaks for it (smoothly: no switching)
+            gc, rc = pooled[problem.kind_of[f]]
+            # the class' own hyperprior (a Gamma of HYPER_DOF degrees of freedom at τ0, the
+            # roughness the class' identified amplitude could carry): where the data hardly
+            # see a class' shapes, their roughness falls back towards what the seen part of the
+            # errors suggests, instead of collapsing to zero ("no curvature at all")
+            t0 = tau0[problem.kind_of[f]]
+            lam_class = (gc + HYPER_DOF) / (rc + HYPER_DOF * t0**2)
+            g = gamma[f] + CLASS_WEIGHT
+            r = rough[f] + CLASS_WEIGHT / lam_class
             value = g / r if r > 0 and g > 0 else LAMBDA_RANGE[1]
             value = float(np.clip(value, *LAMBDA_RANGE))
             # converged when the shapes the data use (γ, a number of degrees of freedom) no
@@ -435,15 +514,15 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         x_abs = problem.absolute(theta, states)
         stats = problem.group_stats(res, jac)
         total = 0.0  # what σ and λ moved in this round (they change the fit: refit if so)
-        for _ in range(40):
+        for _ in range(HYPER_ITERATIONS):
             lam, change, delta = _hyper_step(problem, stats, x_abs, lam, estimate)
             total += change
-            if change < 1e-4:
+            if change < HYPER_TOL:
                 break
         history.append({"round": rnd + 1, "lm_iterations": it, "hyper_change": total})
         if progress is not None:
             progress(f"fit round {rnd + 1}: {it} step(s), σ/λ change {total:.1e}")
-        if ok and total < 2e-3 and it <= 3 and rnd > 0:
+        if ok and total < 10 * HYPER_TOL and it <= 3 and rnd > 0:
             converged = True
             break
     res, jac = problem.linearize(theta, states)
