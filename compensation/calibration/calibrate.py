@@ -231,11 +231,11 @@ def _warnings(r: CalibrationResult) -> list[str]:
                            f"{s:.3g} {q['unit']} is {s / q['sigma_prior']:.1f}× its a-priori "
                            f"{q['sigma_prior']:g}: the data hold something the model does not "
                            "describe (or the a-priori σ is too small); U is scaled to the scatter")
-    for f in r.gauge["all_data"]["freedoms"]:
-        if f.get("consequence", "").startswith("not identified"):
-            out.append(f"not identified by the data: {', '.join(f['errors'])} ({f['what']}); the "
-                       "volumetric error at the calibration stylus depends on it — its U carries "
-                       "the prior")
+    unseen = [f"{'+'.join(f['errors'])} ({f['what']})" for f in r.gauge["all_data"]["freedoms"]
+              if f.get("consequence", "").startswith("not identified")]
+    if unseen:
+        out.append("not identified by the data, yet the volumetric error at the calibration "
+                   "stylus depends on it (its U carries the prior): " + "; ".join(unseen))
     worst = r.checks["resimulation"]["max_abs"]
     if worst > 1e-6:
         out.append(f"the written machine reproduces the fit only to {worst:.3g} µm/µrad")

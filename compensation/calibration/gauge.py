@@ -114,8 +114,16 @@ def _describe(problem: Problem, null: FloatArray, fields: _Fields) -> list[dict[
             explained += extra
     rest = null.shape[1] - explained
     if rest > 0:
-        out.append({"errors": ["several"], "dimension": int(rest), "what":
-                    "combinations of three or more errors that no reading sees"})
+        share = {name: float(np.sum(null[cols, :] ** 2)) for name, cols, _ in groups}
+        total = sum(share.values()) or 1.0
+        involved = [n for n, v in sorted(share.items(), key=lambda kv: -kv[1]) if v / total > 0.02]
+        out.append({
+            "errors": involved,
+            "dimension": int(rest),
+            "what": "combinations of three or more of these errors that no reading sees",
+            "consequence": "see the pairs and single errors above; the U of the volumetric "
+            "error carries whatever these do at the calibration stylus",
+        })
     return out
 
 

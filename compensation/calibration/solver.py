@@ -41,7 +41,7 @@ __all__ = ["GroupFit", "Problem", "Solution", "residuals_without_errors", "solve
 
 FloatArray = NDArray[np.float64]
 LAMBDA_RANGE = (1e-8, 1e6)  # τ = 1e4 … 1e-3 µm (µrad): beyond, the data have nothing to add
-INITIAL_TAU = 10.0  # µm or µrad: the smoothness before the data have spoken
+INITIAL_TAU = 1e4  # µm or µrad: start rough, the data first (the smoothness then grows to fit)
 STEP_TOL = 1e-6  # µm, µrad (scaled): a step this small ends the iteration
 FLAT_PRECISION = 1e-12  # a "flat" nuisance prior (poses, stations): keeps H positive definite
 GAUGE_PRECISION = 1e8  # 1/µrad²: the rigid rotations no data see are pinned at zero in θ
