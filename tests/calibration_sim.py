@@ -143,8 +143,10 @@ def squareness(machine: Machine, setup: Setup, a: int, b: int, centre: np.ndarra
 
 def plate_files(machine: Machine, setup: Setup, rng: np.random.Generator, folder: Path,
                 size: float = 400.0) -> None:
-    """A 5 × 5 plate of ``size`` mm in four placements: flat low, flat high turned 90°, upright
-    in x–z, upright in y–z; each pose disturbed by a few mrad and mm (unknown to the fit)."""
+    """A 5 × 5 plate of ``size`` mm (at most 80 % of the smallest travel) in four placements:
+    flat low, flat high turned 90°, upright in x–z, upright in y–z; each pose disturbed by a
+    few mrad and up to 1 mm (unknown to the fit)."""
+    size = min(size, 0.8 * float(np.min(setup.upper - setup.lower)))
     n = 5
     pitch = size / (n - 1)
     lines = []
@@ -167,9 +169,12 @@ def plate_files(machine: Machine, setup: Setup, rng: np.random.Generator, folder
     ]
     rows = []
     for k, (r0, t) in enumerate(poses):
-        tilt = rng.normal(0, 2e-3, 3)
+        tilt = rng.uniform(-2e-3, 2e-3, 3)
         r = _rodrigues(tilt) @ r0
-        t = t + rng.normal(0, 1.0, 3)
+        t = t + rng.uniform(-1.0, 1.0, 3)
+        corners = np.array([[0, 0, 0], [size, 0, 0], [0, size, 0], [size, size, 0]]) @ r.T + t
+        margin = 0.02 * (hi - lo) + 2.0  # every ball inside the volume, whatever the pose
+        t = t + np.maximum(0.0, lo + margin - corners.min(0)) - np.maximum(0.0, corners.max(0) - hi + margin)
         for j in range(n * n):
             b = np.array([pitch * (j % n), pitch * (j // n), 0.0])
             target = r @ b + t
