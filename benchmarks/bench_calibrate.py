@@ -52,14 +52,18 @@ def _run(args: list[str], cwd: Path) -> float:
 
 def make_plan(folder: Path, seed: int) -> tuple[object, Path]:
     rng = np.random.default_rng(seed)
-    setup = Setup(lower=np.zeros(3), upper=np.array([1000.0, 800.0, 600.0]),
-                  stylus=np.array([0.0, 0.0, -150.0]))
+    setup = Setup(
+        lower=np.zeros(3),
+        upper=np.array([1000.0, 800.0, 600.0]),
+        stylus=np.array([0.0, 0.0, -150.0]),
+    )
     machine = random_machine(rng, "MB1", setup, wave=False)
     laser_file(machine, setup, rng, folder / "laser.csv", targets=21, cycles=2)
     plate_files(machine, setup, rng, folder)
     guesses = trac_file(machine, setup, rng, folder / "trac.csv", stations=6, points=200)
-    plan = write_plan(folder, "MB1", setup, ("laser", "plate", "multilateration"), guesses,
-                      nodes=21)
+    plan = write_plan(
+        folder, "MB1", setup, ("laser", "plate", "multilateration"), guesses, nodes=21
+    )
     machine.to_toml(folder / "truth.toml")  # type: ignore[attr-defined]
     return machine, plan
 
@@ -75,11 +79,36 @@ def main() -> int:
         machine, plan = make_plan(d, args.seed)
         example = ROOT / "examples" / "machines" / "npl-bridge.toml"
         for i in range(args.repeat):
-            base = _run([*CLI, "map", str(example), "--out", "map.csv", "--steps", "21", "21", "21"], d)
-            cal = _run([*CLI, "calibrate", str(plan), "-o", "machine.toml", "--report", "report",
-                        "--quiet"], d)
-            pln = _run([*CLI, "calibrate", "plan", str(plan), "--machine", "truth.toml",
-                        "--json", "plan.json", "--quiet"], d)
+            base = _run(
+                [*CLI, "map", str(example), "--out", "map.csv", "--steps", "21", "21", "21"], d
+            )
+            cal = _run(
+                [
+                    *CLI,
+                    "calibrate",
+                    str(plan),
+                    "-o",
+                    "machine.toml",
+                    "--report",
+                    "report",
+                    "--quiet",
+                ],
+                d,
+            )
+            pln = _run(
+                [
+                    *CLI,
+                    "calibrate",
+                    "plan",
+                    str(plan),
+                    "--machine",
+                    "truth.toml",
+                    "--json",
+                    "plan.json",
+                    "--quiet",
+                ],
+                d,
+            )
             rows.append({"run": i + 1, "baseline_map_s": base, "calibrate_s": cal, "plan_s": pln})
         report = json.loads((d / "report" / "calibration.json").read_text())
         accuracy = compare(machine, d / "report" / "volumetric_u.csv")  # type: ignore[arg-type]
@@ -89,13 +118,19 @@ def main() -> int:
     base = min(r["baseline_map_s"] for r in rows)
     print(f"{'run':>4} {'baseline map s':>15} {'calibrate s':>12} {'plan s':>8}")
     for r in rows:
-        print(f"{r['run']:>4} {r['baseline_map_s']:>15.2f} {r['calibrate_s']:>12.2f} {r['plan_s']:>8.2f}")
-    print(f"best: calibrate {cal:.1f} s (bar {BAR_CALIBRATE_S:.0f} s, {cal / base:.1f}× the "
-          f"baseline), plan {pln:.1f} s (bar {BAR_PLAN_S:.0f} s, {pln / base:.1f}× the baseline)")
-    print(f"readings {report['fit']['readings']}, parameters {report['fit']['parameters']} + "
-          f"{report['fit']['nuisance_parameters']} nuisance; fit {report['fit']['elapsed_s']:.1f} s "
-          f"in-process; identified vs truth: RMS {accuracy['rms_percent']:.2f} % of the error RMS, "
-          f"coverage {accuracy['coverage']:.3f}")
+        print(
+            f"{r['run']:>4} {r['baseline_map_s']:>15.2f} {r['calibrate_s']:>12.2f} {r['plan_s']:>8.2f}"
+        )
+    print(
+        f"best: calibrate {cal:.1f} s (bar {BAR_CALIBRATE_S:.0f} s, {cal / base:.1f}× the "
+        f"baseline), plan {pln:.1f} s (bar {BAR_PLAN_S:.0f} s, {pln / base:.1f}× the baseline)"
+    )
+    print(
+        f"readings {report['fit']['readings']}, parameters {report['fit']['parameters']} + "
+        f"{report['fit']['nuisance_parameters']} nuisance; fit {report['fit']['elapsed_s']:.1f} s "
+        f"in-process; identified vs truth: RMS {accuracy['rms_percent']:.2f} % of the error RMS, "
+        f"coverage {accuracy['coverage']:.3f}"
+    )
     out = {
         "plan": "6 stations x 200 points + 4 placements x 25 balls + 18 laser runs (+3 squareness)",
         "runs": rows,

@@ -41,17 +41,27 @@ def plan_text(dat: Path, axis: str, u_um: float) -> str:
     nodes = {a: len(run.target_mm) if a == axis else 2 for a in "xyz"}
     lines = ['model = "MB1"', f'name = "{dat.parent.name}-{axis}"', "", "[volume]"]
     lines += [f"{a} = [{volume[a][0]}, {volume[a][1]}]" for a in "xyz"]
-    lines += ["", "[fit]", f'components = ["d{axis}_{axis}"]',
-              "nodes = {" + ", ".join(f"{a} = {nodes[a]}" for a in "xyz") + "}", "",
-              "[[laser]]", f'file = "{dat}"', f'axis = "{axis}"',
-              f"cycles = {list(CALIBRATE_CYCLES)}", f"u_linear_um = {u_um}", ""]
+    lines += [
+        "",
+        "[fit]",
+        f'components = ["d{axis}_{axis}"]',
+        "nodes = {" + ", ".join(f"{a} = {nodes[a]}" for a in "xyz") + "}",
+        "",
+        "[[laser]]",
+        f'file = "{dat}"',
+        f'axis = "{axis}"',
+        f"cycles = {list(CALIBRATE_CYCLES)}",
+        f"u_linear_um = {u_um}",
+        "",
+    ]
     return "\n".join(lines)
 
 
 def iso(dat: Path, cwd: Path) -> dict[str, float]:
     out = cwd / "iso.json"
-    subprocess.run([*CLI, "iso230", str(dat), "--json", str(out)], cwd=cwd, check=True,
-                   capture_output=True)
+    subprocess.run(
+        [*CLI, "iso230", str(dat), "--json", str(out)], cwd=cwd, check=True, capture_output=True
+    )
     data = json.loads(out.read_text())
     return {k: float(data[k]) for k in PARAMETERS}
 
@@ -61,13 +71,33 @@ def evaluate(rel: str, axis: str, u_um: float, tmp: Path) -> dict[str, object]:
     folder = tmp / rel.replace("/", "_")
     folder.mkdir()
     (folder / "plan.toml").write_text(plan_text(dat, axis, u_um))
-    subprocess.run([*CLI, "calibrate", "plan.toml", "-o", "machine.toml", "--report", "report",
-                    "--quiet"], cwd=folder, check=True, capture_output=True)
+    subprocess.run(
+        [*CLI, "calibrate", "plan.toml", "-o", "machine.toml", "--report", "report", "--quiet"],
+        cwd=folder,
+        check=True,
+        capture_output=True,
+    )
     cycles = [str(c) for c in CHECK_CYCLES]
     for name, extra in (("before.dat", ["--uncorrected"]), ("after.dat", [])):
-        subprocess.run([*CLI, "calibrate", "apply", "machine.toml", str(dat), "--axis", axis,
-                        "--cycles", *cycles, *extra, "-o", name], cwd=folder, check=True,
-                       capture_output=True)
+        subprocess.run(
+            [
+                *CLI,
+                "calibrate",
+                "apply",
+                "machine.toml",
+                str(dat),
+                "--axis",
+                axis,
+                "--cycles",
+                *cycles,
+                *extra,
+                "-o",
+                name,
+            ],
+            cwd=folder,
+            check=True,
+            capture_output=True,
+        )
     report = json.loads((folder / "report" / "calibration.json").read_text())
     return {
         "file": rel,

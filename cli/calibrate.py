@@ -79,7 +79,8 @@ def _plan(args: argparse.Namespace, words: list[str]) -> int:
     guess = load_machine(args.machine)
     plans = [read_plan(w) for w in words]
     results = [
-        predict_plan(p, guess, trials=args.trials, seed=args.seed, progress=_say(args)) for p in plans
+        predict_plan(p, guess, trials=args.trials, seed=args.seed, progress=_say(args))
+        for p in plans
     ]
     header = f"{'plan':<28} {'readings':>8} {'U max µm':>9} {'U rms µm':>9} {'null':>5}"
     if args.trials:
@@ -87,8 +88,10 @@ def _plan(args: argparse.Namespace, words: list[str]) -> int:
     print(header)
     for p, r in zip(plans, results, strict=True):
         v = r["volumetric_U_um"]
-        line = (f"{p.source.name:<28} {r['readings']:>8} {max(v['max_um']):>9.3g} "
-                f"{max(v['rms_um']):>9.3g} {r['null_dimension']:>5}")
+        line = (
+            f"{p.source.name:<28} {r['readings']:>8} {max(v['max_um']):>9.3g} "
+            f"{max(v['rms_um']):>9.3g} {r['null_dimension']:>5}"
+        )
         if args.trials:
             mc = r["monte_carlo"]
             line += f" {mc['spread_over_predicted_u']['overall']:>11.2f} {mc['coverage_of_predicted_U']:>8.3f}"
@@ -119,8 +122,10 @@ def _apply(args: argparse.Namespace, words: list[str]) -> int:
     cycles = "all cycles" if not args.cycles else f"cycles {' '.join(map(str, args.cycles))}"
     what = "uncorrected (for comparison)" if args.uncorrected else f"corrected by {words[0]}"
     write_iso230_dat(run, args.output, f"{words[1]} ({cycles}) {what}")
-    print(f"wrote {args.output}: {run.fwd_mm.shape[0]} targets × {run.fwd_mm.shape[1]} cycles; "
-          f"evaluate with: cmm-comp iso230 {args.output}")
+    print(
+        f"wrote {args.output}: {run.fwd_mm.shape[0]} targets × {run.fwd_mm.shape[1]} cycles; "
+        f"evaluate with: cmm-comp iso230 {args.output}"
+    )
     return 0
 
 
@@ -148,23 +153,53 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("words", nargs="+", metavar="PLAN | plan PLAN… | apply MACHINE RUN.dat")
-    p.add_argument("-o", "--output", type=Path, help="the identified machine.toml (calibrate); "
-                   "the corrected .dat (apply)")
-    p.add_argument("--report", type=Path, help="calibrate: write calibration.json, "
-                   "volumetric_u.csv, PNGs and index.html into this folder")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        help="the identified machine.toml (calibrate); the corrected .dat (apply)",
+    )
+    p.add_argument(
+        "--report",
+        type=Path,
+        help="calibrate: write calibration.json, "
+        "volumetric_u.csv, PNGs and index.html into this folder",
+    )
     p.add_argument("--machine", type=Path, help="plan: the machine you expect (GUESS.toml)")
     p.add_argument("--json", type=Path, help="plan: the prediction as JSON")
-    p.add_argument("--trials", type=int, default=0, help="plan: check the prediction with this "
-                   "many simulated calibrations (default 0)")
+    p.add_argument(
+        "--trials",
+        type=int,
+        default=0,
+        help="plan: check the prediction with this many simulated calibrations (default 0)",
+    )
     p.add_argument("--seed", type=int, default=0, help="plan: random seed (default 0)")
     p.add_argument("--axis", choices=("x", "y", "z"), help="apply: the axis of the run")
-    p.add_argument("--line", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                   help="apply: the other axes' positions during the run, mm (default the reference)")
-    p.add_argument("--optic", nargs=3, type=float, metavar=("X", "Y", "Z"),
-                   help="apply: the optic's offset, mm (default 0 0 0)")
-    p.add_argument("--cycles", nargs="+", type=int, metavar="C",
-                   help="apply: the cycles to correct (default all): use those not calibrated on")
-    p.add_argument("--uncorrected", action="store_true",
-                   help="apply: write the chosen cycles without the correction (the 'before')")
+    p.add_argument(
+        "--line",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="apply: the other axes' positions during the run, mm (default the reference)",
+    )
+    p.add_argument(
+        "--optic",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="apply: the optic's offset, mm (default 0 0 0)",
+    )
+    p.add_argument(
+        "--cycles",
+        nargs="+",
+        type=int,
+        metavar="C",
+        help="apply: the cycles to correct (default all): use those not calibrated on",
+    )
+    p.add_argument(
+        "--uncorrected",
+        action="store_true",
+        help="apply: write the chosen cycles without the correction (the 'before')",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=cmd_calibrate)

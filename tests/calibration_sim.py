@@ -23,11 +23,24 @@ from cmm_comp.compensation.parametric_errors import TABLE_COMPONENTS
 
 MODELS = ("MB1", "MB2", "FB1", "FB2", "MH1", "MH2", "FH1", "FH2", "CX1", "CY1")
 LASER_HEADER = [
-    "axis", "quantity", "position_mm", "value", "direction", "run", "line_x_mm", "line_y_mm",
-    "line_z_mm", "optic_offset_x_mm", "optic_offset_y_mm", "optic_offset_z_mm",
+    "axis",
+    "quantity",
+    "position_mm",
+    "value",
+    "direction",
+    "run",
+    "line_x_mm",
+    "line_y_mm",
+    "line_z_mm",
+    "optic_offset_x_mm",
+    "optic_offset_y_mm",
+    "optic_offset_z_mm",
 ]
-ANGLES = {"x": {"roll": 0, "pitch": 1, "yaw": 2}, "y": {"roll": 1, "pitch": 0, "yaw": 2},
-          "z": {"roll": 2, "pitch": 1, "yaw": 0}}
+ANGLES = {
+    "x": {"roll": 0, "pitch": 1, "yaw": 2},
+    "y": {"roll": 1, "pitch": 0, "yaw": 2},
+    "z": {"roll": 2, "pitch": 1, "yaw": 0},
+}
 
 
 @dataclass(frozen=True)
@@ -58,8 +71,12 @@ def random_machine(
         amp = (4.0 if name[0] == "d" else 5.0) * scale
         poly = rng.normal(0, amp, 3)
         period = rng.uniform(0.4, 1.5)
-        v = poly[0] * s + poly[1] * s**2 + poly[2] * s**3 + (rng.normal(0, amp / 3) if wave else 0.0) * np.sin(
-            2 * np.pi * s / period + rng.uniform(0, 2 * np.pi)
+        v = (
+            poly[0] * s
+            + poly[1] * s**2
+            + poly[2] * s**3
+            + (rng.normal(0, amp / 3) if wave else 0.0)
+            * np.sin(2 * np.pi * s / period + rng.uniform(0, 2 * np.pi))
         )
         if name[0] == "e":
             v = v + rng.normal(0, amp)
@@ -79,13 +96,23 @@ def _write(path: Path, header: list[str], rows: list[list[object]]) -> None:
 
 def rotation_urad(machine: Machine, q: np.ndarray) -> np.ndarray:
     r = machine.pose_error(q).rotation
-    return 1e6 * 0.5 * np.stack(
-        [r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], axis=1
+    return (
+        1e6
+        * 0.5
+        * np.stack(
+            [r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]], axis=1
+        )
     )
 
 
-def laser_file(machine: Machine, setup: Setup, rng: np.random.Generator, path: Path,
-               targets: int = 21, cycles: int = 2) -> None:
+def laser_file(
+    machine: Machine,
+    setup: Setup,
+    rng: np.random.Generator,
+    path: Path,
+    targets: int = 21,
+    cycles: int = 2,
+) -> None:
     """Runs of every quantity through the middle of the volume, optic at the stylus."""
     centre = 0.5 * (setup.lower + setup.upper)
     optic = setup.stylus
@@ -120,12 +147,31 @@ def laser_file(machine: Machine, setup: Setup, rng: np.random.Generator, path: P
                 v = v - v[0]
             run = f"{axis}-{quantity}"
             for i in range(len(order)):
-                rows.append([axis, quantity, f"{q[i, k]:.4f}", f"{v[i]:.5f}", int(d[i]), run,
-                             *centre, *optic])
+                rows.append(
+                    [
+                        axis,
+                        quantity,
+                        f"{q[i, k]:.4f}",
+                        f"{v[i]:.5f}",
+                        int(d[i]),
+                        run,
+                        *centre,
+                        *optic,
+                    ]
+                )
     for a, b in ((0, 1), (0, 2), (1, 2)):
-        rows.append([f"{'xyz'[a]}{'xyz'[b]}", "squareness_urad", "",
-                     f"{squareness(machine, setup, a, b, centre) + rng.normal(0, 0.5):.5f}", "",
-                     f"sq-{a}{b}", *centre, *optic])
+        rows.append(
+            [
+                f"{'xyz'[a]}{'xyz'[b]}",
+                "squareness_urad",
+                "",
+                f"{squareness(machine, setup, a, b, centre) + rng.normal(0, 0.5):.5f}",
+                "",
+                f"sq-{a}{b}",
+                *centre,
+                *optic,
+            ]
+        )
     _write(path, LASER_HEADER, rows)
 
 
@@ -141,8 +187,9 @@ def squareness(machine: Machine, setup: Setup, a: int, b: int, centre: np.ndarra
     return float((np.arccos(np.clip(dirs[0] @ dirs[1], -1, 1)) - np.pi / 2) * 1e6)
 
 
-def plate_files(machine: Machine, setup: Setup, rng: np.random.Generator, folder: Path,
-                size: float = 400.0) -> None:
+def plate_files(
+    machine: Machine, setup: Setup, rng: np.random.Generator, folder: Path, size: float = 400.0
+) -> None:
     """A 5 × 5 plate of ``size`` mm (at most 80 % of the smallest travel) in four placements:
     flat low, flat high turned 90°, upright in x–z, upright in y–z; each pose disturbed by a
     few mrad and up to 1 mm (unknown to the fit)."""
@@ -151,8 +198,15 @@ def plate_files(machine: Machine, setup: Setup, rng: np.random.Generator, folder
     pitch = size / (n - 1)
     lines = []
     for j in range(n * n):
-        lines += ["[[ball]]", f"id = {j + 1}", f"u_mm = {pitch * (j % n)}", f"v_mm = {pitch * (j // n)}",
-                  "w_mm = 0.0", "u_um = 0.1", ""]
+        lines += [
+            "[[ball]]",
+            f"id = {j + 1}",
+            f"u_mm = {pitch * (j % n)}",
+            f"v_mm = {pitch * (j // n)}",
+            "w_mm = 0.0",
+            "u_um = 0.1",
+            "",
+        ]
     (folder / "plate.toml").write_text("\n".join(lines), encoding="utf-8")
     lo, hi = setup.lower, setup.upper
     mid = 0.5 * (lo + hi)
@@ -174,7 +228,11 @@ def plate_files(machine: Machine, setup: Setup, rng: np.random.Generator, folder
         t = t + rng.uniform(-1.0, 1.0, 3)
         corners = np.array([[0, 0, 0], [size, 0, 0], [0, size, 0], [size, size, 0]]) @ r.T + t
         margin = 0.02 * (hi - lo) + 2.0  # every ball inside the volume, whatever the pose
-        t = t + np.maximum(0.0, lo + margin - corners.min(0)) - np.maximum(0.0, corners.max(0) - hi + margin)
+        t = (
+            t
+            + np.maximum(0.0, lo + margin - corners.min(0))
+            - np.maximum(0.0, corners.max(0) - hi + margin)
+        )
         for j in range(n * n):
             b = np.array([pitch * (j % n), pitch * (j // n), 0.0])
             target = r @ b + t
@@ -195,14 +253,28 @@ def _rodrigues(v: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(a) * kx + (1 - np.cos(a)) * kx @ kx
 
 
-def trac_file(machine: Machine, setup: Setup, rng: np.random.Generator, path: Path,
-              stations: int = 5, points: int = 60) -> np.ndarray:
+def trac_file(
+    machine: Machine,
+    setup: Setup,
+    rng: np.random.Generator,
+    path: Path,
+    stations: int = 5,
+    points: int = 60,
+) -> np.ndarray:
     """Lengths from ``stations`` stations (below and beside the volume) to ``points`` random
     points; returns the station guesses (true ± 30 mm)."""
     lo, hi = setup.lower, setup.upper
     span = hi - lo
-    corners = np.array([[0.05, 0.05, -0.15], [0.95, 0.05, -0.15], [0.95, 0.95, -0.15],
-                        [0.05, 0.95, -0.15], [0.5, -0.2, 0.5], [0.5, 1.2, 0.5]])
+    corners = np.array(
+        [
+            [0.05, 0.05, -0.15],
+            [0.95, 0.05, -0.15],
+            [0.95, 0.95, -0.15],
+            [0.05, 0.95, -0.15],
+            [0.5, -0.2, 0.5],
+            [0.5, 1.2, 0.5],
+        ]
+    )
     true_s = lo + corners[:stations] * span
     pts = lo + rng.uniform(0.02, 0.98, (points, 3)) * span
     true = pts + machine.volumetric_error(pts, setup.stylus) / 1000.0
@@ -217,33 +289,74 @@ def trac_file(machine: Machine, setup: Setup, rng: np.random.Generator, path: Pa
     return true_s + rng.uniform(-30, 30, true_s.shape)
 
 
-def write_plan(folder: Path, model: str, setup: Setup, kinds: tuple[str, ...],
-               guesses: np.ndarray | None, nodes: int = 11) -> Path:
+def write_plan(
+    folder: Path,
+    model: str,
+    setup: Setup,
+    kinds: tuple[str, ...],
+    guesses: np.ndarray | None,
+    nodes: int = 11,
+) -> Path:
     """The plan naming the files written for ``kinds``."""
     vol = "\n".join(f"{a} = [{setup.lower[k]}, {setup.upper[k]}]" for k, a in enumerate("xyz"))
-    text = [f'model = "{model}"', "", "[volume]", vol, "steps = [6, 6, 6]", "", "[probe]",
-            f"offset = {list(map(float, setup.stylus))}", "", "[fit]", f"nodes = {nodes}", ""]
+    text = [
+        f'model = "{model}"',
+        "",
+        "[volume]",
+        vol,
+        "steps = [6, 6, 6]",
+        "",
+        "[probe]",
+        f"offset = {list(map(float, setup.stylus))}",
+        "",
+        "[fit]",
+        f"nodes = {nodes}",
+        "",
+    ]
     if "laser" in kinds:
-        text += ["[[laser]]", 'file = "laser.csv"', f"u_linear_um = {setup.noise_linear_um}",
-                 f"u_straightness_um = {setup.noise_linear_um}",
-                 f"u_angle_urad = {setup.noise_angle_urad}", "u_squareness_urad = 0.5", ""]
+        text += [
+            "[[laser]]",
+            'file = "laser.csv"',
+            f"u_linear_um = {setup.noise_linear_um}",
+            f"u_straightness_um = {setup.noise_linear_um}",
+            f"u_angle_urad = {setup.noise_angle_urad}",
+            "u_squareness_urad = 0.5",
+            "",
+        ]
     if "plate" in kinds:
-        text += ["[[plate]]", 'balls = "plate.toml"', 'file = "plate.csv"',
-                 f"stylus_mm = {list(map(float, setup.stylus))}",
-                 f"probe_um = {setup.noise_probe_um}", ""]
+        text += [
+            "[[plate]]",
+            'balls = "plate.toml"',
+            'file = "plate.csv"',
+            f"stylus_mm = {list(map(float, setup.stylus))}",
+            f"probe_um = {setup.noise_probe_um}",
+            "",
+        ]
     if "multilateration" in kinds:
         assert guesses is not None
         g = "[" + ", ".join("[" + ", ".join(f"{v:.3f}" for v in s) + "]" for s in guesses) + "]"
-        text += ["[[multilateration]]", 'file = "trac.csv"',
-                 f"stylus_mm = {list(map(float, setup.stylus))}", f"station_guess_mm = {g}",
-                 f"u_um = {setup.noise_length_um}", ""]
+        text += [
+            "[[multilateration]]",
+            'file = "trac.csv"',
+            f"stylus_mm = {list(map(float, setup.stylus))}",
+            f"station_guess_mm = {g}",
+            f"u_um = {setup.noise_length_um}",
+            "",
+        ]
     path = folder / "calibration.toml"
     path.write_text("\n".join(text), encoding="utf-8")
     return path
 
 
-def simulate(folder: Path, model: str, setup: Setup, kinds: tuple[str, ...],
-             rng: np.random.Generator, nodes: int = 11, wave: bool = True) -> tuple[Machine, Path]:
+def simulate(
+    folder: Path,
+    model: str,
+    setup: Setup,
+    kinds: tuple[str, ...],
+    rng: np.random.Generator,
+    nodes: int = 11,
+    wave: bool = True,
+) -> tuple[Machine, Path]:
     """A random machine and the plan with its simulated data files for ``kinds``."""
     machine = random_machine(rng, model, setup, wave=wave)
     guesses = None

@@ -41,8 +41,13 @@ def test_worked_example_runs_as_printed(tmp_path: Path) -> None:
     for line in commands:
         argv = shlex.split(line)
         assert argv[0] == "cmm-comp"
-        proc = subprocess.run([sys.executable, "-m", "cmm_comp.cli", *argv[1:]], cwd=tmp_path,
-                              capture_output=True, text=True, timeout=600)
+        proc = subprocess.run(
+            [sys.executable, "-m", "cmm_comp.cli", *argv[1:]],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert proc.returncode == 0, f"{line}\n{proc.stdout}\n{proc.stderr}"
     # the daemon accepted the signed grid of the calibrated machine
     assert "ok; grid machine.grid" in proc.stdout
@@ -51,8 +56,9 @@ def test_worked_example_runs_as_printed(tmp_path: Path) -> None:
     # the identified machine against the machine the data were simulated from
     machine = Machine.from_toml(tmp_path / "machine.toml")
     truth = Machine.from_toml(EXAMPLE / "truth.toml")
-    data = np.loadtxt(tmp_path / "calibration-report" / "volumetric_u.csv", delimiter=",",
-                      skiprows=1)
+    data = np.loadtxt(
+        tmp_path / "calibration-report" / "volumetric_u.csv", delimiter=",", skiprows=1
+    )
     q = data[:, :3]
     mine = machine.volumetric_error(q, machine.probe.offset_mm)
     np.testing.assert_allclose(mine, data[:, 3:6], atol=2e-6)  # the CSV is the machine's
@@ -78,8 +84,18 @@ def _rigid_free(q: np.ndarray, field: np.ndarray) -> np.ndarray:
 
 
 def test_example_data_regenerate_bit_for_bit(tmp_path: Path) -> None:
-    subprocess.run([sys.executable, str(EXAMPLE / "generate.py"), str(tmp_path)], check=True,
-                   capture_output=True, timeout=300)
-    for name in ("calibration.toml", "laser.csv", "plate.toml", "plate.csv", "trac.csv",
-                 "truth.toml"):
+    subprocess.run(
+        [sys.executable, str(EXAMPLE / "generate.py"), str(tmp_path)],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    for name in (
+        "calibration.toml",
+        "laser.csv",
+        "plate.toml",
+        "plate.csv",
+        "trac.csv",
+        "truth.toml",
+    ):
         assert (tmp_path / name).read_bytes() == (EXAMPLE / name).read_bytes(), name

@@ -19,10 +19,11 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from calibration_sim import Setup, compare, simulate  # noqa: E402
+from calibration_sim import Setup, compare, simulate
 
-SETUP = Setup(lower=np.zeros(3), upper=np.array([700.0, 600.0, 500.0]),
-              stylus=np.array([0.0, 0.0, -120.0]))
+SETUP = Setup(
+    lower=np.zeros(3), upper=np.array([700.0, 600.0, 500.0]), stylus=np.array([0.0, 0.0, -120.0])
+)
 CASES = [
     (("laser",), "MB2", 1),
     (("laser",), "CY1", 2),
@@ -42,12 +43,26 @@ RESULTS: list[dict[str, float]] = []
 def test_identified_error_within_its_uncertainty(
     tmp_path: Path, kinds: tuple[str, ...], model: str, seed: int
 ) -> None:
-    machine, plan = simulate(tmp_path, model, SETUP, kinds, np.random.default_rng(seed),
-                             nodes=9, wave=False)
+    machine, plan = simulate(
+        tmp_path, model, SETUP, kinds, np.random.default_rng(seed), nodes=9, wave=False
+    )
     proc = subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "calibrate", str(plan), "-o", "machine.toml",
-         "--report", "report", "--quiet"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=500,
+        [
+            sys.executable,
+            "-m",
+            "cmm_comp.cli",
+            "calibrate",
+            str(plan),
+            "-o",
+            "machine.toml",
+            "--report",
+            "report",
+            "--quiet",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=500,
     )
     assert proc.returncode == 0, proc.stderr
     result = compare(machine, tmp_path / "report" / "volumetric_u.csv")

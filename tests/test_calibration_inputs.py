@@ -29,9 +29,22 @@ def plan_dir(tmp_path: Path) -> Path:
 
 def _run(folder: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "calibrate", "calibration.toml", "-o",
-         "machine.toml", "--report", "report", "--quiet"],
-        cwd=folder, capture_output=True, text=True, timeout=120,
+        [
+            sys.executable,
+            "-m",
+            "cmm_comp.cli",
+            "calibrate",
+            "calibration.toml",
+            "-o",
+            "machine.toml",
+            "--report",
+            "report",
+            "--quiet",
+        ],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
 
 
@@ -62,7 +75,11 @@ def _line_number(path: Path, predicate) -> int:  # type: ignore[no-untyped-def]
 def test_station_with_too_few_points(plan_dir: Path) -> None:
     path = plan_dir / "trac.csv"
     lines = _lines(path)
-    kept = [line for line in lines if not line.startswith("S3,") or line.split(",")[1] in ("1", "2", "3")]
+    kept = [
+        line
+        for line in lines
+        if not line.startswith("S3,") or line.split(",")[1] in ("1", "2", "3")
+    ]
     path.write_text("\n".join(kept) + "\n")
     first = _line_number(path, lambda s: s.startswith("S3,"))
     _fails(plan_dir, "trac.csv", f"line {first}", "column 'station'", "'S3' has 3 point(s)", "≥ 4")

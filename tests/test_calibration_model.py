@@ -22,22 +22,24 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from calibration_sim import Setup, random_machine, simulate  # noqa: E402
+from calibration_sim import Setup, random_machine, simulate
 
-from cmm_comp.compensation.calibration.calibrate import calibrate  # noqa: E402
-from cmm_comp.compensation.calibration.datasets import build_problem, load_datasets  # noqa: E402
-from cmm_comp.compensation.calibration.plan import read_plan  # noqa: E402
+from cmm_comp.compensation.calibration.calibrate import calibrate
+from cmm_comp.compensation.calibration.datasets import build_problem, load_datasets
+from cmm_comp.compensation.calibration.plan import read_plan
 
-SETUP = Setup(lower=np.zeros(3), upper=np.array([600.0, 500.0, 400.0]),
-              stylus=np.array([0.0, 0.0, -100.0]))
+SETUP = Setup(
+    lower=np.zeros(3), upper=np.array([600.0, 500.0, 400.0]), stylus=np.array([0.0, 0.0, -100.0])
+)
 
 
 @pytest.fixture(scope="module")
 def mixed(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Path]:
     folder = tmp_path_factory.mktemp("mixed")
     rng = np.random.default_rng(7)
-    return simulate(folder, "FB1", SETUP, ("laser", "plate", "multilateration"), rng, nodes=7,
-                    wave=False)
+    return simulate(
+        folder, "FB1", SETUP, ("laser", "plate", "multilateration"), rng, nodes=7, wave=False
+    )
 
 
 def _problem(plan_path: Path):  # type: ignore[no-untyped-def]
@@ -73,8 +75,9 @@ def test_jacobians_match_finite_differences_of_the_exact_model(mixed) -> None:  
             up = block.linearize(problem.model, theta, block.advance(state, d)).residual
             dn = block.linearize(problem.model, theta, block.advance(state, -d)).residual
             fd = (up - dn) / (2 * h)
-            assert np.max(np.abs(fd - lin.jac_nuisance[:, j])) < 1e-5 * max(1.0, np.max(np.abs(fd))), (
-                block.kind, j)
+            assert np.max(np.abs(fd - lin.jac_nuisance[:, j])) < 1e-5 * max(
+                1.0, np.max(np.abs(fd))
+            ), (block.kind, j)
 
 
 def test_exact_minus_first_order_is_second_order(mixed) -> None:  # type: ignore[no-untyped-def]
@@ -152,8 +155,12 @@ def test_written_machine_predicts_the_data_to_the_noise(tmp_path: Path) -> None:
 
     written = Machine.from_toml(tmp_path / "machine.toml")
     noise_free = tmp_path / "predicted.csv"
-    laser_file(written, Setup(SETUP.lower, SETUP.upper, SETUP.stylus, 0.0, 0.0),
-               np.random.default_rng(0), noise_free)
+    laser_file(
+        written,
+        Setup(SETUP.lower, SETUP.upper, SETUP.stylus, 0.0, 0.0),
+        np.random.default_rng(0),
+        noise_free,
+    )
     data = np.genfromtxt(tmp_path / "laser.csv", delimiter=",", skip_header=2, dtype=str)
     pred = np.genfromtxt(noise_free, delimiter=",", skip_header=2, dtype=str)
     linear = data[:, 1] == "linear_um"

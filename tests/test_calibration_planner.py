@@ -16,10 +16,11 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from calibration_sim import Setup, laser_file, random_machine, write_plan  # noqa: E402
+from calibration_sim import Setup, laser_file, random_machine, write_plan
 
-SETUP = Setup(lower=np.zeros(3), upper=np.array([600.0, 500.0, 400.0]),
-              stylus=np.array([0.0, 0.0, -100.0]))
+SETUP = Setup(
+    lower=np.zeros(3), upper=np.array([600.0, 500.0, 400.0]), stylus=np.array([0.0, 0.0, -100.0])
+)
 UNCERTAINTY = """
 [uncertainty]
 squareness = 2.0
@@ -56,9 +57,27 @@ def _plan(folder: Path, targets: int) -> tuple[Path, Path]:
 def test_predicted_u_matches_the_spread_of_30_simulated_calibrations(tmp_path: Path) -> None:
     plan, guess = _plan(tmp_path, targets=11)
     proc = subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "calibrate", "plan", str(plan), "--machine",
-         str(guess), "--trials", "30", "--seed", "3", "--json", "plan.json", "--quiet"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=1100,
+        [
+            sys.executable,
+            "-m",
+            "cmm_comp.cli",
+            "calibrate",
+            "plan",
+            str(plan),
+            "--machine",
+            str(guess),
+            "--trials",
+            "30",
+            "--seed",
+            "3",
+            "--json",
+            "plan.json",
+            "--quiet",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=1100,
     )
     assert proc.returncode == 0, proc.stderr
     mc = json.loads((tmp_path / "plan.json").read_text())["monte_carlo"]
@@ -73,9 +92,24 @@ def test_more_targets_predict_a_smaller_u(tmp_path: Path) -> None:
     sparse, guess = _plan(tmp_path / "sparse", targets=6)
     dense, _ = _plan(tmp_path / "dense", targets=21)
     proc = subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "calibrate", "plan", str(sparse), str(dense),
-         "--machine", str(guess), "--json", "plans.json", "--quiet"],
-        cwd=tmp_path, capture_output=True, text=True, timeout=500,
+        [
+            sys.executable,
+            "-m",
+            "cmm_comp.cli",
+            "calibrate",
+            "plan",
+            str(sparse),
+            str(dense),
+            "--machine",
+            str(guess),
+            "--json",
+            "plans.json",
+            "--quiet",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=500,
     )
     assert proc.returncode == 0, proc.stderr
     a, b = json.loads((tmp_path / "plans.json").read_text())

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import REALDATA
 
 pytestmark = pytest.mark.realdata
@@ -60,14 +59,38 @@ def test_corrected_run_is_reference_minus_corrected_position(tmp_path: Path) -> 
 
     (tmp_path / "plan.toml").write_text(plan_text(dat, "z", 0.5))
     cli = [sys.executable, "-m", "cmm_comp.cli"]
-    subprocess.run([*cli, "calibrate", "plan.toml", "-o", "m.toml", "--quiet"], cwd=tmp_path,
-                   check=True, capture_output=True)
-    subprocess.run([*cli, "calibrate", "apply", "m.toml", str(dat), "--axis", "z", "--cycles",
-                    "4", "5", "-o", "c.dat"], cwd=tmp_path, check=True, capture_output=True)
+    subprocess.run(
+        [*cli, "calibrate", "plan.toml", "-o", "m.toml", "--quiet"],
+        cwd=tmp_path,
+        check=True,
+        capture_output=True,
+    )
+    subprocess.run(
+        [
+            *cli,
+            "calibrate",
+            "apply",
+            "m.toml",
+            str(dat),
+            "--axis",
+            "z",
+            "--cycles",
+            "4",
+            "5",
+            "-o",
+            "c.dat",
+        ],
+        cwd=tmp_path,
+        check=True,
+        capture_output=True,
+    )
     run, corrected = read_iso230_dat(dat), read_iso230_dat(tmp_path / "c.dat")
     machine = Machine.from_toml(tmp_path / "m.toml")
     q = np.zeros((run.target_mm.size, 3))
     q[:, 2] = run.target_mm
-    for data, mine, d in ((run.fwd_mm, corrected.fwd_mm, 1.0), (run.bwd_mm, corrected.bwd_mm, -1.0)):
+    for data, mine, d in (
+        (run.fwd_mm, corrected.fwd_mm, 1.0),
+        (run.bwd_mm, corrected.bwd_mm, -1.0),
+    ):
         e = machine.volumetric_error(q, (0, 0, 0), inputs={"dir_z": np.full(len(q), d)})[:, 2]
         np.testing.assert_allclose(mine, data[:, 3:5] - e[:, None] / 1000.0, atol=1e-12)

@@ -183,7 +183,9 @@ class Layout:
             functions.append(fn)
             start += fn.size
         self.functions = tuple(functions)
-        self.squareness = {name: start + j for j, name in enumerate(n for n in SQUARENESS if n in components)}
+        self.squareness = {
+            name: start + j for j, name in enumerate(n for n in SQUARENESS if n in components)
+        }
         self.n = start + len(self.squareness)
 
     def _function(

@@ -69,8 +69,9 @@ def _rms(values: FloatArray) -> float | None:
     return float(np.sqrt(np.mean(values**2))) if values.size else None
 
 
-def dataset_summary(problem: Problem, datasets: list[Dataset], before: list[FloatArray],
-                    after: list[FloatArray]) -> list[dict[str, Any]]:
+def dataset_summary(
+    problem: Problem, datasets: list[Dataset], before: list[FloatArray], after: list[FloatArray]
+) -> list[dict[str, Any]]:
     """Per data set: the residual RMS before (no errors, nuisance fitted) and after the fit, per
     quantity with its a-priori and estimated σ. ``rms_*_um`` over the µm readings (a data set of
     angles only: over all its readings, µrad, said by ``unit``)."""
@@ -95,17 +96,19 @@ def dataset_summary(problem: Problem, datasets: list[Dataset], before: list[Floa
                 "redundancy": float(g.redundancy),
             }
         rows = um_rows if um_rows.any() else np.ones(block.n_rows, dtype=bool)
-        out.append({
-            "kind": ds.kind,
-            "where": ds.where,
-            "file": ds.source,
-            "readings": int(block.n_rows),
-            "rms_before_um": _rms(before[bi][rows]),
-            "rms_after_um": _rms(after[bi][rows]),
-            "unit": "um" if um_rows.any() else "urad",
-            "quantities": quantities,
-            "nuisance": None,  # the fitted poses / stations, filled in by calibrate()
-        })
+        out.append(
+            {
+                "kind": ds.kind,
+                "where": ds.where,
+                "file": ds.source,
+                "readings": int(block.n_rows),
+                "rms_before_um": _rms(before[bi][rows]),
+                "rms_after_um": _rms(after[bi][rows]),
+                "unit": "um" if um_rows.any() else "urad",
+                "quantities": quantities,
+                "nuisance": None,  # the fitted poses / stations, filled in by calibrate()
+            }
+        )
     return out
 
 
@@ -130,11 +133,12 @@ def _calibrate(
 ) -> CalibrationResult:
     if datasets is None:
         datasets = load_datasets(plan)
-    say(f"read {len(datasets)} data set(s): "
-        + ", ".join(f"{d.kind} {d.where}" for d in datasets))
+    say(f"read {len(datasets)} data set(s): " + ", ".join(f"{d.kind} {d.where}" for d in datasets))
     problem = build_problem(plan, datasets)
-    say(f"{problem.p} error parameters, {problem.n - problem.p} nuisance parameters, "
-        f"{sum(b.n_rows for b in problem.blocks)} readings")
+    say(
+        f"{problem.p} error parameters, {problem.n - problem.p} nuisance parameters, "
+        f"{sum(b.n_rows for b in problem.blocks)} readings"
+    )
     before = residuals_without_errors(problem)
     sol = solve(problem, progress=say)
     kept, dropped = _significant_reversals(problem, sol)
@@ -169,7 +173,9 @@ def _calibrate(
         ),
     }
     summary = dataset_summary(problem, datasets, before, sol.residuals)
-    for block, st, cn, entry in zip(problem.blocks, sol.states, sol.covariance_nuisance, summary, strict=True):
+    for block, st, cn, entry in zip(
+        problem.blocks, sol.states, sol.covariance_nuisance, summary, strict=True
+    ):
         entry["nuisance"] = block.describe_state(st, cn) or None
     result = CalibrationResult(
         plan=plan,
@@ -216,26 +222,37 @@ def _significant_reversals(problem: Problem, sol: Solution) -> tuple[tuple[int, 
 def _warnings(r: CalibrationResult) -> list[str]:
     out = []
     if not r.solution.converged:
-        out.append(f"the fit did not converge in {r.solution.iterations} iterations: check the "
-                   "station guesses and the data; the result is the last iterate")
+        out.append(
+            f"the fit did not converge in {r.solution.iterations} iterations: check the "
+            "station guesses and the data; the result is the last iterate"
+        )
     for ds in r.datasets:
         placements = getattr(ds.data, "placements", None)
         if placements is not None and len(placements) < MIN_PLATE_PLACEMENTS:
-            out.append(f"{ds.where}: {len(placements)} plate placement(s); the PTB method uses at "
-                       f"least {MIN_PLATE_PLACEMENTS} (two planes, two orientations)")
+            out.append(
+                f"{ds.where}: {len(placements)} plate placement(s); the PTB method uses at "
+                f"least {MIN_PLATE_PLACEMENTS} (two planes, two orientations)"
+            )
     for entry in r.datasets_summary:
         for name, q in entry["quantities"].items():
             s = q["sigma_estimated"]
             if s is not None and s > MISFIT_WARNING * q["sigma_prior"]:
-                out.append(f"{entry['where']} ({entry['file']}): {name} scatter about the fit "
-                           f"{s:.3g} {q['unit']} is {s / q['sigma_prior']:.1f}× its a-priori "
-                           f"{q['sigma_prior']:g}: the data hold something the model does not "
-                           "describe (or the a-priori σ is too small); U is scaled to the scatter")
-    unseen = [f"{'+'.join(f['errors'])} ({f['what']})" for f in r.gauge["all_data"]["freedoms"]
-              if f.get("consequence", "").startswith("not identified")]
+                out.append(
+                    f"{entry['where']} ({entry['file']}): {name} scatter about the fit "
+                    f"{s:.3g} {q['unit']} is {s / q['sigma_prior']:.1f}× its a-priori "
+                    f"{q['sigma_prior']:g}: the data hold something the model does not "
+                    "describe (or the a-priori σ is too small); U is scaled to the scatter"
+                )
+    unseen = [
+        f"{'+'.join(f['errors'])} ({f['what']})"
+        for f in r.gauge["all_data"]["freedoms"]
+        if f.get("consequence", "").startswith("not identified")
+    ]
     if unseen:
-        out.append("not identified by the data, yet the volumetric error at the calibration "
-                   "stylus depends on it (its U carries the prior): " + "; ".join(unseen))
+        out.append(
+            "not identified by the data, yet the volumetric error at the calibration "
+            "stylus depends on it (its U carries the prior): " + "; ".join(unseen)
+        )
     worst = r.checks["resimulation"]["max_abs"]
     if worst > 1e-6:
         out.append(f"the written machine reproduces the fit only to {worst:.3g} µm/µrad")

@@ -32,9 +32,11 @@ __all__ = ["exact_vs_first_order", "resimulation"]
 FloatArray = NDArray[np.float64]
 
 
-def resimulation(problem: Problem, theta: FloatArray, states: list[Any], machine: Machine) -> dict[str, Any]:
+def resimulation(
+    problem: Problem, theta: FloatArray, states: list[Any], machine: Machine
+) -> dict[str, Any]:
     """Largest |written machine − fit| over each block's readings (µm or µrad)."""
-    out = []
+    out: list[dict[str, Any]] = []
     for block, state in zip(problem.blocks, states, strict=True):
         if isinstance(block, LaserBlock):
             mine = block.predict(problem.model, theta)
@@ -56,11 +58,15 @@ def resimulation(problem: Problem, theta: FloatArray, states: list[Any], machine
             mine, _ = problem.model.exact(theta, block.pts)
             p_mine = d2.q_mm + mine / 1000.0
             s = ss.position_mm[d2.station]
-            diff = 1000.0 * (np.linalg.norm(p_mine - s, axis=1) - np.linalg.norm(p_theirs - s, axis=1))
+            diff = 1000.0 * (
+                np.linalg.norm(p_mine - s, axis=1) - np.linalg.norm(p_theirs - s, axis=1)
+            )
         else:  # pragma: no cover - every block kind is handled above
             continue
-        out.append({"source": block.source, "kind": block.kind, "max_abs": float(np.max(np.abs(diff)))})
-    worst = max((o["max_abs"] for o in out), default=0.0)
+        out.append(
+            {"source": block.source, "kind": block.kind, "max_abs": float(np.max(np.abs(diff)))}
+        )
+    worst = max((float(o["max_abs"]) for o in out), default=0.0)
     return {
         "max_abs": worst,
         "per_dataset": out,
@@ -70,7 +76,11 @@ def resimulation(problem: Problem, theta: FloatArray, states: list[Any], machine
 
 
 def exact_vs_first_order(
-    problem: Problem, theta: FloatArray, machine: Machine, grid_mm: FloatArray, stylus_mm: FloatArray
+    problem: Problem,
+    theta: FloatArray,
+    machine: Machine,
+    grid_mm: FloatArray,
+    stylus_mm: FloatArray,
 ) -> dict[str, Any]:
     """Largest |exact − first order| of the volumetric error at every reading and on the grid."""
     worst_data, scale = 0.0, 0.0

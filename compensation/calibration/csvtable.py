@@ -109,7 +109,9 @@ def read_csv_table(path: Path, required: Sequence[str], optional: Sequence[str] 
         if len(rows) > MAX_ROWS:
             raise CalibrationError(f"{path}: more than {MAX_ROWS} rows")
     if header is None:
-        raise CalibrationError(f"{path}: empty file: expected a header naming {', '.join(required)}")
+        raise CalibrationError(
+            f"{path}: empty file: expected a header naming {', '.join(required)}"
+        )
     if not rows:
         raise CalibrationError(f"{path}: no data rows after the header")
     return CsvTable(path=path, header=header, rows=tuple(rows), lines=tuple(lines))

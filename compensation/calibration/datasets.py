@@ -44,21 +44,29 @@ def load_datasets(plan: Plan, *, need_values: bool = True) -> list[Dataset]:
     out: list[Dataset] = []
     for spec in plan.lasers:
         out.append(
-            Dataset("laser", spec.where, read_laser(
-                spec, vol.lower_mm, vol.upper_mm, vol.reference_mm, need_values=need_values
-            ))
+            Dataset(
+                "laser",
+                spec.where,
+                read_laser(
+                    spec, vol.lower_mm, vol.upper_mm, vol.reference_mm, need_values=need_values
+                ),
+            )
         )
     for pspec in plan.plates:
         out.append(
-            Dataset("plate", pspec.where, read_plate(
-                pspec, vol.lower_mm, vol.upper_mm, need_values=need_values
-            ))
+            Dataset(
+                "plate",
+                pspec.where,
+                read_plate(pspec, vol.lower_mm, vol.upper_mm, need_values=need_values),
+            )
         )
     for tspec in plan.multilaterations:
         out.append(
-            Dataset("multilateration", tspec.where, read_multilateration(
-                tspec, vol.lower_mm, vol.upper_mm, need_values=need_values
-            ))
+            Dataset(
+                "multilateration",
+                tspec.where,
+                read_multilateration(tspec, vol.lower_mm, vol.upper_mm, need_values=need_values),
+            )
         )
     return out
 

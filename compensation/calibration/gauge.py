@@ -37,7 +37,9 @@ _ONE = 1.0 - 1e-6  # a principal cosine above this: the subspaces share that dir
 _SEEN_UM = 1e-3  # a field below this (µm per unit whitened step) is "nothing"
 
 
-def _null_of(problem: Problem, stats: list[Any], blocks: set[int], lam: dict[str, float]) -> FloatArray:
+def _null_of(
+    problem: Problem, stats: list[Any], blocks: set[int], lam: dict[str, float]
+) -> FloatArray:
     """(P, k) the roughness-free directions the data of ``blocks`` do not see (whitened by the
     weak prior, orthonormal; zero on the shapes, which the smoothness prior carries)."""
     free, info = problem.free_information(stats, lam, blocks)
@@ -90,9 +92,16 @@ def _describe(problem: Problem, null: FloatArray, fields: _Fields) -> list[dict[
     lay = problem.model.layout
     groups: list[tuple[str, list[int], list[int]]] = []  # name, all coords, line coords
     for fn in lay.functions:
-        n_line = fn.size - sum(1 for j in range(fn.start, fn.start + fn.size) if problem.shape_class[j])
-        groups.append((fn.name, list(range(fn.start, fn.start + fn.size)),
-                       list(range(fn.start, fn.start + n_line))))
+        n_line = fn.size - sum(
+            1 for j in range(fn.start, fn.start + fn.size) if problem.shape_class[j]
+        )
+        groups.append(
+            (
+                fn.name,
+                list(range(fn.start, fn.start + fn.size)),
+                list(range(fn.start, fn.start + n_line)),
+            )
+        )
     for name, j in lay.squareness.items():
         groups.append((name, [j], [j]))
     out: list[dict[str, Any]] = []
@@ -109,21 +118,30 @@ def _describe(problem: Problem, null: FloatArray, fields: _Fields) -> list[dict[
         dim, vecs = _intersection(null, ca + cb)
         extra = dim - single_dim[na] - single_dim[nb]
         if extra > 0:
-            out.append(_entry([na, nb], extra, vecs, fields,
-                              f"only their combination is seen ({extra} direction(s))"))
+            out.append(
+                _entry(
+                    [na, nb],
+                    extra,
+                    vecs,
+                    fields,
+                    f"only their combination is seen ({extra} direction(s))",
+                )
+            )
             explained += extra
     rest = null.shape[1] - explained
     if rest > 0:
         share = {name: float(np.sum(null[cols, :] ** 2)) for name, cols, _ in groups}
         total = sum(share.values()) or 1.0
         involved = [n for n, v in sorted(share.items(), key=lambda kv: -kv[1]) if v / total > 0.02]
-        out.append({
-            "errors": involved,
-            "dimension": int(rest),
-            "what": "combinations of three or more of these errors that no reading sees",
-            "consequence": "see the pairs and single errors above; the U of the volumetric "
-            "error carries whatever these do at the calibration stylus",
-        })
+        out.append(
+            {
+                "errors": involved,
+                "dimension": int(rest),
+                "what": "combinations of three or more of these errors that no reading sees",
+                "consequence": "see the pairs and single errors above; the U of the volumetric "
+                "error carries whatever these do at the calibration stylus",
+            }
+        )
     return out
 
 
@@ -131,7 +149,7 @@ def _intersection(null: FloatArray, cols: list[int]) -> tuple[int, FloatArray]:
     """dim(span(coordinate axes ``cols``) ∩ span(null)) and an orthonormal basis of it."""
     if null.shape[1] == 0 or not cols:
         return 0, np.zeros((null.shape[0], 0))
-    u, s, vt = np.linalg.svd(null[cols, :], full_matrices=False)
+    _, s, vt = np.linalg.svd(null[cols, :], full_matrices=False)
     keep = s > _ONE
     return int(np.sum(keep)), null @ vt[keep].T
 
@@ -144,7 +162,9 @@ def _shapes(name: str, dim: int, line_dim: int, size: int) -> str:
     return f"{dim} of its {size} shapes not seen"
 
 
-def _entry(names: list[str], dim: int, vecs: FloatArray, fields: _Fields, what: str) -> dict[str, Any]:
+def _entry(
+    names: list[str], dim: int, vecs: FloatArray, fields: _Fields, what: str
+) -> dict[str, Any]:
     effects = [fields.effect(vecs[:, k]) for k in range(vecs.shape[1])]
     at_cal = max((e[0] for e in effects), default=0.0)
     other = max((e[1] for e in effects), default=0.0)
@@ -229,12 +249,14 @@ def _rigid(
     problem: Problem, stats: list[Any], kinds: list[str], lam: dict[str, float]
 ) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
-    for k, axis in enumerate("xyz"):
-        out.append({
-            "freedom": f"rigid translation along {axis}",
-            "seen_by": [],
-            "fixed_by": "every linear error is zero at the reference point (the lower corner)",
-        })
+    for axis in "xyz":
+        out.append(
+            {
+                "freedom": f"rigid translation along {axis}",
+                "seen_by": [],
+                "fixed_by": "every linear error is zero at the reference point (the lower corner)",
+            }
+        )
     representable = problem.rotation_misfit <= 1e-6
     for k, axis in enumerate("xyz"):
         seen_by = []
@@ -250,10 +272,13 @@ def _rigid(
                 v = v / max(float(np.linalg.norm(v)), 1e-300)
                 if float(v @ info @ v) >= NULL_RATIO:
                     seen_by.append(kind)
-        out.append({
-            "freedom": f"rigid rotation about {axis}",
-            "seen_by": seen_by,
-            "fixed_by": "pinned at zero in the identified errors (inner constraint)"
-            if representable else "not expressible by the identified errors",
-        })
+        out.append(
+            {
+                "freedom": f"rigid rotation about {axis}",
+                "seen_by": seen_by,
+                "fixed_by": "pinned at zero in the identified errors (inner constraint)"
+                if representable
+                else "not expressible by the identified errors",
+            }
+        )
     return out

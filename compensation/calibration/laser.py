@@ -11,6 +11,7 @@ Values are errors, true − indicated: µm (``linear_um``, ``straightness_<dir>_
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -119,8 +120,10 @@ def _quantity(table: CsvTable, i: int, axis: str, quantity: str) -> tuple[str, i
         d = quantity[len("straightness_") : -len("_um")]
         if d not in AXES or d == axis:
             raise table.fail(
-                i, "quantity", f"{quantity}: the direction must be one of the two axes "
-                f"perpendicular to {axis} ({', '.join(a for a in AXES if a != axis)})"
+                i,
+                "quantity",
+                f"{quantity}: the direction must be one of the two axes "
+                f"perpendicular to {axis} ({', '.join(a for a in AXES if a != axis)})",
             )
         return "straightness", k, AXIS_INDEX[d]
     for name, rot in ANGLE_AXIS[axis].items():
@@ -144,10 +147,7 @@ def read_laser(
 ) -> LaserData:
     """Read one ``[[laser]]`` entry; every position must lie in the volume ``lower…upper``.
     ``need_values`` False (the planner): empty ``value`` cells are allowed (NaN)."""
-    if spec.is_iso230:
-        runs = _read_dat(spec, reference_mm)
-    else:
-        runs = _read_csv(spec, need_values)
+    runs = _read_dat(spec, reference_mm) if spec.is_iso230 else _read_csv(spec, need_values)
     for run in runs:
         _check_inside(run, lower_mm, upper_mm)
     return LaserData(spec=spec, runs=tuple(runs))
@@ -181,7 +181,9 @@ def _read_csv(spec: LaserSpec, need_values: bool) -> list[LaserRun]:
         for i in rows[1:]:
             if kinds[i] != kinds[first] or quantity[i] != quantity[first]:
                 raise table.fail(
-                    i, "quantity", f"run {rid!r} mixes {quantity[first]} on {axis_txt[first]} "
+                    i,
+                    "quantity",
+                    f"run {rid!r} mixes {quantity[first]} on {axis_txt[first]} "
                     f"(line {table.lines[first]}) with {quantity[i]} on {axis_txt[i]}: one "
                     "quantity and axis per run",
                 )
@@ -193,7 +195,9 @@ def _read_csv(spec: LaserSpec, need_values: bool) -> list[LaserRun]:
                 same = [k for k in range(3) if k != moving]
                 if not np.allclose(arr[i, same], arr[first, same], rtol=0, atol=1e-6):
                     raise table.fail(
-                        i, f"{col}_{AXES[same[0]]}_mm", f"run {rid!r} changes its {col} "
+                        i,
+                        f"{col}_{AXES[same[0]]}_mm",
+                        f"run {rid!r} changes its {col} "
                         f"(line {table.lines[first]} has {arr[first].tolist()}): one line per run",
                     )
         kind, axis, comp = kinds[first]
@@ -235,7 +239,7 @@ def _passes(
             start = j
     for p in out:
         sign = direction[rows[p[0]]]
-        for a, b in zip(p[:-1], p[1:], strict=True):
+        for a, b in itertools.pairwise(p):
             step = (position[rows[b]] - position[rows[a]]) * sign
             if not step > 0:
                 want = "increase" if sign > 0 else "decrease"
@@ -254,12 +258,16 @@ def _check_counts(table: CsvTable, rows: list[int], run: LaserRun) -> None:
         for p in run.passes:
             if len(p) < 3:
                 raise table.fail(
-                    rows[p[0]], "run", f"run {run.run!r}: a straightness pass needs ≥ 3 rows "
+                    rows[p[0]],
+                    "run",
+                    f"run {run.run!r}: a straightness pass needs ≥ 3 rows "
                     f"(its least-squares line is removed), this one has {len(p)}",
                 )
     elif run.kind in ("linear", "angle") and run.n < 2:
         raise table.fail(
-            rows[0], "run", f"run {run.run!r}: a {run.quantity} run needs ≥ 2 rows (its values "
+            rows[0],
+            "run",
+            f"run {run.run!r}: a {run.quantity} run needs ≥ 2 rows (its values "
             "are relative to its first row)",
         )
 
@@ -324,4 +332,3 @@ def _read_dat(spec: LaserSpec, reference_mm: FloatArray) -> list[LaserRun]:
             )
         )
     return runs
-

@@ -30,7 +30,7 @@ def rotation_vector_urad(rotation: FloatArray) -> FloatArray:
     """(N, 3) small rotation vector (µrad) of (N, 3, 3) rotations: the skew part (exact to
     second order in the angle, 10⁻¹⁰ relative at 100 µrad)."""
     r = rotation
-    w = np.empty(r.shape[:-2] + (3,))
+    w = np.empty((*r.shape[:-2], 3))
     w[..., 0] = 0.5 * (r[..., 2, 1] - r[..., 1, 2])
     w[..., 1] = 0.5 * (r[..., 0, 2] - r[..., 2, 0])
     w[..., 2] = 0.5 * (r[..., 1, 0] - r[..., 0, 1])

@@ -80,12 +80,16 @@ def read_multilateration(
         count = int(np.sum(idx == k))
         if count < MIN_POINTS_PER_STATION:
             raise table.fail(
-                first[k], "station", f"station {name!r} has {count} point(s); a station's "
+                first[k],
+                "station",
+                f"station {name!r} has {count} point(s); a station's "
                 f"position and dead path need ≥ {MIN_POINTS_PER_STATION}",
             )
     if len(stations) < MIN_STATIONS:
         raise table.fail(
-            None, "station", f"{len(stations)} station(s) ({', '.join(stations)}); "
+            None,
+            "station",
+            f"{len(stations)} station(s) ({', '.join(stations)}); "
             f"multilateration with unknown station positions needs ≥ {MIN_STATIONS}",
         )
     if spec.station_guess_mm.shape[0] != len(stations):

@@ -159,7 +159,9 @@ class MultilaterationBlock(Block):
         dead = np.zeros(self.s)
         for k in range(self.s):
             rows = d.station == k
-            dead[k] = float(np.median(d.length_mm[rows] - np.linalg.norm(d.q_mm[rows] - pos[k], axis=1)))
+            dead[k] = float(
+                np.median(d.length_mm[rows] - np.linalg.norm(d.q_mm[rows] - pos[k], axis=1))
+            )
         return StationState(pos, dead)
 
     def linearize(self, model: MachineModel, theta: FloatArray, state: Any) -> Linearization:

@@ -46,8 +46,12 @@ class LaserBlock(Block):
         runs = data.runs
         kinds = [k for k in _QUANTITY_GROUPS if any(r.kind == k for r in runs)]
         self.variance_groups = [
-            VarianceGroup(dataset, _QUANTITY_GROUPS[k][0], _QUANTITY_GROUPS[k][1],
-                          float(data.spec.u[_QUANTITY_GROUPS[k][2]]))
+            VarianceGroup(
+                dataset,
+                _QUANTITY_GROUPS[k][0],
+                _QUANTITY_GROUPS[k][1],
+                float(data.spec.u[_QUANTITY_GROUPS[k][2]]),
+            )
             for k in kinds
         ]
         self.row_runs = [r for r in runs if r.kind != "squareness"]
@@ -55,7 +59,9 @@ class LaserBlock(Block):
         self.value = np.concatenate(
             [r.value for r in self.row_runs] + [r.value for r in self.square_runs]
         )
-        groups, lines, projections = [], [], []
+        groups: list[NDArray[np.intp]] = []
+        lines: list[int] = []
+        projections: list[Projection] = []
         start = 0
         for r in self.row_runs:
             groups.append(np.full(r.n, kinds.index(r.kind), dtype=np.intp))
@@ -66,7 +72,9 @@ class LaserBlock(Block):
                     design = np.column_stack([np.ones(len(p)), pos - pos.mean()])
                     projections.append(Projection(rows=start + p, design=design))
             else:
-                projections.append(Projection(rows=start + np.arange(r.n), design=np.ones((r.n, 1))))
+                projections.append(
+                    Projection(rows=start + np.arange(r.n), design=np.ones((r.n, 1)))
+                )
             start += r.n
         for r in self.square_runs:
             groups.append(np.full(r.n, kinds.index("squareness"), dtype=np.intp))

@@ -205,8 +205,8 @@ class _Checks(TomlChecks):
         if isinstance(value, list):
             if len(value) != 3:
                 raise self.fail(where, f"expected 3 integers (x, y, z), got {value!r}")
-            a, b, c = (self.integer(v, f"{where}[{i}]", lo, hi) for i, v in enumerate(value))
-            return a, b, c
+            n3 = [self.integer(v, f"{where}[{i}]", lo, hi) for i, v in enumerate(value)]
+            return n3[0], n3[1], n3[2]
         n = self.integer(value, where, lo, hi)
         return n, n, n
 
@@ -302,7 +302,7 @@ def _fit(c: _Checks, tbl: Mapping[str, Any]) -> FitSettings:
         components: tuple[str, ...] = (*TABLE_COMPONENTS, *SQUARENESS)
     else:
         if not isinstance(comps, list) or not comps:
-            raise c.fail("fit.components", "expected \"all\" or a non-empty array of error names")
+            raise c.fail("fit.components", 'expected "all" or a non-empty array of error names')
         found = []
         for i, name in enumerate(comps):
             canon = canonical_name(name) if isinstance(name, str) else None
@@ -373,7 +373,9 @@ def _plate(c: _Checks, folder: Path, e: Mapping[str, Any], i: int) -> PlateSpec:
         balls=c.file(folder, e, "balls", where),
         file=c.file(folder, e, "file", where),
         stylus_mm=c.vector(e["stylus_mm"], f"{where}.stylus_mm", 3),
-        probe_um=c.number(e.get("probe_um", PLATE_PROBE_DEFAULT_UM), f"{where}.probe_um", positive=True),
+        probe_um=c.number(
+            e.get("probe_um", PLATE_PROBE_DEFAULT_UM), f"{where}.probe_um", positive=True
+        ),
     )
 
 

@@ -68,8 +68,12 @@ def _rigid_free(points_mm: FloatArray, field_um: FloatArray) -> FloatArray:
 
 def _summary(r: CalibrationResult) -> dict[str, Any]:
     errors = {
-        b.name: {"position_mm": b.position_mm.tolist(), "u": b.u.tolist(),
-                 "U_max": float(2.0 * np.max(b.u)), "unit": "urad" if b.name.startswith("e") else "um"}
+        b.name: {
+            "position_mm": b.position_mm.tolist(),
+            "u": b.u.tolist(),
+            "U_max": float(2.0 * np.max(b.u)),
+            "unit": "urad" if b.name.startswith("e") else "um",
+        }
         for b in r.bands
     }
     return {
@@ -107,7 +111,9 @@ def predict_plan(
         **_summary(result),
         "warnings": result.warnings,
     }
-    say(f"predicted U (k = 2) of the volumetric error: max {max(out['volumetric_U_um']['max_um']):.3g} µm")
+    say(
+        f"predicted U (k = 2) of the volumetric error: max {max(out['volumetric_U_um']['max_um']):.3g} µm"
+    )
     if trials:
         out["monte_carlo"] = _check(plan, guess, geometry, result, trials, rng, say)
     out["elapsed_s"] = time.perf_counter() - t0

@@ -81,7 +81,9 @@ def _read_balls(spec: PlateSpec) -> tuple[tuple[str, ...], FloatArray, FloatArra
         raise CalibrationError(f"{path}: unknown key(s) {unknown}; a plate has [[ball]] tables")
     balls = data.get("ball")
     if not isinstance(balls, list) or not balls:
-        raise CalibrationError(f"{path}: ball: expected [[ball]] tables (id, u_mm, v_mm, w_mm, u_um)")
+        raise CalibrationError(
+            f"{path}: ball: expected [[ball]] tables (id, u_mm, v_mm, w_mm, u_um)"
+        )
     ids: list[str] = []
     uvw = np.empty((len(balls), 3))
     u_um = np.empty(len(balls))
@@ -96,7 +98,9 @@ def _read_balls(spec: PlateSpec) -> tuple[tuple[str, ...], FloatArray, FloatArra
             )
         bid = _ball_id(b.get("id"))
         if bid is None:
-            raise CalibrationError(f"{where}.id: expected an integer or a name, got {b.get('id')!r}")
+            raise CalibrationError(
+                f"{where}.id: expected an integer or a name, got {b.get('id')!r}"
+            )
         if bid in ids:
             raise CalibrationError(
                 f"{where}.id: duplicate ball id {bid!r} (also ball[{ids.index(bid)}]): each ball "
@@ -108,7 +112,9 @@ def _read_balls(spec: PlateSpec) -> tuple[tuple[str, ...], FloatArray, FloatArra
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise CalibrationError(f"{where}.{key}: expected a number, got {value!r}")
             if not np.isfinite(value) or (key == "u_um" and value < 0):
-                raise CalibrationError(f"{where}.{key}: expected a finite number ≥ 0 for u_um, got {value!r}")
+                raise CalibrationError(
+                    f"{where}.{key}: expected a finite number ≥ 0 for u_um, got {value!r}"
+                )
             if k < 3:
                 uvw[j, k] = float(value)
             else:
@@ -124,7 +130,9 @@ def read_plate(
     ``need_values`` is accepted for symmetry (the planner uses the centres as the geometry)."""
     del need_values  # the measured centres are the geometry as well as the data
     ids, uvw, u_um = _read_balls(spec)
-    table = read_csv_table(spec.file, ("placement", "ball", "x", "y", "z"), ("T_x", "T_y", "T_z", "T_wp"))
+    table = read_csv_table(
+        spec.file, ("placement", "ball", "x", "y", "z"), ("T_x", "T_y", "T_z", "T_wp")
+    )
     q = np.column_stack([table.numbers(a) for a in AXES])
     placement_txt = table.text("placement")
     ball_txt = table.text("ball")
@@ -144,7 +152,9 @@ def read_plate(
         key = (int(pl[i]), int(ball[i]))
         if key in seen:
             raise table.fail(
-                i, "ball", f"ball {bid!r} measured twice in placement {p_txt!r} (line "
+                i,
+                "ball",
+                f"ball {bid!r} measured twice in placement {p_txt!r} (line "
                 f"{table.lines[seen[key]]}): one centre per ball and placement",
             )
         seen[key] = i
@@ -152,7 +162,9 @@ def read_plate(
         rows = np.flatnonzero(pl == k)
         if rows.size < MIN_BALLS_PER_PLACEMENT:
             raise table.fail(
-                int(rows[0]), "placement", f"placement {name!r} has {rows.size} ball(s); its pose "
+                int(rows[0]),
+                "placement",
+                f"placement {name!r} has {rows.size} ball(s); its pose "
                 f"needs ≥ {MIN_BALLS_PER_PLACEMENT} balls not on one line",
             )
     tol = 1e-6 * max(1.0, float(np.max(upper_mm - lower_mm)))

@@ -109,8 +109,17 @@ def volumetric_png(r: CalibrationResult) -> bytes:
         sel = np.isclose(q[:, 2], z)
         ax = axs[0, col]
         scale = 0.15 * max(np.ptp(q[:, 0]), np.ptp(q[:, 1]), 1.0) / emax
-        ax.quiver(q[sel, 0], q[sel, 1], e[sel, 0] * scale, e[sel, 1] * scale, e[sel, 2],
-                  angles="xy", scale_units="xy", scale=1.0, cmap="coolwarm")
+        ax.quiver(
+            q[sel, 0],
+            q[sel, 1],
+            e[sel, 0] * scale,
+            e[sel, 1] * scale,
+            e[sel, 2],
+            angles="xy",
+            scale_units="xy",
+            scale=1.0,
+            cmap="coolwarm",
+        )
         ax.set_title(f"error at z = {z:g} mm (arrows x–y, colour z)", fontsize=9)
         ax.set_aspect("equal")
         ax = axs[1, col]
@@ -118,6 +127,8 @@ def volumetric_png(r: CalibrationResult) -> bytes:
         ax.set_title(f"largest U component at z = {z:g} mm", fontsize=9)
         ax.set_aspect("equal")
         fig.colorbar(sc, ax=ax, label="U (k = 2), µm")
-    fig.suptitle(f"volumetric error at stylus {v.stylus_mm.tolist()} mm; U of the rigid-body-free "
-                 f"part: max {umax:.3g} µm, largest error {emax:.3g} µm")
+    fig.suptitle(
+        f"volumetric error at stylus {v.stylus_mm.tolist()} mm; U of the rigid-body-free "
+        f"part: max {umax:.3g} µm, largest error {emax:.3g} µm"
+    )
     return _png(fig)

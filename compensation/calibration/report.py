@@ -140,13 +140,38 @@ def report_html(r: CalibrationResult, payload: dict[str, Any]) -> str:
     ds_rows = []
     for d in payload["datasets"]:
         for name, q in d["quantities"].items():
-            ds_rows.append([d["where"], Path(d["file"]).name, name, q["n"], q["rms_before"],
-                            q["rms_after"], q["unit"], q["sigma_prior"], q["sigma_estimated"]])
-    gauge_rows = [[g["scope"], ", ".join(g.get("errors", [g.get("freedom", "")])),
-                   g.get("what", g.get("fixed_by", "")), g.get("consequence", ", ".join(g.get("seen_by", [])) or "no data kind"),
-                   g.get("dimension", 1)] for g in payload["gauge"]]
-    err_rows = [[name, e["unit"], float(np.max(np.abs(e["value"]))) if e["value"] else 0.0,
-                 float(np.max(e["U"])) if e["U"] else 0.0] for name, e in payload["errors"].items()]
+            ds_rows.append(
+                [
+                    d["where"],
+                    Path(d["file"]).name,
+                    name,
+                    q["n"],
+                    q["rms_before"],
+                    q["rms_after"],
+                    q["unit"],
+                    q["sigma_prior"],
+                    q["sigma_estimated"],
+                ]
+            )
+    gauge_rows = [
+        [
+            g["scope"],
+            ", ".join(g.get("errors", [g.get("freedom", "")])),
+            g.get("what", g.get("fixed_by", "")),
+            g.get("consequence", ", ".join(g.get("seen_by", [])) or "no data kind"),
+            g.get("dimension", 1),
+        ]
+        for g in payload["gauge"]
+    ]
+    err_rows = [
+        [
+            name,
+            e["unit"],
+            float(np.max(np.abs(e["value"]))) if e["value"] else 0.0,
+            float(np.max(e["U"])) if e["U"] else 0.0,
+        ]
+        for name, e in payload["errors"].items()
+    ]
     sq_rows = [[k, v["value_urad"], 2 * v["u_urad"]] for k, v in payload["squareness"].items()]
     vol = payload["volumetric_U_um"]
     cond = payload["condition"]
@@ -193,7 +218,9 @@ on the grid (largest error {checks["exact_vs_first_order"]["grid_max_error_um"]:
 """
 
 
-def write_outputs(r: CalibrationResult, machine_path: Path | None, report_dir: Path | None) -> list[Path]:
+def write_outputs(
+    r: CalibrationResult, machine_path: Path | None, report_dir: Path | None
+) -> list[Path]:
     """Write the machine and/or the report; everything is rendered before the first write."""
     from ..formats.atomic import atomic_output, write_text_atomic
     from ..formats.machine_toml import write_machine_toml

@@ -27,7 +27,9 @@ _STYLI_MM = (
 )
 
 
-def grid_points(lower_mm: FloatArray, upper_mm: FloatArray, steps: tuple[int, int, int]) -> FloatArray:
+def grid_points(
+    lower_mm: FloatArray, upper_mm: FloatArray, steps: tuple[int, int, int]
+) -> FloatArray:
     """(N, 3) nodes of a regular grid of the volume, corners included, C order (z fastest)."""
     axes = [np.linspace(lower_mm[k], upper_mm[k], int(steps[k])) for k in range(3)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -63,7 +65,7 @@ def line_basis(model: MachineModel) -> FloatArray:
             values = [v[1:] if fn.fixed_reference else v for v in shapes]
         else:  # Legendre: P1 (and P0 when free)
             values = []
-            for k in ([1] if fn.fixed_reference else [0, 1]):
+            for k in [1] if fn.fixed_reference else [0, 1]:
                 v = np.zeros(fn.size)
                 v[k - 1 if fn.fixed_reference else k] = 1.0
                 values.append(v)

@@ -27,7 +27,13 @@ from .plate import PlateData
 if TYPE_CHECKING:
     from ..machine import Machine
 
-__all__ = ["random_pose", "run_values", "simulate_laser", "simulate_multilateration", "simulate_plate"]
+__all__ = [
+    "random_pose",
+    "run_values",
+    "simulate_laser",
+    "simulate_multilateration",
+    "simulate_plate",
+]
 
 FloatArray = NDArray[np.float64]
 

@@ -117,7 +117,8 @@ class Problem:
         self.groups: list[GroupFit] = []
         self.group_index: list[NDArray[np.intp]] = []  # per block: global group of each row
         for bi, b in enumerate(blocks):
-            removed = getattr(b, "removed_dof", lambda: np.zeros(len(b.variance_groups)))()
+            removed_dof = getattr(b, "removed_dof", None)
+            removed = removed_dof() if removed_dof else np.zeros(len(b.variance_groups))
             base = len(self.groups)
             for li, vg in enumerate(b.variance_groups):
                 n = int(np.sum(b.groups == li))
@@ -169,7 +170,7 @@ class Problem:
         stats: list[tuple[FloatArray, FloatArray, float]],
         lam: dict[str, float],
         blocks: set[int] | None = None,
-    ) -> tuple[FloatArray, FloatArray]:
+    ) -> tuple[NDArray[np.intp], FloatArray]:
         """The data's information (of ``blocks``, default all) about the roughness-free
         coordinates of θ — each function's constant, slope (and parabola), the squareness —
         with every shape (its smoothness prior at ``lam``) and every nuisance parameter
@@ -396,7 +397,7 @@ def _lm(
     states: list[Any],
     lam: dict[str, float],
     max_iter: int,
-    frozen: FloatArray | None = None,
+    frozen: NDArray[np.bool_] | None = None,
 ) -> tuple[FloatArray, list[Any], int, bool]:
     """Levenberg–Marquardt with fixed σ and λ; ``frozen`` (n,) True for parameters held."""
     res, jac = problem.linearize(theta, states)
@@ -476,9 +477,9 @@ def _hyper_step(
             # errors suggests, instead of collapsing to zero ("no curvature at all")
             t0 = tau0[problem.kind_of[f]]
             lam_class = (gc + HYPER_DOF) / (rc + HYPER_DOF * t0**2)
-            g = gamma[f] + CLASS_WEIGHT
-            r = rough[f] + CLASS_WEIGHT / lam_class
-            value = g / r if r > 0 and g > 0 else LAMBDA_RANGE[1]
+            g_f = gamma[f] + CLASS_WEIGHT
+            r_f = rough[f] + CLASS_WEIGHT / lam_class
+            value = g_f / r_f if r_f > 0 and g_f > 0 else LAMBDA_RANGE[1]
             value = float(np.clip(value, *LAMBDA_RANGE))
             # converged when the shapes the data use (γ, a number of degrees of freedom) no
             # longer change: λ may still creep towards "straight" where that changes nothing
@@ -515,7 +516,7 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         stats = problem.group_stats(res, jac)
         total = 0.0  # what σ and λ moved in this round (they change the fit: refit if so)
         for _ in range(HYPER_ITERATIONS):
-            lam, change, delta = _hyper_step(problem, stats, x_abs, lam, estimate)
+            lam, change, _ = _hyper_step(problem, stats, x_abs, lam, estimate)
             total += change
             if change < HYPER_TOL:
                 break
@@ -539,7 +540,10 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         covariance_theta=problem.theta_covariance(cov[: problem.p, : problem.p]),
         covariance_theta_pinned=problem.theta_covariance(pinned),
         covariance_nuisance=[
-            cov[problem.offsets[i] : problem.offsets[i + 1], problem.offsets[i] : problem.offsets[i + 1]]
+            cov[
+                problem.offsets[i] : problem.offsets[i + 1],
+                problem.offsets[i] : problem.offsets[i + 1],
+            ]
             for i in range(len(problem.blocks))
         ],
         residuals=res,

@@ -78,7 +78,9 @@ def _rebuilt(guess: Machine, plan: Plan, rng: np.random.Generator | None) -> Mac
     desc = json.loads(json.dumps(guess.description, default=float))
     desc["errors"] = errors
     desc["squareness"] = dict(zip(SQUARENESS, sq.tolist(), strict=True))
-    desc["volume"] = {a: [float(vol.lower_mm[k]), float(vol.upper_mm[k])] for k, a in enumerate(AXES)}
+    desc["volume"] = {
+        a: [float(vol.lower_mm[k]), float(vol.upper_mm[k])] for k, a in enumerate(AXES)
+    }
     desc["probe"] = {"offset": [float(v) for v in plan.stylus_mm]}
     desc.pop("uncertainty", None)
     return Machine.from_dict(desc, source=f"virtual machine drawn from {guess.source}")

@@ -39,7 +39,9 @@ def _base_sections(plan: Plan) -> dict[str, Any]:
         thermal["workpiece_expansion"] = float(th.workpiece_expansion)
     if th.workpiece_fixture_mm is not None:
         thermal["workpiece_fixture"] = [float(v) for v in th.workpiece_fixture_mm]
-    volume: dict[str, Any] = {a: [float(vol.lower_mm[k]), float(vol.upper_mm[k])] for k, a in enumerate(AXES)}
+    volume: dict[str, Any] = {
+        a: [float(vol.lower_mm[k]), float(vol.upper_mm[k])] for k, a in enumerate(AXES)
+    }
     volume["reference"] = [float(v) for v in vol.reference_mm]
     volume["steps"] = [int(s) for s in plan.steps]
     return {
@@ -92,12 +94,14 @@ def machine_description(
         if fn.basis == "hat":
             errors[fn.component]["reversal"] = [float(v) for v in params]
         else:
-            effects.append({
-                "cause": "reversal",
-                "axis": AXES[fn.axis],
-                "half_step_um": [float(params[0]), float(params[1])],
-                "span_mm": [fn.lo_mm, fn.hi_mm],
-            })
+            effects.append(
+                {
+                    "cause": "reversal",
+                    "axis": AXES[fn.axis],
+                    "half_step_um": [float(params[0]), float(params[1])],
+                    "span_mm": [fn.lo_mm, fn.hi_mm],
+                }
+            )
     data["errors"] = errors
     if effects:
         data["effects"] = effects

@@ -93,8 +93,9 @@ def truth_machine() -> Machine:
         "ez_z": [0.2, 2e-3],
     }
     errors = ParametricErrors.from_polynomials(poly, squareness_urad=(6.0, -4.0, 3.0))
-    return Machine.from_parts(model="MB1", volume=VOLUME, errors=errors, probe=STYLUS,
-                              name="example-truth")
+    return Machine.from_parts(
+        model="MB1", volume=VOLUME, errors=errors, probe=STYLUS, name="example-truth"
+    )
 
 
 def laser_rows() -> list[list[object]]:
@@ -102,9 +103,30 @@ def laser_rows() -> list[list[object]]:
     rows: list[list[object]] = []
     centre = [400.0, 300.0, 200.0]
     quantities = {
-        "x": ["linear_um", "straightness_y_um", "straightness_z_um", "pitch_urad", "yaw_urad", "roll_urad"],
-        "y": ["linear_um", "straightness_x_um", "straightness_z_um", "pitch_urad", "yaw_urad", "roll_urad"],
-        "z": ["linear_um", "straightness_x_um", "straightness_y_um", "pitch_urad", "yaw_urad", "roll_urad"],
+        "x": [
+            "linear_um",
+            "straightness_y_um",
+            "straightness_z_um",
+            "pitch_urad",
+            "yaw_urad",
+            "roll_urad",
+        ],
+        "y": [
+            "linear_um",
+            "straightness_x_um",
+            "straightness_z_um",
+            "pitch_urad",
+            "yaw_urad",
+            "roll_urad",
+        ],
+        "z": [
+            "linear_um",
+            "straightness_x_um",
+            "straightness_y_um",
+            "pitch_urad",
+            "yaw_urad",
+            "roll_urad",
+        ],
     }
     for k, axis in enumerate("xyz"):
         targets = np.linspace(VOLUME[k][0], VOLUME[k][1], 17)
@@ -113,10 +135,23 @@ def laser_rows() -> list[list[object]]:
             for _ in range(2):
                 for direction, pos in ((1, targets), (-1, targets[::-1])):
                     for p in pos:
-                        rows.append([axis, quantity, round(float(p), 3), 0.0, direction, run,
-                                     *centre, *STYLUS])
-    for pair, crossing in (("xy", [400.0, 300.0, 200.0]), ("xz", [400.0, 300.0, 200.0]),
-                           ("yz", [400.0, 300.0, 200.0])):
+                        rows.append(
+                            [
+                                axis,
+                                quantity,
+                                round(float(p), 3),
+                                0.0,
+                                direction,
+                                run,
+                                *centre,
+                                *STYLUS,
+                            ]
+                        )
+    for pair, crossing in (
+        ("xy", [400.0, 300.0, 200.0]),
+        ("xz", [400.0, 300.0, 200.0]),
+        ("yz", [400.0, 300.0, 200.0]),
+    ):
         rows.append([pair, "squareness_urad", "", 0.0, "", f"sq-{pair}", *crossing, *STYLUS])
     return rows
 
@@ -127,8 +162,15 @@ def plate_balls() -> str:
     for v in range(5):
         for u in range(5):
             j += 1
-            lines += ["[[ball]]", f"id = {j}", f"u_mm = {100.0 * u:.1f}", f"v_mm = {100.0 * v:.1f}",
-                      "w_mm = 0.0", "u_um = 0.2", ""]
+            lines += [
+                "[[ball]]",
+                f"id = {j}",
+                f"u_mm = {100.0 * u:.1f}",
+                f"v_mm = {100.0 * v:.1f}",
+                "w_mm = 0.0",
+                "u_um = 0.2",
+                "",
+            ]
     return "\n".join(lines)
 
 
@@ -160,12 +202,27 @@ def main(out: Path) -> None:
     truth.to_toml(out / "truth.toml")
     guesses = STATIONS + rng.uniform(-30.0, 30.0, STATIONS.shape)
     (out / "calibration.toml").write_text(
-        PLAN.format(guesses="[" + ", ".join(
-            "[" + ", ".join(f"{v:.1f}" for v in g) + "]" for g in guesses) + "]"),
-        encoding="utf-8")
-    laser_header = ["axis", "quantity", "position_mm", "value", "direction", "run", "line_x_mm",
-                    "line_y_mm", "line_z_mm", "optic_offset_x_mm", "optic_offset_y_mm",
-                    "optic_offset_z_mm"]
+        PLAN.format(
+            guesses="["
+            + ", ".join("[" + ", ".join(f"{v:.1f}" for v in g) + "]" for g in guesses)
+            + "]"
+        ),
+        encoding="utf-8",
+    )
+    laser_header = [
+        "axis",
+        "quantity",
+        "position_mm",
+        "value",
+        "direction",
+        "run",
+        "line_x_mm",
+        "line_y_mm",
+        "line_z_mm",
+        "optic_offset_x_mm",
+        "optic_offset_y_mm",
+        "optic_offset_z_mm",
+    ]
     write_csv(out / "laser.csv", laser_header, laser_rows(), "laser runs (values filled below)")
     (out / "plate.toml").write_text(plate_balls(), encoding="utf-8")
     poses = plate_poses()
@@ -175,9 +232,15 @@ def main(out: Path) -> None:
             b = np.array([100.0 * (j % 5), 100.0 * (j // 5), 0.0])
             plate_rows.append([f"P{k + 1}", j + 1, *(r @ b + t).round(4)])
     write_csv(out / "plate.csv", ["placement", "ball", "x", "y", "z"], plate_rows, "plate")
-    grid = np.stack(np.meshgrid(np.linspace(50, 750, 4), np.linspace(50, 550, 4),
-                                np.linspace(20, 380, 3), indexing="ij"), -1).reshape(-1, 3)
-    trac_rows = [[f"S{s + 1}", i + 1, *p, ""] for s in range(len(STATIONS)) for i, p in enumerate(grid)]
+    grid = np.stack(
+        np.meshgrid(
+            np.linspace(50, 750, 4), np.linspace(50, 550, 4), np.linspace(20, 380, 3), indexing="ij"
+        ),
+        -1,
+    ).reshape(-1, 3)
+    trac_rows = [
+        [f"S{s + 1}", i + 1, *p, ""] for s in range(len(STATIONS)) for i, p in enumerate(grid)
+    ]
     write_csv(out / "trac.csv", ["station", "point", "x", "y", "z", "length_mm"], trac_rows, "trac")
 
     plan = read_plan(out / "calibration.toml")
@@ -192,18 +255,51 @@ def main(out: Path) -> None:
             pos = "" if run.kind == "squareness" else f"{run.position_mm[i]:.3f}"
             direction = "" if run.kind == "squareness" else int(run.direction[i])
             axis = "xyz"[run.axis] + ("xyz"[run.component] if run.kind == "squareness" else "")
-            rows.append([axis, run.quantity, pos, f"{run.value[i]:.4f}", direction, run.run,
-                         *run.points_mm[i], *run.optic_mm])
-    write_csv(out / "laser.csv", laser_header, rows,
-              "laser interferometer runs: error = true - indicated, um / urad")
-    write_csv(out / "plate.csv", ["placement", "ball", "x", "y", "z"],
-              [[plate.placements[plate.placement[i]], plate.ball_ids[plate.ball[i]],
-                *(f"{v:.5f}" for v in plate.q_mm[i])] for i in range(plate.n)],
-              "measured ball centres, indicated machine coordinates, mm")
-    write_csv(out / "trac.csv", ["station", "point", "x", "y", "z", "length_mm"],
-              [[trac.stations[trac.station[i]], trac_rows[i][1], *trac.q_mm[i],
-                f"{trac.length_mm[i]:.6f}"] for i in range(trac.n)],
-              "tracking interferometer lengths (dead path unknown), mm")
+            rows.append(
+                [
+                    axis,
+                    run.quantity,
+                    pos,
+                    f"{run.value[i]:.4f}",
+                    direction,
+                    run.run,
+                    *run.points_mm[i],
+                    *run.optic_mm,
+                ]
+            )
+    write_csv(
+        out / "laser.csv",
+        laser_header,
+        rows,
+        "laser interferometer runs: error = true - indicated, um / urad",
+    )
+    write_csv(
+        out / "plate.csv",
+        ["placement", "ball", "x", "y", "z"],
+        [
+            [
+                plate.placements[plate.placement[i]],
+                plate.ball_ids[plate.ball[i]],
+                *(f"{v:.5f}" for v in plate.q_mm[i]),
+            ]
+            for i in range(plate.n)
+        ],
+        "measured ball centres, indicated machine coordinates, mm",
+    )
+    write_csv(
+        out / "trac.csv",
+        ["station", "point", "x", "y", "z", "length_mm"],
+        [
+            [
+                trac.stations[trac.station[i]],
+                trac_rows[i][1],
+                *trac.q_mm[i],
+                f"{trac.length_mm[i]:.6f}",
+            ]
+            for i in range(trac.n)
+        ],
+        "tracking interferometer lengths (dead path unknown), mm",
+    )
 
 
 if __name__ == "__main__":
