@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .checks import exact_vs_first_order, resimulation
+from .checks import exact_vs_first_order, resimulation, virtual_cmm_check
 from .covariance import (
     FunctionBand,
     VolumetricU,
@@ -171,6 +171,7 @@ def _calibrate(
         "exact_vs_first_order": exact_vs_first_order(
             problem, sol.theta, machine, vol.points_mm, plan.stylus_mm
         ),
+        "virtual_cmm": virtual_cmm_check(machine, vol.points_mm, plan.stylus_mm, vol.U_um),
     }
     summary = dataset_summary(problem, datasets, before, sol.residuals)
     for block, st, cn, entry in zip(

@@ -27,7 +27,7 @@ from .solver import Problem
 if TYPE_CHECKING:
     from ..machine import Machine
 
-__all__ = ["exact_vs_first_order", "resimulation"]
+__all__ = ["exact_vs_first_order", "resimulation", "virtual_cmm_check"]
 
 FloatArray = NDArray[np.float64]
 
@@ -103,4 +103,36 @@ def exact_vs_first_order(
         "grid_max_error_um": float(np.max(np.abs(e))),
         "definition": "largest |exact chain − paper's first-order form| of the volumetric error "
         "(µm): the second-order part the exact model carries",
+    }
+
+
+def virtual_cmm_check(
+    machine: Machine, points_mm: FloatArray, stylus_mm: FloatArray, fit_u_um: FloatArray
+) -> dict[str, Any]:
+    """How well the written ``[uncertainty]`` (per table, no correlation between tables)
+    reproduces the fit's own U: the virtual CMM's first-order U (calibration part only: tables
+    and squareness, no probing, no random parts) of the rigid-body-free volumetric error on the
+    same grid, as a ratio to the fit's U (k = 2)."""
+    from dataclasses import replace
+
+    from ..uncertainty.gum import residual_covariance
+    from .rigid import rigid_basis
+
+    model = replace(machine.uncertainty_model(), probe_um=0.0)
+    n = points_mm.shape[0]
+    cov = residual_covariance(
+        machine, points_mm, stylus_mm, model=model, random_parts=False
+    ).reshape(3 * n, 3 * n)
+    b = rigid_basis(points_mm)
+    proj = np.eye(3 * n) - b @ np.linalg.pinv(b)
+    u_vcmm = 2.0 * np.sqrt(np.clip(np.diag(proj @ cov @ proj.T), 0.0, None)).reshape(n, 3)
+    ok = fit_u_um > 0
+    ratio = u_vcmm[ok] / fit_u_um[ok]
+    return {
+        "ratio_median": float(np.median(ratio)) if ratio.size else None,
+        "ratio_p05": float(np.percentile(ratio, 5)) if ratio.size else None,
+        "ratio_p95": float(np.percentile(ratio, 95)) if ratio.size else None,
+        "definition": "U (k = 2) of the rigid-body-free volumetric error at the calibration "
+        "stylus from the written [uncertainty] (virtual CMM, first order, tables and squareness) "
+        "over the fit's own U, on the volumetric_u.csv grid",
     }
