@@ -171,35 +171,22 @@ def _read_csv(spec: LaserSpec, need_values: bool) -> list[LaserRun]:
                 raise table.fail(i, "position_mm", "empty: a run's row needs its position")
             if direction[i] not in (1.0, -1.0):
                 raise table.fail(i, "direction", f"must be +1 or -1, got {direction[i]:g}")
-    order: dict[str, list[int]] = {}
+    # a run: the rows of one run id, quantity and axis on one line with one optic (the file
+    # order kept); a run id reused for another quantity, axis or line starts another run
+    order: dict[tuple[object, ...], list[int]] = {}
     for i, r in enumerate(run_id):
-        order.setdefault(r, []).append(i)
+        kind, axis, comp = kinds[i]
+        if kind == "squareness":
+            key: tuple[object, ...] = (r, kind, axis, comp)
+        else:
+            others = [k for k in range(3) if k != axis]
+            key = (r, kind, axis, comp, *np.round(line[i, others], 6), *np.round(optic[i], 6))
+        order.setdefault(key, []).append(i)
     runs = []
-    for rid, rows in order.items():
+    for key, rows in order.items():
+        rid = str(key[0])
         idx = np.asarray(rows, dtype=np.intp)
         first = rows[0]
-        for i in rows[1:]:
-            if kinds[i] != kinds[first] or quantity[i] != quantity[first]:
-                raise table.fail(
-                    i,
-                    "quantity",
-                    f"run {rid!r} mixes {quantity[first]} on {axis_txt[first]} "
-                    f"(line {table.lines[first]}) with {quantity[i]} on {axis_txt[i]}: one "
-                    "quantity and axis per run",
-                )
-            square = kinds[first][0] == "squareness"  # each row its own crossing point
-            for col, arr in (("line", line), ("optic_offset", optic)):
-                if square and col == "line":
-                    continue
-                moving = kinds[first][1] if col == "line" else -1
-                same = [k for k in range(3) if k != moving]
-                if not np.allclose(arr[i, same], arr[first, same], rtol=0, atol=1e-6):
-                    raise table.fail(
-                        i,
-                        f"{col}_{AXES[same[0]]}_mm",
-                        f"run {rid!r} changes its {col} "
-                        f"(line {table.lines[first]} has {arr[first].tolist()}): one line per run",
-                    )
         kind, axis, comp = kinds[first]
         points = line[idx].copy()
         if kind != "squareness":
