@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -27,7 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from calibration_sim import MODELS, Setup, compare, simulate  # noqa: E402
+from calibration_sim import MODELS, Setup, compare, run_cli, simulate  # noqa: E402
 
 SETUP = Setup(
     lower=np.zeros(3), upper=np.array([800.0, 600.0, 500.0]), stylus=np.array([0.0, 0.0, -120.0])
@@ -48,23 +47,8 @@ def run_one(kinds: tuple[str, ...], index: int, seed: int, wave: bool) -> dict[s
             d, model, SETUP, kinds, np.random.default_rng(seed + index), nodes=11, wave=wave
         )
         t0 = time.perf_counter()
-        subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "cmm_comp.cli",
-                "calibrate",
-                str(plan),
-                "-o",
-                "machine.toml",
-                "--report",
-                "report",
-                "--quiet",
-            ],
-            cwd=d,
-            check=True,
-            capture_output=True,
-        )
+        proc = run_cli(["calibrate", str(plan), "-o", "machine.toml", "--report", "report"], d)
+        proc.check_returncode()
         result = compare(machine, d / "report" / "volumetric_u.csv")
         return {"model": model, **result, "seconds": time.perf_counter() - t0}
 

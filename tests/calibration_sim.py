@@ -13,6 +13,8 @@ paths), and written with the csv module. Units: mm, µm, µrad.
 from __future__ import annotations
 
 import csv
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +24,7 @@ from cmm_comp.compensation import Machine, ParametricErrors
 from cmm_comp.compensation.parametric_errors import TABLE_COMPONENTS
 
 MODELS = ("MB1", "MB2", "FB1", "FB2", "MH1", "MH2", "FH1", "FH2", "CX1", "CY1")
-LASER_HEADER = [
+LASER_HEADER = [  # the contract (docs/formats.md §10.2), restated: the oracle does not read the code's
     "axis",
     "quantity",
     "position_mm",
@@ -369,6 +371,20 @@ def simulate(
     return machine, write_plan(folder, model, setup, kinds, guesses, nodes)
 
 
+def rigid_free(points_mm: np.ndarray, field_um: np.ndarray) -> np.ndarray:
+    """``field_um`` (N, 3) less its least-squares rigid motion over ``points_mm`` (N, 3)."""
+    c = (points_mm - points_mm.mean(0)) / 1000.0
+    b = np.zeros((points_mm.shape[0], 3, 6))
+    for k in range(3):
+        b[:, k, k] = 1.0
+    b[:, 1, 3], b[:, 2, 3] = -c[:, 2], c[:, 1]
+    b[:, 0, 4], b[:, 2, 4] = c[:, 2], -c[:, 0]
+    b[:, 0, 5], b[:, 1, 5] = -c[:, 1], c[:, 0]
+    b = b.reshape(-1, 6)
+    v = np.asarray(field_um, dtype=float).reshape(-1)
+    return (v - b @ np.linalg.lstsq(b, v, rcond=None)[0]).reshape(-1, 3)
+
+
 def compare(machine: Machine, volumetric_csv: Path) -> dict[str, float]:
     """Identified vs true volumetric error on the CSV's grid at the stylus, rigid-body motion
     removed (least squares): RMS difference as % of the truth's RMS, and the fraction of
@@ -376,24 +392,24 @@ def compare(machine: Machine, volumetric_csv: Path) -> dict[str, float]:
     data = np.loadtxt(volumetric_csv, delimiter=",", skiprows=1)
     q, e, u = data[:, :3], data[:, 3:6], data[:, 6:9]
     true = machine.volumetric_error(q, machine.probe.offset_mm)
-    c = (q - q.mean(0)) / 1000.0
-    b = np.zeros((q.shape[0], 3, 6))
-    for k in range(3):
-        b[:, k, k] = 1.0
-    b[:, 1, 3], b[:, 2, 3] = -c[:, 2], c[:, 1]
-    b[:, 0, 4], b[:, 2, 4] = c[:, 2], -c[:, 0]
-    b[:, 0, 5], b[:, 1, 5] = -c[:, 1], c[:, 0]
-    b = b.reshape(-1, 6)
-
-    def free(v: np.ndarray) -> np.ndarray:
-        v = v.reshape(-1)
-        return v - b @ np.linalg.lstsq(b, v, rcond=None)[0]
-
-    diff = free(e - true)
-    truth = free(true)
+    diff = rigid_free(q, e - true)
+    truth = rigid_free(q, true)
     return {
         "rms_percent": float(100 * np.sqrt(np.mean(diff**2)) / np.sqrt(np.mean(truth**2))),
-        "coverage": float(np.mean(np.abs(diff) <= u.reshape(-1))),
+        "coverage": float(np.mean(np.abs(diff) <= u)),
         "rms_diff_um": float(np.sqrt(np.mean(diff**2))),
         "rms_truth_um": float(np.sqrt(np.mean(truth**2))),
     }
+
+
+def run_cli(
+    args: list[str], folder: Path, timeout_s: float = 900.0
+) -> subprocess.CompletedProcess[str]:
+    """``cmm-comp ARGS`` in ``folder``, as a user runs it (a subprocess), output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", "cmm_comp.cli", *args],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )

@@ -21,6 +21,9 @@ import pytest
 
 from cmm_comp.compensation import Machine
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from calibration_sim import rigid_free
+
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "calibration.md"
 EXAMPLE = ROOT / "examples" / "calibration"
@@ -62,25 +65,12 @@ def test_worked_example_runs_as_printed(tmp_path: Path) -> None:
     q = data[:, :3]
     mine = machine.volumetric_error(q, machine.probe.offset_mm)
     np.testing.assert_allclose(mine, data[:, 3:6], atol=2e-6)  # the CSV is the machine's
-    diff = _rigid_free(q, mine - truth.volumetric_error(q, machine.probe.offset_mm))
-    true = _rigid_free(q, truth.volumetric_error(q, machine.probe.offset_mm))
+    diff = rigid_free(q, mine - truth.volumetric_error(q, machine.probe.offset_mm))
+    true = rigid_free(q, truth.volumetric_error(q, machine.probe.offset_mm))
     assert np.sqrt(np.mean(diff**2)) < 0.2 * np.sqrt(np.mean(true**2))
     assert np.mean(np.abs(diff) <= data[:, 6:9]) > 0.8
     plan = json.loads((tmp_path / "plan.json").read_text())
     assert 0 < max(plan["volumetric_U_um"]["max_um"]) < 5 * max(report["volumetric_U_um"]["max_um"])
-
-
-def _rigid_free(q: np.ndarray, field: np.ndarray) -> np.ndarray:
-    c = (q - q.mean(0)) / 1000.0
-    b = np.zeros((q.shape[0], 3, 6))
-    for k in range(3):
-        b[:, k, k] = 1.0
-    b[:, 1, 3], b[:, 2, 3] = -c[:, 2], c[:, 1]
-    b[:, 0, 4], b[:, 2, 4] = c[:, 2], -c[:, 0]
-    b[:, 0, 5], b[:, 1, 5] = -c[:, 1], c[:, 0]
-    b = b.reshape(-1, 6)
-    v = field.reshape(-1)
-    return (v - b @ np.linalg.lstsq(b, v, rcond=None)[0]).reshape(-1, 3)
 
 
 def test_example_data_regenerate_bit_for_bit(tmp_path: Path) -> None:

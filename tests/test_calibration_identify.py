@@ -10,7 +10,6 @@ machines.
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from calibration_sim import Setup, compare, simulate
+from calibration_sim import Setup, compare, run_cli, simulate
 
 SETUP = Setup(
     lower=np.zeros(3), upper=np.array([700.0, 600.0, 500.0]), stylus=np.array([0.0, 0.0, -120.0])
@@ -46,23 +45,10 @@ def test_identified_error_within_its_uncertainty(
     machine, plan = simulate(
         tmp_path, model, SETUP, kinds, np.random.default_rng(seed), nodes=9, wave=False
     )
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cmm_comp.cli",
-            "calibrate",
-            str(plan),
-            "-o",
-            "machine.toml",
-            "--report",
-            "report",
-            "--quiet",
-        ],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=500,
+    proc = run_cli(
+        ["calibrate", str(plan), "-o", "machine.toml", "--report", "report", "--quiet"],
+        tmp_path,
+        500,
     )
     assert proc.returncode == 0, proc.stderr
     result = compare(machine, tmp_path / "report" / "volumetric_u.csv")

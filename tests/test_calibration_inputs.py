@@ -102,26 +102,20 @@ def test_run_whose_positions_are_not_monotonic(plan_dir: Path) -> None:
     _fails(plan_dir, "laser.csv", f"line {i}", "column 'position_mm'", "not monotonic")
 
 
-def test_nan_reading(plan_dir: Path) -> None:
-    path = plan_dir / "plate.csv"
+@pytest.mark.parametrize(
+    ("name", "line", "cell", "column", "text"),
+    [("plate.csv", 10, 3, "y", "nan"), ("laser.csv", 40, 3, "value", "NaN")],
+)
+def test_nan_reading(
+    plan_dir: Path, name: str, line: int, cell: int, column: str, text: str
+) -> None:
+    path = plan_dir / name
     lines = _lines(path)
-    i = 10
-    cells = lines[i - 1].split(",")
-    cells[3] = "nan"
-    lines[i - 1] = ",".join(cells)
+    cells = lines[line - 1].split(",")
+    cells[cell] = text
+    lines[line - 1] = ",".join(cells)
     path.write_text("\n".join(lines) + "\n")
-    _fails(plan_dir, "plate.csv", f"line {i}", "column 'y'", "not a finite number: 'nan'")
-
-
-def test_nan_in_a_laser_value(plan_dir: Path) -> None:
-    path = plan_dir / "laser.csv"
-    lines = _lines(path)
-    i = 40
-    cells = lines[i - 1].split(",")
-    cells[3] = "NaN"
-    lines[i - 1] = ",".join(cells)
-    path.write_text("\n".join(lines) + "\n")
-    _fails(plan_dir, "laser.csv", f"line {i}", "column 'value'", "not a finite number")
+    _fails(plan_dir, name, f"line {line}", f"column '{column}'", f"not a finite number: '{text}'")
 
 
 def test_plan_naming_a_missing_file(plan_dir: Path) -> None:

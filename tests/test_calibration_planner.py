@@ -7,7 +7,6 @@ The plans are laser-only and small so that 30 calibrations take a minute or two.
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -16,7 +15,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from calibration_sim import Setup, laser_file, random_machine, write_plan
+from calibration_sim import Setup, laser_file, random_machine, run_cli, write_plan
 
 SETUP = Setup(
     lower=np.zeros(3), upper=np.array([600.0, 500.0, 400.0]), stylus=np.array([0.0, 0.0, -100.0])
@@ -56,11 +55,8 @@ def _plan(folder: Path, targets: int) -> tuple[Path, Path]:
 @pytest.mark.timeout(1200)
 def test_predicted_u_matches_the_spread_of_30_simulated_calibrations(tmp_path: Path) -> None:
     plan, guess = _plan(tmp_path, targets=11)
-    proc = subprocess.run(
+    proc = run_cli(
         [
-            sys.executable,
-            "-m",
-            "cmm_comp.cli",
             "calibrate",
             "plan",
             str(plan),
@@ -74,10 +70,8 @@ def test_predicted_u_matches_the_spread_of_30_simulated_calibrations(tmp_path: P
             "plan.json",
             "--quiet",
         ],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=1100,
+        tmp_path,
+        1100,
     )
     assert proc.returncode == 0, proc.stderr
     mc = json.loads((tmp_path / "plan.json").read_text())["monte_carlo"]
@@ -91,11 +85,8 @@ def test_predicted_u_matches_the_spread_of_30_simulated_calibrations(tmp_path: P
 def test_more_targets_predict_a_smaller_u(tmp_path: Path) -> None:
     sparse, guess = _plan(tmp_path / "sparse", targets=6)
     dense, _ = _plan(tmp_path / "dense", targets=21)
-    proc = subprocess.run(
+    proc = run_cli(
         [
-            sys.executable,
-            "-m",
-            "cmm_comp.cli",
             "calibrate",
             "plan",
             str(sparse),
@@ -106,10 +97,8 @@ def test_more_targets_predict_a_smaller_u(tmp_path: Path) -> None:
             "plans.json",
             "--quiet",
         ],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=500,
+        tmp_path,
+        500,
     )
     assert proc.returncode == 0, proc.stderr
     a, b = json.loads((tmp_path / "plans.json").read_text())

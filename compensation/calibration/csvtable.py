@@ -19,10 +19,11 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError
 
-__all__ = ["CsvTable", "read_csv_table"]
+__all__ = ["TEMPERATURES", "CsvTable", "read_csv_table"]
 
 FloatArray = NDArray[np.float64]
 MAX_ROWS = 2_000_000
+TEMPERATURES = ("T_x", "T_y", "T_z", "T_wp")  # optional columns: the plan's thermal terms, °C
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,22 @@ class CsvTable:
             if cell == "":
                 raise self.fail(i, column, "empty cell; a value is required")
         return out
+
+    def temperatures(self) -> dict[str, FloatArray]:
+        """The optional temperature columns present (°C)."""
+        return {t: self.numbers(t) for t in TEMPERATURES if self.has(t)}
+
+    def check_inside(
+        self, points_mm: FloatArray, lower_mm: FloatArray, upper_mm: FloatArray, what: str
+    ) -> None:
+        """Refuse the first row whose point (N, 3) mm lies outside ``lower…upper``."""
+        tol = 1e-6 * max(1.0, float(np.max(upper_mm - lower_mm)))
+        bad = np.any((points_mm < lower_mm - tol) | (points_mm > upper_mm + tol), axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise self.fail(
+                i, "x", f"{what} {points_mm[i].tolist()} mm is outside the plan's volume"
+            )
 
     def numbers(self, column: str, *, allow_empty: bool = False) -> FloatArray:
         """The cells of ``column`` as finite floats; ``allow_empty``: an empty cell is NaN."""

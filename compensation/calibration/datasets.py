@@ -41,33 +41,21 @@ class Dataset:
 def load_datasets(plan: Plan, *, need_values: bool = True) -> list[Dataset]:
     """Read every data file of the plan (in the plan's order: lasers, plates, multilateration)."""
     vol = plan.base.volume
-    out: list[Dataset] = []
-    for spec in plan.lasers:
-        out.append(
-            Dataset(
-                "laser",
-                spec.where,
-                read_laser(
-                    spec, vol.lower_mm, vol.upper_mm, vol.reference_mm, need_values=need_values
-                ),
-            )
+    lo, hi = vol.lower_mm, vol.upper_mm
+    out = [
+        Dataset("laser", s.where, read_laser(s, lo, hi, vol.reference_mm, need_values=need_values))
+        for s in plan.lasers
+    ]
+    out += [
+        Dataset("plate", s.where, read_plate(s, lo, hi, need_values=need_values))
+        for s in plan.plates
+    ]
+    out += [
+        Dataset(
+            "multilateration", s.where, read_multilateration(s, lo, hi, need_values=need_values)
         )
-    for pspec in plan.plates:
-        out.append(
-            Dataset(
-                "plate",
-                pspec.where,
-                read_plate(pspec, vol.lower_mm, vol.upper_mm, need_values=need_values),
-            )
-        )
-    for tspec in plan.multilaterations:
-        out.append(
-            Dataset(
-                "multilateration",
-                tspec.where,
-                read_multilateration(tspec, vol.lower_mm, vol.upper_mm, need_values=need_values),
-            )
-        )
+        for s in plan.multilaterations
+    ]
     return out
 
 

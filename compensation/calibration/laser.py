@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError, RealDataError
 from ..parametric_errors import AXES, AXIS_INDEX
-from .csvtable import CsvTable, read_csv_table
+from .csvtable import TEMPERATURES, CsvTable, read_csv_table
 from .plan import LaserSpec
 
 __all__ = [
@@ -46,7 +46,6 @@ COLUMNS = (
     "optic_offset_y_mm",
     "optic_offset_z_mm",
 )
-TEMPERATURES = ("T_x", "T_y", "T_z", "T_wp")
 #: rotation axis read by pitch/yaw/roll on each moving axis (the issue's mapping)
 ANGLE_AXIS = {
     "x": {"roll": "x", "pitch": "y", "yaw": "z"},
@@ -163,7 +162,7 @@ def _read_csv(spec: LaserSpec, need_values: bool) -> list[LaserRun]:
     direction = table.numbers("direction", allow_empty=True)
     line = np.column_stack([table.numbers(f"line_{a}_mm") for a in AXES])
     optic = np.column_stack([table.numbers(f"optic_offset_{a}_mm") for a in AXES])
-    temps = {t: table.numbers(t) for t in TEMPERATURES if table.has(t)}
+    temps = table.temperatures()
     kinds = [_quantity(table, i, axis_txt[i], quantity[i]) for i in range(len(table))]
     for i, (kind, _, _) in enumerate(kinds):
         if kind != "squareness":

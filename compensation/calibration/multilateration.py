@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError
 from ..parametric_errors import AXES
-from .csvtable import read_csv_table
+from .csvtable import TEMPERATURES, read_csv_table
 from .plan import MultilaterationSpec
 
 __all__ = ["MIN_POINTS_PER_STATION", "MIN_STATIONS", "MultilaterationData", "read_multilateration"]
@@ -62,7 +62,7 @@ def read_multilateration(
     table = read_csv_table(
         spec.file,
         ("station", "point", "x", "y", "z", "length_mm"),
-        ("T_x", "T_y", "T_z", "T_wp"),
+        TEMPERATURES,
     )
     q = np.column_stack([table.numbers(a) for a in AXES])
     length = table.numbers("length_mm", allow_empty=not need_values)
@@ -98,12 +98,8 @@ def read_multilateration(
             f"{spec.where}.station_guess_mm gives {spec.station_guess_mm.shape[0]} positions: "
             "one per station, in order of first appearance"
         )
-    tol = 1e-6 * max(1.0, float(np.max(upper_mm - lower_mm)))
-    outside = np.flatnonzero(np.any((q < lower_mm - tol) | (q > upper_mm + tol), axis=1))
-    if outside.size:
-        i = int(outside[0])
-        raise table.fail(i, "x", f"point {q[i].tolist()} mm is outside the plan's volume")
-    temps = {t: table.numbers(t) for t in ("T_x", "T_y", "T_z", "T_wp") if table.has(t)}
+    table.check_inside(q, lower_mm, upper_mm, "point")
+    temps = table.temperatures()
     return MultilaterationData(
         spec=spec,
         stations=tuple(stations),

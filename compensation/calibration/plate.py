@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError
 from ..parametric_errors import AXES
-from .csvtable import read_csv_table
+from .csvtable import TEMPERATURES, read_csv_table
 from .plan import PlateSpec
 
 __all__ = ["PlateData", "read_plate"]
@@ -130,9 +130,7 @@ def read_plate(
     ``need_values`` is accepted for symmetry (the planner uses the centres as the geometry)."""
     del need_values  # the measured centres are the geometry as well as the data
     ids, uvw, u_um = _read_balls(spec)
-    table = read_csv_table(
-        spec.file, ("placement", "ball", "x", "y", "z"), ("T_x", "T_y", "T_z", "T_wp")
-    )
+    table = read_csv_table(spec.file, ("placement", "ball", "x", "y", "z"), TEMPERATURES)
     q = np.column_stack([table.numbers(a) for a in AXES])
     placement_txt = table.text("placement")
     ball_txt = table.text("ball")
@@ -167,12 +165,8 @@ def read_plate(
                 f"placement {name!r} has {rows.size} ball(s); its pose "
                 f"needs ≥ {MIN_BALLS_PER_PLACEMENT} balls not on one line",
             )
-    tol = 1e-6 * max(1.0, float(np.max(upper_mm - lower_mm)))
-    outside = np.flatnonzero(np.any((q < lower_mm - tol) | (q > upper_mm + tol), axis=1))
-    if outside.size:
-        i = int(outside[0])
-        raise table.fail(i, "x", f"centre {q[i].tolist()} mm is outside the plan's volume")
-    temps = {t: table.numbers(t) for t in ("T_x", "T_y", "T_z", "T_wp") if table.has(t)}
+    table.check_inside(q, lower_mm, upper_mm, "centre")
+    temps = table.temperatures()
     return PlateData(
         spec=spec,
         ball_ids=ids,

@@ -28,30 +28,22 @@ FloatArray = NDArray[np.float64]
 
 
 def _base_sections(plan: Plan) -> dict[str, Any]:
-    base = plan.base
-    vol = base.volume
-    th = base.thermal
-    thermal: dict[str, Any] = {
-        "reference_C": float(th.reference_C),
-        "expansion": {a: float(th.expansion[k]) for k, a in enumerate(AXES)},
-    }
-    if th.workpiece_expansion is not None:
-        thermal["workpiece_expansion"] = float(th.workpiece_expansion)
-    if th.workpiece_fixture_mm is not None:
-        thermal["workpiece_fixture"] = [float(v) for v in th.workpiece_fixture_mm]
-    volume: dict[str, Any] = {
-        a: [float(vol.lower_mm[k]), float(vol.upper_mm[k])] for k, a in enumerate(AXES)
-    }
-    volume["reference"] = [float(v) for v in vol.reference_mm]
-    volume["steps"] = [int(s) for s in plan.steps]
-    return {
-        "format": "cmm-machine/1",
-        "name": plan.name,
-        "model": plan.model,
-        "volume": volume,
-        "probe": {"offset": [float(v) for v in plan.stylus_mm]},
-        "thermal": thermal,
-    }
+    """format, name, model, volume (the plan's grid steps), probe, thermal of the machine file."""
+    from ..formats.machine_toml import description_from_parts
+    from ..machine_parts import ArmDeflection, Probe, Volume
+
+    vol = plan.base.volume
+    data = description_from_parts(
+        name=plan.name,
+        model=plan.model,
+        volume=Volume(vol.lower_mm, vol.upper_mm, vol.reference_mm, tuple(plan.steps)),
+        probe=Probe(offset_mm=plan.stylus_mm),
+        thermal=plan.base.thermal,
+        arm=ArmDeflection(),
+        error_sections={},
+    )
+    del data["arm_deflection"]  # the plan's machines have none
+    return data
 
 
 def machine_description(

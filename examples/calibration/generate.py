@@ -27,6 +27,7 @@ from cmm_comp.compensation.calibration import (
     simulate_multilateration,
     simulate_plate,
 )
+from cmm_comp.compensation.calibration.laser import COLUMNS as LASER_COLUMNS
 
 HERE = Path(__file__).resolve().parent
 SEED = 27
@@ -209,20 +210,7 @@ def main(out: Path) -> None:
         ),
         encoding="utf-8",
     )
-    laser_header = [
-        "axis",
-        "quantity",
-        "position_mm",
-        "value",
-        "direction",
-        "run",
-        "line_x_mm",
-        "line_y_mm",
-        "line_z_mm",
-        "optic_offset_x_mm",
-        "optic_offset_y_mm",
-        "optic_offset_z_mm",
-    ]
+    laser_header = list(LASER_COLUMNS)
     write_csv(out / "laser.csv", laser_header, laser_rows(), "laser runs (values filled below)")
     (out / "plate.toml").write_text(plate_balls(), encoding="utf-8")
     poses = plate_poses()
