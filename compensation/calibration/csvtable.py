@@ -13,17 +13,34 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import CalibrationError
 
-__all__ = ["TEMPERATURES", "CsvTable", "read_csv_table"]
+__all__ = ["TEMPERATURES", "CsvTable", "PointsFile", "read_csv_table"]
 
 FloatArray = NDArray[np.float64]
 MAX_ROWS = 2_000_000
 TEMPERATURES = ("T_x", "T_y", "T_z", "T_wp")  # optional columns: the plan's thermal terms, °C
+
+
+class PointsFile:
+    """What the data of a points file (plate centres, multilateration points) have in common:
+    its plan entry ``spec`` (with its ``file``) and the indicated points ``q_mm`` (N, 3)."""
+
+    spec: Any
+    q_mm: FloatArray
+
+    @property
+    def source(self) -> str:
+        return str(self.spec.file)
+
+    @property
+    def n(self) -> int:
+        return int(self.q_mm.shape[0])
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError
 from ..parametric_errors import AXES
-from .csvtable import TEMPERATURES, read_csv_table
+from .csvtable import TEMPERATURES, PointsFile, read_csv_table
 from .plan import MultilaterationSpec
 
 __all__ = ["MIN_POINTS_PER_STATION", "MIN_STATIONS", "MultilaterationData", "read_multilateration"]
@@ -28,7 +28,7 @@ MIN_STATIONS = 4
 
 
 @dataclass(frozen=True)
-class MultilaterationData:
+class MultilaterationData(PointsFile):
     """One ``[[multilateration]]`` entry: ``stations`` (names, order of first appearance),
     ``station`` index per row, ``q_mm`` (N, 3) indicated points, ``length_mm`` (N,)."""
 
@@ -39,14 +39,6 @@ class MultilaterationData:
     length_mm: FloatArray
     lines: tuple[int, ...]
     temps_C: dict[str, FloatArray] = field(default_factory=dict)
-
-    @property
-    def source(self) -> str:
-        return str(self.spec.file)
-
-    @property
-    def n(self) -> int:
-        return int(self.q_mm.shape[0])
 
 
 def read_multilateration(

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError
 from ..parametric_errors import AXES
-from .csvtable import TEMPERATURES, read_csv_table
+from .csvtable import TEMPERATURES, PointsFile, read_csv_table
 from .plan import PlateSpec
 
 __all__ = ["PlateData", "read_plate"]
@@ -32,7 +32,7 @@ _INT = re.compile(r"^[+-]?\d+$")
 
 
 @dataclass(frozen=True)
-class PlateData:
+class PlateData(PointsFile):
     """One ``[[plate]]`` entry: the balls (``ball_ids``, ``ball_mm`` (B, 3) in the plate frame,
     ``ball_u_um`` (B,)) and the N measured centres (``placement`` and ``ball`` indices, ``q_mm``
     (N, 3) indicated, ``lines`` of the CSV). ``placements`` names each placement in order."""
@@ -47,14 +47,6 @@ class PlateData:
     q_mm: FloatArray
     lines: tuple[int, ...]
     temps_C: dict[str, FloatArray] = field(default_factory=dict)
-
-    @property
-    def source(self) -> str:
-        return str(self.spec.file)
-
-    @property
-    def n(self) -> int:
-        return int(self.q_mm.shape[0])
 
 
 def _ball_id(value: Any) -> str | None:

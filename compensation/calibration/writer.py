@@ -36,7 +36,7 @@ def _base_sections(plan: Plan) -> dict[str, Any]:
     data = description_from_parts(
         name=plan.name,
         model=plan.model,
-        volume=Volume(vol.lower_mm, vol.upper_mm, vol.reference_mm, tuple(plan.steps)),
+        volume=Volume(vol.lower_mm, vol.upper_mm, vol.reference_mm, plan.steps),
         probe=Probe(offset_mm=plan.stylus_mm),
         thermal=plan.base.thermal,
         arm=ArmDeflection(),
