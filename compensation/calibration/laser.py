@@ -160,12 +160,18 @@ def _read_csv(spec: LaserSpec, need_values: bool) -> list[LaserRun]:
     value = table.numbers("value", allow_empty=not need_values)
     position = table.numbers("position_mm", allow_empty=True)
     direction = table.numbers("direction", allow_empty=True)
-    line = np.column_stack([table.numbers(f"line_{a}_mm") for a in AXES])
+    line = np.column_stack([table.numbers(f"line_{a}_mm", allow_empty=True) for a in AXES])
     optic = np.column_stack([table.numbers(f"optic_offset_{a}_mm") for a in AXES])
     temps = table.temperatures()
     kinds = [_quantity(table, i, axis_txt[i], quantity[i]) for i in range(len(table))]
-    for i, (kind, _, _) in enumerate(kinds):
+    for i, (kind, axis, _) in enumerate(kinds):
+        # the moving axis' own line cell may be empty (it is the position); the rest is needed
+        needed = [k for k in range(3) if kind == "squareness" or k != axis]
+        for k in needed:
+            if np.isnan(line[i, k]):
+                raise table.fail(i, f"line_{AXES[k]}_mm", "empty: where the other axes stand")
         if kind != "squareness":
+            line[i, axis] = 0.0 if np.isnan(line[i, axis]) else line[i, axis]
             if np.isnan(position[i]):
                 raise table.fail(i, "position_mm", "empty: a run's row needs its position")
             if direction[i] not in (1.0, -1.0):

@@ -266,10 +266,10 @@ def _base_machine(c: _Checks, data: Mapping[str, Any], path: Path, name: str) ->
     from ..machine import Machine
 
     volume = dict(c.table(data, "volume", "volume"))
-    c.check_keys(volume, "volume", {"x", "y", "z", "steps"})
+    c.check_keys(volume, "volume", {"x", "y", "z", "steps", "reference"})
     volume.pop("steps", None)  # the plan's steps are the U grid's (2…200), checked above
     probe = c.table(data, "probe", "probe")
-    c.check_keys(probe, "probe", {"offset"})
+    c.check_keys(probe, "probe", {"offset", "random_um"})
     thermal = dict(c.table(data, "thermal", "thermal"))
     c.check_keys(thermal, "thermal", {"expansion", "workpiece_expansion", "workpiece_fixture"})
     thermal["reference_C"] = c.number(data.get("reference_C", 20.0), "reference_C")
