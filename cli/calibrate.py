@@ -82,14 +82,15 @@ def _plan(args: argparse.Namespace, words: list[str]) -> int:
         predict_plan(p, guess, trials=args.trials, seed=args.seed, progress=_say(args))
         for p in plans
     ]
-    header = f"{'plan':<28} {'readings':>8} {'U max µm':>9} {'U rms µm':>9} {'null':>5}"
+    width = max(28, *(len(w) for w in words))
+    header = f"{'plan':<{width}} {'readings':>8} {'U max µm':>9} {'U rms µm':>9} {'null':>5}"
     if args.trials:
         header += f" {'MC spread/u':>11} {'coverage':>8}"
     print(header)
-    for p, r in zip(plans, results, strict=True):
+    for word, r in zip(words, results, strict=True):
         v = r["volumetric_U_um"]
         line = (
-            f"{p.source.name:<28} {r['readings']:>8} {max(v['max_um']):>9.3g} "
+            f"{word:<{width}} {r['readings']:>8} {max(v['max_um']):>9.3g} "
             f"{max(v['rms_um']):>9.3g} {r['null_dimension']:>5}"
         )
         if args.trials:

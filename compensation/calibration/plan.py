@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -148,7 +148,6 @@ class Plan:
     lasers: tuple[LaserSpec, ...] = ()
     plates: tuple[PlateSpec, ...] = ()
     multilaterations: tuple[MultilaterationSpec, ...] = ()
-    raw: dict[str, Any] = field(default_factory=dict)
 
     @property
     def stylus_mm(self) -> FloatArray:
@@ -255,7 +254,6 @@ def read_plan(path: str | Path) -> Plan:
         multilaterations=tuple(
             _trac(c, folder, e, i) for i, e in enumerate(c.entries(data, "multilateration"))
         ),
-        raw=dict(data),
     )
     if not (plan.lasers or plan.plates or plan.multilaterations):
         raise c.fail("plan", "no data sets: give [[laser]], [[plate]] or [[multilateration]]")
