@@ -25,6 +25,15 @@ __all__ = ["TEMPERATURES", "CsvTable", "PointsFile", "read_csv_table"]
 FloatArray = NDArray[np.float64]
 MAX_ROWS = 2_000_000
 TEMPERATURES = ("T_x", "T_y", "T_z", "T_wp")  # optional columns: the plan's thermal terms, °C
+#: how far (fraction of each axis' travel) a reading may lie outside the plan's volume: a ball on
+#: the volume's edge probed with noise is a reading, not a mistake (the tables' end values hold)
+OUTSIDE_TOLERANCE = 0.02
+
+
+def outside(points_mm: FloatArray, lower_mm: FloatArray, upper_mm: FloatArray) -> NDArray[np.bool_]:
+    """(N,) True where a point lies further outside ``lower…upper`` than the tolerance."""
+    tol = OUTSIDE_TOLERANCE * (upper_mm - lower_mm)
+    return np.any((points_mm < lower_mm - tol) | (points_mm > upper_mm + tol), axis=1)
 
 
 class PointsFile:
@@ -84,9 +93,9 @@ class CsvTable:
     def check_inside(
         self, points_mm: FloatArray, lower_mm: FloatArray, upper_mm: FloatArray, what: str
     ) -> None:
-        """Refuse the first row whose point (N, 3) mm lies outside ``lower…upper``."""
-        tol = 1e-6 * max(1.0, float(np.max(upper_mm - lower_mm)))
-        bad = np.any((points_mm < lower_mm - tol) | (points_mm > upper_mm + tol), axis=1)
+        """Refuse the first row whose point (N, 3) mm lies outside ``lower…upper`` (beyond
+        :data:`OUTSIDE_TOLERANCE` of the travel)."""
+        bad = outside(points_mm, lower_mm, upper_mm)
         if bad.any():
             i = int(np.argmax(bad))
             raise self.fail(

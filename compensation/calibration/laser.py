@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError, RealDataError
 from ..parametric_errors import AXES, AXIS_INDEX
-from .csvtable import TEMPERATURES, CsvTable, read_csv_table
+from .csvtable import TEMPERATURES, CsvTable, outside, read_csv_table
 from .plan import LaserSpec
 
 __all__ = [
@@ -265,8 +265,7 @@ def _check_counts(table: CsvTable, rows: list[int], run: LaserRun) -> None:
 
 
 def _check_inside(run: LaserRun, lower: FloatArray, upper: FloatArray) -> None:
-    tol = 1e-6 * max(1.0, float(np.max(np.abs(upper - lower))))
-    bad = np.flatnonzero(np.any((run.points_mm < lower - tol) | (run.points_mm > upper + tol), 1))
+    bad = np.flatnonzero(outside(run.points_mm, lower, upper))
     if bad.size:
         i = int(bad[0])
         raise CalibrationError(
