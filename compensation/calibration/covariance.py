@@ -50,6 +50,7 @@ class FunctionBand:
     value: FloatArray
     u: FloatArray
     covariance: FloatArray  # at position_mm
+    curve: tuple[FloatArray, FloatArray, FloatArray]  # dense (q mm, value, u) for plots
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,9 @@ def function_bands(layout: Layout, theta: FloatArray, cov: FloatArray) -> list[F
         q = band_positions(fn)
         m = fn.matrix(q)
         c = m @ cov[fn.cols, fn.cols] @ m.T
+        dense = np.linspace(fn.lo_mm, fn.hi_mm, 201)
+        md = fn.matrix(dense)
+        ud = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", md, cov[fn.cols, fn.cols], md), 0.0, None))
         out.append(
             FunctionBand(
                 name=fn.name,
@@ -94,6 +98,7 @@ def function_bands(layout: Layout, theta: FloatArray, cov: FloatArray) -> list[F
                 value=m @ theta[fn.cols],
                 u=np.sqrt(np.clip(np.diag(c), 0.0, None)),
                 covariance=c,
+                curve=(dense, md @ theta[fn.cols], ud),
             )
         )
     return out
