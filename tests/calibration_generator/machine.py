@@ -160,7 +160,11 @@ def machine_toml(machine: TrueMachine, note: str = "") -> str:
     lines.append("[squareness]")
     lines += [f"{s} = {_f(machine.squareness_urad[s])}" for s in SQUARENESS]
     for name in COMPONENTS:
-        lines += ["", f"[errors.{name}]", f"polynomial = {_vec(np.array(machine.power_series(name)))}"]
+        lines += [
+            "",
+            f"[errors.{name}]",
+            f"polynomial = {_vec(np.array(machine.power_series(name)))}",
+        ]
     for k, a in enumerate(AXES):
         h = machine.reversal_um.get(a, 0.0)
         if h:
