@@ -104,13 +104,15 @@ def test_first_order_chain_is_appendix_a1_term_by_term(model: str) -> None:
     for _ in range(3):
         u, p = rng.uniform(-900, 900, 3), rng.uniform(-200, 200, 3)
         env0 = dict.fromkeys([*names, "phi1", "phi2"], 0.0)
-        env0.update(x=u[0] / 1e3, y=u[1] / 1e3, z=u[2] / 1e3, Xp=p[0] / 1e3, Yp=p[1] / 1e3, Zp=p[2] / 1e3)  # fmt: skip
+        env0.update(
+            x=u[0] / 1e3, y=u[1] / 1e3, z=u[2] / 1e3, Xp=p[0] / 1e3, Yp=p[1] / 1e3, Zp=p[2] / 1e3
+        )
         for name in names:
             env = dict(env0, **{name: 1.0})
-            printed = np.array([eval(e, {}, env) for e in PRINTED[model]])  # noqa: S307
+            printed = np.array([eval(e, {}, env) for e in PRINTED[model]])
             for (m, i), term in CORRECTIONS.items():
                 if m == model:
-                    printed[i] += eval(term, {}, env)  # noqa: S307
+                    printed[i] += eval(term, {}, env)
             chain = chain_error_um(model, u[None], p[None], {name: np.ones(1)})[0]
             assert np.allclose(chain, printed, atol=1e-12), f"{model} {name}: {chain} vs {printed}"
 
@@ -122,10 +124,16 @@ def test_the_one_correction_is_what_the_identical_chain_prints() -> None:
     assert CORRECTIONS == {("FH1", 0): "y*ez_x"}
     rng = np.random.default_rng(7)
     names = [*COMPONENTS, *SQUARENESS]
-    env = dict(zip(["x", "y", "z", "Xp", "Yp", "Zp", *names], rng.uniform(-1, 1, 6 + len(names)), strict=True))  # fmt: skip
+    env = dict(
+        zip(
+            ["x", "y", "z", "Xp", "Yp", "Zp", *names],
+            rng.uniform(-1, 1, 6 + len(names)),
+            strict=True,
+        )
+    )
     for i in range(3):
-        fh1 = eval(PRINTED["FH1"][i], {}, dict(env))  # noqa: S307
-        fb2 = eval(PRINTED["FB2"][i], {}, dict(env))  # noqa: S307
+        fh1 = eval(PRINTED["FH1"][i], {}, dict(env))
+        fb2 = eval(PRINTED["FB2"][i], {}, dict(env))
         missing = env["y"] * env["ez_x"] if i == 0 else 0.0
         assert fh1 + missing == pytest.approx(fb2, abs=1e-12)
 
@@ -230,9 +238,11 @@ def test_laser_straightness_and_angles(model: str) -> None:
         k = AXES.index(axis)
         line = truth.lower_mm + 0.4 * (truth.upper_mm - truth.lower_mm)
         targets = np.linspace(truth.lower_mm[k], truth.upper_mm[k], 7)
-        for quantity, comp in {"x": {"roll_urad": "ex", "pitch_urad": "ey", "yaw_urad": "ez"},
-                               "y": {"roll_urad": "ey", "pitch_urad": "ex", "yaw_urad": "ez"},
-                               "z": {"roll_urad": "ez", "pitch_urad": "ey", "yaw_urad": "ex"}}[axis].items():  # fmt: skip
+        for quantity, comp in {
+            "x": {"roll_urad": "ex", "pitch_urad": "ey", "yaw_urad": "ez"},
+            "y": {"roll_urad": "ey", "pitch_urad": "ex", "yaw_urad": "ez"},
+            "z": {"roll_urad": "ez", "pitch_urad": "ey", "yaw_urad": "ex"},
+        }[axis].items():
             run = simulate_run(truth, rng, axis, quantity, 1, line, np.zeros(3), targets, 1, QUIET)
             pos = np.array([r["position_mm"] for r in run.rows])
             val = np.array([r["value"] for r in run.rows])
@@ -348,8 +358,10 @@ def test_written_case_is_in_the_issue_formats(kind: str, tmp_path: Path) -> None
                 assert r["axis"] in ("xy", "xz", "yz") and r["position_mm"] == ""
             assert np.isfinite(float(r["value"])) and r["direction"] in ("1", "-1")
         assert all(
-            float(r["value"]) == 0.0 for r in firsts.values() if r["quantity"].endswith(("linear_um", "urad")) and r["quantity"] != "squareness_urad"
-        )  # fmt: skip
+            float(r["value"]) == 0.0
+            for r in firsts.values()
+            if r["quantity"].endswith(("linear_um", "urad")) and r["quantity"] != "squareness_urad"
+        )
     for entry in plan.get("plate", []):
         balls = tomllib.loads((case.directory / entry["balls"]).read_text(encoding="utf-8"))["ball"]
         assert {"id", "u_mm", "v_mm", "w_mm", "u_um"} == set(balls[0])
@@ -373,7 +385,11 @@ def test_truth_grid_is_the_contract_grid_at_the_probe(tmp_path: Path) -> None:
     case = build_case(tmp_path / "c", 22, "laser", "MH1")
     project = Machine.from_toml(case.directory / "truth" / "machine.toml")
     assert case.nodes_mm.shape == (216, 3)
-    for corner in np.array(np.meshgrid(*zip(case.machine.lower_mm, case.machine.upper_mm, strict=True))).reshape(3, -1).T:  # fmt: skip
+    for corner in (
+        np.array(np.meshgrid(*zip(case.machine.lower_mm, case.machine.upper_mm, strict=True)))
+        .reshape(3, -1)
+        .T
+    ):
         assert np.any(np.all(np.isclose(case.nodes_mm, corner), axis=1))
     want = project.volumetric_error(case.nodes_mm, stylus_mm=project.probe.offset_mm)
     assert np.abs(case.truth_um - want).max() < 1e-6

@@ -80,8 +80,13 @@ def _duplicate_ball_id(d: Path) -> BadCase:
     value = lines[first].split("=")[1].strip()
     lines[second] = f"id = {value}\n"
     path.write_text("".join(lines), encoding="utf-8")
-    return BadCase("duplicate_ball_id", d / "calibration.toml", "plate.toml",
-                   frozenset({first + 1, second + 1}), r"\bid\b")  # fmt: skip
+    return BadCase(
+        "duplicate_ball_id",
+        d / "calibration.toml",
+        "plate.toml",
+        frozenset({first + 1, second + 1}),
+        r"\bid\b",
+    )
 
 
 def _non_monotonic_run(d: Path) -> BadCase:
@@ -94,8 +99,13 @@ def _non_monotonic_run(d: Path) -> BadCase:
     lines[n3 - 1] = ",".join(f3) + "\n"
     lines[n4 - 1] = ",".join(f4) + "\n"
     path.write_text("".join(lines), encoding="utf-8")
-    return BadCase("non_monotonic_run", d / "calibration.toml", "laser.csv",
-                   frozenset({n3, n4}), r"position_mm")  # fmt: skip
+    return BadCase(
+        "non_monotonic_run",
+        d / "calibration.toml",
+        "laser.csv",
+        frozenset({n3, n4}),
+        r"position_mm",
+    )
 
 
 def _nan_in(d: Path, file: str, column: str, row_index: int, spelled: str) -> BadCase:
@@ -110,16 +120,22 @@ def _nan_in(d: Path, file: str, column: str, row_index: int, spelled: str) -> Ba
     f[header.index(column)] = spelled
     lines[n - 1] = ",".join(f) + "\n"
     path.write_text("".join(lines), encoding="utf-8")
-    return BadCase(f"nan_{file.split('.')[0]}_{column}", d / "calibration.toml", file,
-                   frozenset({n}), rf"\b{re.escape(column)}\b")  # fmt: skip
+    return BadCase(
+        f"nan_{file.split('.')[0]}_{column}",
+        d / "calibration.toml",
+        file,
+        frozenset({n}),
+        rf"\b{re.escape(column)}\b",
+    )
 
 
 def _missing_file(d: Path) -> BadCase:
     plan = d / "calibration.toml"
     text = plan.read_text(encoding="utf-8").replace('file = "plate.csv"', 'file = "plate_gone.csv"')
     plan.write_text(text, encoding="utf-8")
-    return BadCase("missing_file", plan, "calibration.toml", frozenset(), r"\bfile\b",
-                   also=("plate_gone.csv",))  # fmt: skip
+    return BadCase(
+        "missing_file", plan, "calibration.toml", frozenset(), r"\bfile\b", also=("plate_gone.csv",)
+    )
 
 
 def make_bad_cases(root: Path, seed: int = 4242, model: str = "FB1") -> list[BadCase]:

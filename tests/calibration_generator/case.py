@@ -93,8 +93,14 @@ def write_laser(path: Path, runs: list[Run], note: str) -> None:
                 )
 
 
-def write_plate(directory: Path, machine: TrueMachine, rng: np.random.Generator,
-                design: PlateDesign, stylus_mm: FloatArray, note: str) -> dict[str, Any]:  # fmt: skip
+def write_plate(
+    directory: Path,
+    machine: TrueMachine,
+    rng: np.random.Generator,
+    design: PlateDesign,
+    stylus_mm: FloatArray,
+    note: str,
+) -> dict[str, Any]:
     """``plate.toml`` + ``plate.csv``; returns the hidden poses."""
     side = plate_side_mm(machine, design)
     plate = random_plate(rng, side, design)
@@ -163,8 +169,9 @@ def _reflector_offsets(rng: np.random.Generator, machine: TrueMachine) -> list[F
     return offsets
 
 
-def _write_data(directory: Path, machine: TrueMachine, rng: np.random.Generator, kind: str,
-                note: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:  # fmt: skip
+def _write_data(
+    directory: Path, machine: TrueMachine, rng: np.random.Generator, kind: str, note: str
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     sets: list[dict[str, Any]] = []
     hidden: dict[str, Any] = {}
     if kind in ("laser", "mixed"):
@@ -182,8 +189,14 @@ def _write_data(directory: Path, machine: TrueMachine, rng: np.random.Generator,
             planes = ("XY", str(rng.choice(["XZ", "YZ"])))
         design = PlateDesign(planes=planes)
         hidden["plate"] = write_plate(directory, machine, rng, design, machine.probe_mm, note)
-        sets.append({"kind": "plate", "balls": "plate.toml", "file": "plate.csv",
-                     "stylus_mm": machine.probe_mm})  # fmt: skip
+        sets.append(
+            {
+                "kind": "plate",
+                "balls": "plate.toml",
+                "file": "plate.csv",
+                "stylus_mm": machine.probe_mm,
+            }
+        )
     if kind in ("multilateration", "mixed"):
         offsets = [machine.probe_mm] if kind == "mixed" else _reflector_offsets(rng, machine)
         hidden["multilateration"] = []
@@ -192,15 +205,21 @@ def _write_data(directory: Path, machine: TrueMachine, rng: np.random.Generator,
             trac = simulate_trac(machine, rng, stylus, TracDesign(stations=n_st))
             name = "trac.csv" if i == 0 else f"trac_{i + 1}.csv"
             write_trac(directory / name, trac)
-            sets.append({"kind": "multilateration", "file": name, "stylus_mm": stylus,
-                         "station_guess_mm": trac.guesses_mm})  # fmt: skip
+            sets.append(
+                {
+                    "kind": "multilateration",
+                    "file": name,
+                    "stylus_mm": stylus,
+                    "station_guess_mm": trac.guesses_mm,
+                }
+            )
             hidden["multilateration"].append(
                 {
                     "file": name,
                     "stations_mm": trac.stations_mm.tolist(),
                     "dead_path_mm": trac.dead_path_mm.tolist(),
                     "rows": len(trac.rows),
-                }  # fmt: skip
+                }
             )
     return sets, hidden
 
@@ -221,8 +240,13 @@ def build_case(directory: Path, seed: int, kind: str, model: str) -> Case:
     truth = machine.error_um(nodes, machine.probe_mm)
     (directory / "truth" / "machine.toml").write_text(machine_toml(machine, note), encoding="utf-8")
     write_grid_csv(directory / "truth" / "truth_grid.csv", nodes, truth)
-    info = {"seed": seed, "kind": kind, "model": model, "hidden": hidden,
-            "datasets": [{"kind": s["kind"], "file": s["file"]} for s in sets]}  # fmt: skip
+    info = {
+        "seed": seed,
+        "kind": kind,
+        "model": model,
+        "hidden": hidden,
+        "datasets": [{"kind": s["kind"], "file": s["file"]} for s in sets],
+    }
     (directory / "truth" / "case.json").write_text(json.dumps(info, indent=1), encoding="utf-8")
     return Case(
         seed=seed,

@@ -36,10 +36,20 @@ from .machine import TrueMachine
 
 FloatArray = NDArray[np.float64]
 
-HEADER = (
-    "axis,quantity,position_mm,value,direction,run,line_x_mm,line_y_mm,line_z_mm,"
-    "optic_offset_x_mm,optic_offset_y_mm,optic_offset_z_mm"
-).split(",")
+HEADER = [
+    "axis",
+    "quantity",
+    "position_mm",
+    "value",
+    "direction",
+    "run",
+    "line_x_mm",
+    "line_y_mm",
+    "line_z_mm",
+    "optic_offset_x_mm",
+    "optic_offset_y_mm",
+    "optic_offset_z_mm",
+]
 
 #: per moving axis, the rotation component (0 = about x …) each angle quantity reads (the issue)
 ANGLE_COMPONENT = {
@@ -104,8 +114,16 @@ def _optic(rng: np.random.Generator) -> FloatArray:
     )
 
 
-def _row(axis: str, quantity: str, position: Any, value: float, direction: int, run: int,
-         line: FloatArray, optic: FloatArray) -> dict[str, Any]:  # fmt: skip
+def _row(
+    axis: str,
+    quantity: str,
+    position: Any,
+    value: float,
+    direction: int,
+    run: int,
+    line: FloatArray,
+    optic: FloatArray,
+) -> dict[str, Any]:
     return dict(
         zip(
             HEADER,
@@ -236,7 +254,7 @@ def laser_runs(
                     targets,
                     design.cycles,
                     noise,
-                )  # fmt: skip
+                )
             )
             run += 1
     if design.squareness:

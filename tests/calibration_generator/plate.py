@@ -86,7 +86,14 @@ def random_plate(rng: np.random.Generator, side_mm: float, design: PlateDesign) 
 
 def _small_rotation(rng: np.random.Generator, max_deg: float) -> FloatArray:
     a = np.deg2rad(rng.uniform(-max_deg, max_deg, 3))
-    cx, sx, cy, sy, cz, sz = np.cos(a[0]), np.sin(a[0]), np.cos(a[1]), np.sin(a[1]), np.cos(a[2]), np.sin(a[2])  # fmt: skip
+    cx, sx, cy, sy, cz, sz = (
+        np.cos(a[0]),
+        np.sin(a[0]),
+        np.cos(a[1]),
+        np.sin(a[1]),
+        np.cos(a[2]),
+        np.sin(a[2]),
+    )
     rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
     ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
@@ -131,8 +138,12 @@ def placements(
                         centre[w] = lo[w] + rng.uniform(depth - 0.1, depth + 0.1) * (hi[w] - lo[w])
                         centre += rng.uniform(-20.0, 20.0, 3)
                         t = centre - rot @ centre_plate
-                        ends = (rot @ np.array([[0, 0, 0], [side_mm, side_mm, 0],
-                                                [side_mm, 0, 0], [0, side_mm, 0]]).T).T + t  # fmt: skip
+                        ends = (
+                            rot
+                            @ np.array(
+                                [[0, 0, 0], [side_mm, side_mm, 0], [side_mm, 0, 0], [0, side_mm, 0]]
+                            ).T
+                        ).T + t
                         if np.all(ends >= lo + 1.0) and np.all(ends <= hi - 1.0):
                             out.append(Placement(rot, t, plane, deg))
                             break

@@ -227,9 +227,19 @@ def cmm_comp_command() -> list[str]:
     return [str(exe)] if exe.exists() else ["cmm-comp"]
 
 
-def run_cli(plan: Path, out_toml: Path, report_dir: Path, timeout_s: float = 900.0) -> tuple[int, str, str]:  # fmt: skip
+def run_cli(
+    plan: Path, out_toml: Path, report_dir: Path, timeout_s: float = 900.0
+) -> tuple[int, str, str]:
     """``cmm-comp calibrate PLAN -o OUT --report DIR`` as a user types it, in a subprocess."""
-    cmd = [*cmm_comp_command(), "calibrate", str(plan), "-o", str(out_toml), "--report", str(report_dir)]  # fmt: skip
+    cmd = [
+        *cmm_comp_command(),
+        "calibrate",
+        str(plan),
+        "-o",
+        str(out_toml),
+        "--report",
+        str(report_dir),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
     return proc.returncode, proc.stdout, proc.stderr
 
