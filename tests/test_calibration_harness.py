@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from calibration_generator.badinput import SENTINEL, check_rejection, make_bad_cases
 from calibration_generator.case import KINDS, MODELS, build_case, machine_for
-from calibration_generator.oracle import answer_with, perturbed, translated
+from calibration_generator.oracle import answer_with, montecarlo_u, perturbed, translated
 from calibration_generator.scoring import (
     CaseScore,
     bar_failures,
@@ -74,12 +74,7 @@ def test_monte_carlo_u_gives_the_nominal_coverage(tmp_path: Path) -> None:
     rigid-free difference: coverage ≈ 95.4 % (Gaussian, k = 2); half that U: ≈ 68 %."""
     case = build_case(tmp_path / "case", 34, "plate", "CX1")
     rng = np.random.default_rng(9)
-    diffs = []
-    for _ in range(150):
-        m = perturbed(case.machine, rng, 0.3)
-        d = m.error_um(case.nodes_mm, case.stylus_mm) - case.truth_um
-        diffs.append(remove_rigid(case.nodes_mm, d)[0])
-    u = 2.0 * np.std(np.array(diffs), axis=0)
+    u = montecarlo_u(case, rng, 0.3, 150)
     scores = []
     for i in range(12):
         m = perturbed(case.machine, rng, 0.3)
@@ -182,6 +177,14 @@ def test_line_mentions_are_parsed() -> None:
     assert mentioned_lines("trac.csv: line 7, column 'station'") == {7}
     assert mentioned_lines("trac.csv: lines 7-9: station 4 has 3 points") == {7, 8, 9}
     assert mentioned_lines("plate.toml: ball[3].id: duplicate") == set()
+
+
+def test_a_toml_defect_may_be_named_by_its_array_entry(bad_cases) -> None:
+    dup = next(b for b in bad_cases if b.name == "duplicate_ball_id")
+    assert dup.names_the_place("plate.toml: ball[5].id: duplicate id 17 (also ball[2])")
+    assert dup.names_the_place(f"plate.toml: line {min(dup.lines)}: id: duplicate")
+    assert not dup.names_the_place("plate.toml: ball[4].id: duplicate id 17")
+    assert not dup.names_the_place("plate.toml: duplicate ball id 17")
 
 
 @pytest.fixture(scope="module")

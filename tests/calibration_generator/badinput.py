@@ -36,6 +36,17 @@ class BadCase:
     lines: frozenset[int]  # acceptable line numbers (empty: not checked)
     field_pattern: str  # regex the message must match (the field, column or key)
     also: tuple[str, ...] = ()  # further words the message must contain
+    key_prefix: str = ""  # a TOML array whose entry may be named instead of a line …
+    key_indices: frozenset[int] = frozenset()  # … by one of these indices (0- or 1-based)
+
+    def names_the_place(self, message: str) -> bool:
+        """The message names one of the defect's lines, or (TOML) one of its array entries."""
+        if mentioned_lines(message) & self.lines:
+            return True
+        if self.key_prefix:
+            pattern = rf"\b{re.escape(self.key_prefix)}\s*(?:\[|\.|#|\s)\s*(\d+)"
+            return any(int(m) in self.key_indices for m in re.findall(pattern, message))
+        return False
 
 
 def _data_lines(path: Path) -> list[str]:
@@ -76,16 +87,19 @@ def _duplicate_ball_id(d: Path) -> BadCase:
     path = d / "plate.toml"
     lines = _data_lines(path)
     id_lines = [i for i, line in enumerate(lines) if re.match(r"\s*id\s*=", line)]
-    first, second = id_lines[2], id_lines[5]
+    first, second = id_lines[2], id_lines[5]  # the 3rd and 6th ball
     value = lines[first].split("=")[1].strip()
     lines[second] = f"id = {value}\n"
     path.write_text("".join(lines), encoding="utf-8")
+    k1, k2 = 2, 5  # the entries' indices in the [[ball]] array (one id line each)
     return BadCase(
         "duplicate_ball_id",
         d / "calibration.toml",
         "plate.toml",
         frozenset({first + 1, second + 1}),
         r"\bid\b",
+        key_prefix="ball",
+        key_indices=frozenset({k1, k2, k1 + 1, k2 + 1}),
     )
 
 
@@ -176,8 +190,11 @@ def check_rejection(bad: BadCase, work: Path, calibrate: Calibrate) -> list[str]
     message = errors[0] if errors else ""
     if bad.file not in message:
         problems.append(f"the message does not name {bad.file}: {message!r}")
-    if bad.lines and not mentioned_lines(message) & bad.lines:
-        problems.append(f"the message names no line of {sorted(bad.lines)}: {message!r}")
+    if bad.lines and not bad.names_the_place(message):
+        where = f"line of {sorted(bad.lines)}"
+        if bad.key_prefix:
+            where += f" nor {bad.key_prefix}[i] with i in {sorted(bad.key_indices)}"
+        problems.append(f"the message names no {where}: {message!r}")
     if not re.search(bad.field_pattern, message):
         problems.append(f"the message does not name the field /{bad.field_pattern}/: {message!r}")
     problems += [

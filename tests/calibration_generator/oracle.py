@@ -81,6 +81,18 @@ def perturbed(machine: TrueMachine, rng: np.random.Generator, sigma: float) -> T
     return out
 
 
+def montecarlo_u(
+    case: Case, rng: np.random.Generator, sigma: float = 0.3, draws: int = 150
+) -> FloatArray:
+    """U (k = 2) per node and component of the rigid-free error of machines ``perturbed`` by
+    ``sigma`` around the truth: twice the ensemble's standard deviation (µm)."""
+    diffs = []
+    for _ in range(draws):
+        d = perturbed(case.machine, rng, sigma).error_um(case.nodes_mm, case.stylus_mm)
+        diffs.append(remove_rigid(case.nodes_mm, d - case.truth_um)[0])
+    return 2.0 * np.std(np.array(diffs), axis=0)
+
+
 def translated(machine: TrueMachine, shift_um: FloatArray) -> TrueMachine:
     """The machine plus a constant translation (a rigid motion no data kind can see)."""
     out = copy.deepcopy(machine)
