@@ -9,7 +9,7 @@ agreement), itself checked against the paper's appendix A.1.
 * ``u = q − reference``: the axis travels from the reference point (the volume's lower corner).
 * A carriage's error is a rigid motion applied after its nominal travel: ``Tr(u·d)·E`` with
   ``E = (R(ε), δ)``, ``R = Rx(εx)·Ry(εy)·Rz(εz)`` (active, exact sin/cos).
-* Tool axes (base → stylus): ``p_base = Π_k Tr(u_k·d_k)·E_k · p``.
+* Tool axes (base → stylus): ``p_base = Π_k Tr(u_k·d_k)·E_k · p`` (rigid motions as (R, t) pairs).
 * Workpiece axes (base → table): ``T_base_work = Π_k Tr(−u_k·d_k)·E'_k`` with ``E' = (R(ε), −δ)``
   (a table's linear errors are those of the relative motion, its angles its own rotations);
   ``p_work = T_base_work⁻¹ · p_base``.
@@ -23,25 +23,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from independent_generator.chains import MODELS as CHAIN_MODELS
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 
 AXES = ("x", "y", "z")
 
-#: model → (tool axes base → stylus, workpiece axes base → table), docs/formats.md §1.2
-MODEL_AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "MB1": (("y", "x", "z"), ()),
-    "MB2": (("x", "y", "z"), ()),
-    "FB1": (("x", "z"), ("y",)),
-    "FB2": (("y", "z"), ("x",)),
-    "MH1": (("y", "z", "x"), ()),
-    "MH2": (("x", "z", "y"), ()),
-    "FH1": (("y", "z"), ("x",)),
-    "FH2": (("x", "z"), ("y",)),
-    "CX1": (("z",), ("x", "y")),
-    "CY1": (("z",), ("y", "x")),
-}
+#: model → (tool axes base → stylus, workpiece axes base → table), docs/formats.md §1.2; the table
+#: of the independent first-order chain (a test checks both chains against the project's model)
+MODEL_AXES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = CHAIN_MODELS
 
 
 def rotation_matrices(angles_urad: FloatArray) -> FloatArray:
@@ -77,27 +68,23 @@ def travel_directions(squareness_urad: Mapping[str, float]) -> FloatArray:
     return np.stack([d_x, d_y, d_z])
 
 
-def _homogeneous(rotation: FloatArray, translation_mm: FloatArray) -> FloatArray:
-    n = translation_mm.shape[0]
-    out = np.zeros((n, 4, 4))
-    out[:, :3, :3] = rotation
-    out[:, :3, 3] = translation_mm
-    out[:, 3, 3] = 1.0
-    return out
+Pose = tuple[FloatArray, FloatArray]  # (rotation (N, 3, 3), translation (N, 3) mm)
 
 
-def _translation(v_mm: FloatArray) -> FloatArray:
-    return _homogeneous(np.broadcast_to(np.eye(3), (v_mm.shape[0], 3, 3)), v_mm)
+def _compose(a: Pose, b: Pose) -> Pose:
+    """``a·b`` of rigid motions: (Ra·Rb, ta + Ra·tb)."""
+    return a[0] @ b[0], a[1] + np.einsum("nij,nj->ni", a[0], b[1])
 
 
-def chain_transforms(
+def chain_poses(
     model: str,
     u_mm: FloatArray,
     linear_um: Mapping[str, FloatArray],
     angular_urad: Mapping[str, FloatArray],
     squareness_urad: Mapping[str, float],
-) -> tuple[FloatArray, FloatArray]:
-    """``(T_base_tool, T_base_work)``, each (N, 4, 4), mm.
+) -> tuple[Pose, Pose]:
+    """``(pose_base_tool, pose_base_work)``: rigid motions (R, t mm) of the stylus carrier and
+    of the workpiece carrier relative to the base.
 
     ``linear_um[a]`` (N, 3) is (δx, δy, δz) of axis a, ``angular_urad[a]`` (N, 3) its (εx, εy, εz),
     both at the points' positions of axis a; ``u_mm`` (N, 3) travels from the reference.
@@ -106,28 +93,26 @@ def chain_transforms(
     u = np.asarray(u_mm, dtype=float)
     n = u.shape[0]
     d = travel_directions(squareness_urad)
-    t_tool = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-    for a in tool:
-        k = AXES.index(a)
-        err = _homogeneous(rotation_matrices(angular_urad[a]), linear_um[a] / 1000.0)
-        t_tool = t_tool @ _translation(u[:, k : k + 1] * d[k]) @ err
-    t_work = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-    for a in work:
-        k = AXES.index(a)
-        err = _homogeneous(rotation_matrices(angular_urad[a]), -linear_um[a] / 1000.0)
-        t_work = t_work @ _translation(-u[:, k : k + 1] * d[k]) @ err
-    return t_tool, t_work
+    identity: Pose = (np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3)))
+    poses = []
+    for axes, sign in ((tool, 1.0), (work, -1.0)):
+        pose = identity
+        for a in axes:
+            k = AXES.index(a)
+            travel: Pose = (identity[0], sign * u[:, k : k + 1] * d[k])
+            error: Pose = (rotation_matrices(angular_urad[a]), sign * linear_um[a] / 1000.0)
+            pose = _compose(_compose(pose, travel), error)
+        poses.append(pose)
+    return poses[0], poses[1]
 
 
-def tip_error_um(
-    t_base_tool: FloatArray, t_base_work: FloatArray, u_mm: FloatArray, stylus_mm: FloatArray
-) -> FloatArray:
-    """Error (N, 3) µm of the tip at stylus offset ``stylus_mm`` ((3,) or (N, 3), mm)."""
+def tip_error_um(tool: Pose, work: Pose, u_mm: FloatArray, stylus_mm: FloatArray) -> FloatArray:
+    """Error (N, 3) µm of the tip at stylus offset ``stylus_mm`` ((3,) or (N, 3), mm):
+    ``p_work = R_wᵀ·(t_t + R_t·p − t_w)`` minus the nominal ``u + p``."""
     u = np.asarray(u_mm, dtype=float)
     p = np.broadcast_to(np.asarray(stylus_mm, dtype=float), u.shape)
-    p_h = np.concatenate([p, np.ones((u.shape[0], 1))], axis=1)
-    p_base = np.einsum("nij,nj->ni", t_base_tool, p_h)
-    p_work = np.linalg.solve(t_base_work, p_base[:, :, None])[:, :3, 0]
+    p_base = tool[1] + np.einsum("nij,nj->ni", tool[0], p)
+    p_work = np.einsum("nji,nj->ni", work[0], p_base - work[1])
     return (p_work - (u + p)) * 1000.0
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.polynomial import legendre as leg
 from numpy.typing import NDArray
 
-from .kinematics import AXES, MODEL_AXES, chain_transforms, tip_error_um
+from .kinematics import AXES, MODEL_AXES, Pose, chain_poses, tip_error_um
 
 FloatArray = NDArray[np.float64]
 
@@ -82,14 +82,14 @@ class TrueMachine:
             angular[axis] = ang
         return linear, angular
 
-    def transforms(
+    def poses(
         self, q_mm: FloatArray, dirs: Mapping[str, FloatArray] | None = None
-    ) -> tuple[FloatArray, FloatArray]:
-        """``(T_base_tool, T_base_work)`` (N, 4, 4) of the exact chain at indicated points."""
+    ) -> tuple[Pose, Pose]:
+        """``(pose_base_tool, pose_base_work)`` of the exact chain at indicated points."""
         q = np.atleast_2d(np.asarray(q_mm, dtype=float))
         linear, angular = self.parametric(q, dirs)
         u = q - self.reference_mm
-        return chain_transforms(self.model, u, linear, angular, self.squareness_urad)
+        return chain_poses(self.model, u, linear, angular, self.squareness_urad)
 
     def error_um(
         self,
@@ -100,8 +100,8 @@ class TrueMachine:
         """Volumetric error (N, 3) µm, true − indicated, at indicated points for a stylus (mm)."""
         q = np.atleast_2d(np.asarray(q_mm, dtype=float))
         stylus = self.probe_mm if stylus_mm is None else np.asarray(stylus_mm, dtype=float)
-        t_tool, t_work = self.transforms(q, dirs)
-        return tip_error_um(t_tool, t_work, q - self.reference_mm, stylus)
+        tool, work = self.poses(q, dirs)
+        return tip_error_um(tool, work, q - self.reference_mm, stylus)
 
     def true_position_mm(
         self,
@@ -122,9 +122,8 @@ class TrueMachine:
         table top, relative to the base. Either way the reading of the carriage's own angular
         error (plus constant parts of the carriages it rides on).
         """
-        t_tool, t_work = self.transforms(q_mm, dirs)
-        tool, _ = MODEL_AXES[self.model]
-        return (t_tool if axis in tool else t_work)[:, :3, :3]
+        tool, work = self.poses(q_mm, dirs)
+        return (tool if axis in MODEL_AXES[self.model][0] else work)[0]
 
     def power_series(self, name: str) -> list[float]:
         """Coefficients c0, c1, … of the table in the indicated position q (mm)."""
