@@ -212,6 +212,29 @@ def test_laser_linear_run_is_the_optics_error_relative_to_its_first_row() -> Non
         assert np.allclose(gap, 2 * truth.reversal_um[axis], atol=1e-4)
 
 
+@pytest.mark.parametrize("model", ["MH2", "FH1", "CX1"])
+def test_straightness_run_is_the_optics_error_without_its_line_per_pass(model: str) -> None:
+    truth = machine_for(12, model)
+    rng = np.random.default_rng(3)
+    for k, axis in enumerate(AXES):
+        line = truth.lower_mm + 0.7 * (truth.upper_mm - truth.lower_mm)
+        optic = np.array([-90.0, 120.0, -200.0])
+        targets = np.linspace(truth.lower_mm[k], truth.upper_mm[k], 8)
+        for d in (a for a in AXES if a != axis):
+            q_name = f"straightness_{d}_um"
+            run = simulate_run(truth, rng, axis, q_name, 1, line, optic, targets, 2, QUIET)
+            pos = np.array([r["position_mm"] for r in run.rows])
+            val = np.array([r["value"] for r in run.rows])
+            q = np.tile(line, (pos.size, 1))
+            q[:, k] = pos
+            e = _first_order_um(truth, q, optic)[:, AXES.index(d)]
+            for p in range(4):  # 2 cycles × 2 directions, 8 rows each
+                sl = slice(8 * p, 8 * p + 8)
+                want = e[sl] - np.polyval(np.polyfit(pos[sl], e[sl], 1), pos[sl])
+                assert np.allclose(val[sl], want, atol=2e-3), (axis, d, p)
+            assert np.ptp(val) > 0.05  # not trivially zero
+
+
 @pytest.mark.parametrize("model", ["MB1", "CY1"])
 def test_laser_straightness_and_angles(model: str) -> None:
     truth = machine_for(4, model)
