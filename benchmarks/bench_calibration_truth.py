@@ -158,6 +158,17 @@ def report(scores: list[CaseScore], kinds: list[str]) -> dict[str, Any]:
     return summary
 
 
+def _json_safe(value: Any) -> Any:
+    """NaN (a failed case's scores) as null: strict JSON for every reader."""
+    if isinstance(value, float) and value != value:
+        return None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    return value
+
+
 def _plan(args: argparse.Namespace) -> tuple[list[int], bool]:
     if args.replay:
         seeds = json.loads(Path(args.replay).read_text())["seeds"]
@@ -237,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(doc, indent=1, allow_nan=True) + "\n", encoding="utf-8")
+    out.write_text(json.dumps(_json_safe(doc), indent=1, allow_nan=False) + "\n", encoding="utf-8")
     print(f"wrote {out}")
     return 0 if all(v["all"]["verdict"] == "PASS" for v in summary.values()) else 1
 
