@@ -12,6 +12,7 @@ Units: mm, µm, µrad, °C.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -23,7 +24,6 @@ from numpy.typing import NDArray
 
 from ..errors import CalibrationError, MachineFileError
 from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, canonical_name
-from ..toml_checks import TomlChecks
 
 if TYPE_CHECKING:
     from ..machine import Machine
@@ -158,11 +158,32 @@ class Plan:
         return self.source.parent
 
 
-class _Checks(TomlChecks):
-    """TOML value checks whose failures are :class:`CalibrationError` naming the plan file."""
+class _Checks:
+    """TOML value checks whose failures are :class:`CalibrationError` naming the plan file
+    (``source``) and the key (``where``)."""
 
-    def fail(self, where: str, problem: str) -> CalibrationError:  # type: ignore[override]
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, problem: str) -> CalibrationError:
         return CalibrationError(f"{self.source}: {where}: {problem}")
+
+    def number(self, value: Any, where: str, *, positive: bool = False) -> float:
+        """A finite number (an int or a float, not a bool); ``positive``: > 0."""
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.fail(where, f"expected a number, got {value!r}")
+        out = float(value)
+        if not math.isfinite(out):
+            raise self.fail(where, f"expected a finite number, got {value!r}")
+        if positive and out <= 0:
+            raise self.fail(where, f"must be > 0, got {value!r}")
+        return out
+
+    def check_keys(self, table: Mapping[str, Any], where: str, allowed: set[str]) -> None:
+        """Refuse keys of ``table`` not in ``allowed`` (all of them named, and the allowed)."""
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise self.fail(where, f"unknown key(s) {unknown}; allowed: {sorted(allowed)}")
 
     def vector(self, value: Any, where: str, length: int) -> FloatArray:
         if not isinstance(value, list) or len(value) != length:
