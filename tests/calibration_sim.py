@@ -128,7 +128,8 @@ def laser_file(
         q[:, k] = [p for p, _ in order]
         d = np.array([s for _, s in order], dtype=float)
         err = machine.volumetric_error(q, optic, inputs={f"dir_{axis}": d})
-        rot = rotation_urad(machine, q)
+        # the table's own angle (its eI_J's sign): R_work_stylus turns by minus it
+        rot = rotation_urad(machine, q) * (-1.0 if axis in machine.chain.workpiece else 1.0)
         quantities = {"linear_um": err[:, k]}
         for j in range(3):
             if j != k:

@@ -4,9 +4,11 @@ exact chain (:class:`.model.MachineModel`):
 * ``linear_um``: the moving axis' component of the volumetric error at the optic (a stylus
   offset) on the line; a run's zero is unknown (its constant is removed from data and model);
 * ``straightness_<d>_um``: the d component at the optic; each pass' least-squares line removed;
-* ``pitch/yaw/roll_urad``: the component about the mapped axis of the rotation vector of
-  ``R_work_stylus`` (the optic rides on the tool: a table's own rotation counts negative); a
-  run's constant removed;
+* ``pitch/yaw/roll_urad``: the carriage's own angular error as the optic on it sees it, with the
+  sign of its ``eI_J`` table (the contract): on a tool axis the component about the mapped axis
+  of the rotation vector of ``R_work_stylus``, on a table axis its negative (the workpiece
+  frame turns by ``R_work``, so ``R_work_stylus`` turns by its inverse; the tool side is fixed
+  during the run, so the difference is second order in the angles); a run's constant removed;
 * ``squareness_urad``: the angle between the least-squares lines through the optic's true paths
   along the two axes through the crossing point (each over the axis' travel in the plan's
   volume, :data:`SQUARENESS_SAMPLES` points), minus 90°, positive when it exceeds 90°.
@@ -21,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..parametric_errors import AXES
 from .laser import LaserData, LaserRun
 from .model import MachineModel, PointSet
 from .observation import Block, Linearization, Projection, VarianceGroup, project
@@ -100,8 +103,15 @@ class LaserBlock(Block):
         temps = _temps(self.row_runs)
         pts = model.points(q, optic, direction, temps)
         comp = np.concatenate([np.full(r.n, r.component) for r in self.row_runs])
+        # an angle row reads +1 × the rotation of R_work_stylus on a tool axis, −1 on a table
+        sign = np.concatenate(
+            [
+                np.full(r.n, -1.0 if AXES[r.axis] in model.chain.workpiece else 1.0)
+                for r in self.row_runs
+            ]
+        )
         is_angle = np.concatenate([np.full(r.n, r.kind == "angle") for r in self.row_runs])
-        return pts, comp.astype(np.intp), is_angle
+        return pts, comp.astype(np.intp), np.where(is_angle, sign, 0.0)
 
     def _square_points(
         self, model: MachineModel, run: LaserRun
@@ -131,10 +141,10 @@ class LaserBlock(Block):
         """The model's readings (before removing a run's constant / a pass' line)."""
         parts = []
         if self._rows is not None:
-            pts, comp, is_angle = self._rows
+            pts, comp, angle_sign = self._rows
             err, rot = model.exact(theta, pts)
             n = np.arange(comp.shape[0])
-            parts.append(np.where(is_angle, rot[n, comp], err[n, comp]))
+            parts.append(np.where(angle_sign != 0, angle_sign * rot[n, comp], err[n, comp]))
         for run, samples in zip(self.square_runs, self._square, strict=True):
             vals = [self._squareness_exact(model, theta, run, pts) for pts, _ in samples]
             parts.append(np.asarray(vals))
@@ -162,11 +172,11 @@ class LaserBlock(Block):
             return self._jac
         parts = []
         if self._rows is not None:
-            pts, comp, is_angle = self._rows
+            pts, comp, angle_sign = self._rows
             n = np.arange(comp.shape[0])
             dE = model.error_jacobian(pts)[n, comp]
             dW = model.rotation_jacobian(pts)[n, comp]
-            parts.append(np.where(is_angle[:, None], dW, dE))
+            parts.append(np.where(angle_sign[:, None] != 0, angle_sign[:, None] * dW, dE))
         for run, samples in zip(self.square_runs, self._square, strict=True):
             rows = []
             k = SQUARENESS_SAMPLES

@@ -54,7 +54,9 @@ def run_values(machine: Machine, run: LaserRun) -> FloatArray:
         return np.array([_squareness(machine, run, i) for i in range(run.n)])
     if run.kind == "angle":
         rot = machine.pose_error(run.points_mm, temps, inputs=_inputs(run)).rotation
-        values = rotation_vector_urad(rot)[:, run.component]
+        # the carriage's own angular error: a table turns R_work_stylus by minus its rotation
+        sign = -1.0 if "xyz"[run.axis] in machine.chain.workpiece else 1.0
+        values = sign * rotation_vector_urad(rot)[:, run.component]
     else:
         err = machine.volumetric_error(run.points_mm, run.optic_mm, temps, inputs=_inputs(run))
         values = err[:, run.component]
