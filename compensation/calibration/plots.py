@@ -47,9 +47,9 @@ def errors_png(r: CalibrationResult) -> bytes:
     if r.squareness:
         ax = axs[len(bands)]
         names = list(r.squareness)
-        v = [r.squareness[k]["value_urad"] for k in names]
-        u = [2 * r.squareness[k]["u_urad"] for k in names]
-        ax.bar(names, v, yerr=u, capsize=4, alpha=0.7)
+        values = [r.squareness[k]["value_urad"] for k in names]
+        bars = [2 * r.squareness[k]["u_urad"] for k in names]
+        ax.bar(names, values, yerr=bars, capsize=4, alpha=0.7)
         ax.set_title("squareness (±2u)", fontsize=9)
         ax.set_ylabel("µrad", fontsize=8)
         ax.tick_params(labelsize=7)
