@@ -25,6 +25,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -75,17 +76,17 @@ def make_plan(folder: Path, seed: int) -> tuple[object, Path]:
     return machine, plan
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=2, help="runs of each command (default 2)")
-    ap.add_argument("--seed", type=int, default=27)
-    args = ap.parse_args()
+def measure(
+    repeat: int, seed: int
+) -> tuple[list[dict[str, float]], dict[str, Any], dict[str, float], dict[str, Any]]:
+    """Run the baseline, the calibration and the planner ``repeat`` times on the issue's plan:
+    (rows of wall and CPU seconds, the calibration report, accuracy vs the truth, predicted U)."""
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
-        machine, plan = make_plan(d, args.seed)
+        machine, plan = make_plan(d, seed)
         example = ROOT / "examples" / "machines" / "npl-bridge.toml"
-        for i in range(args.repeat):
+        for i in range(repeat):
             base, base_cpu = _run(
                 [*CLI, "map", str(example), "--out", "map.csv", "--steps", "21", "21", "21"], d
             )
@@ -130,6 +131,15 @@ def main() -> int:
         report = json.loads((d / "report" / "calibration.json").read_text())
         accuracy = compare(machine, d / "report" / "volumetric_u.csv")  # type: ignore[arg-type]
         predicted = json.loads((d / "plan.json").read_text())["volumetric_U_um"]
+    return rows, report, accuracy, predicted
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=2, help="runs of each command (default 2)")
+    ap.add_argument("--seed", type=int, default=27)
+    args = ap.parse_args()
+    rows, report, accuracy, predicted = measure(args.repeat, args.seed)
     cal = min(r["calibrate_s"] for r in rows)
     pln = min(r["plan_s"] for r in rows)
     base = min(r["baseline_map_s"] for r in rows)

@@ -28,6 +28,7 @@ from cmm_comp.compensation.calibration import (
     simulate_plate,
 )
 from cmm_comp.compensation.calibration.laser import COLUMNS as LASER_COLUMNS
+from cmm_comp.compensation.calibration.laser import LaserData
 
 HERE = Path(__file__).resolve().parent
 SEED = 27
@@ -196,6 +197,29 @@ def write_csv(path: Path, header: list[str], rows: list[list[object]], comment: 
         w.writerows(rows)
 
 
+def simulated_laser_rows(laser: LaserData) -> list[list[object]]:
+    """The laser CSV's rows of the simulated runs (squareness: no position, no direction)."""
+    rows: list[list[object]] = []
+    for run in laser.runs:
+        for i in range(run.n):
+            pos = "" if run.kind == "squareness" else f"{run.position_mm[i]:.3f}"
+            direction = "" if run.kind == "squareness" else int(run.direction[i])
+            axis = "xyz"[run.axis] + ("xyz"[run.component] if run.kind == "squareness" else "")
+            rows.append(
+                [
+                    axis,
+                    run.quantity,
+                    pos,
+                    f"{run.value[i]:.4f}",
+                    direction,
+                    run.run,
+                    *run.points_mm[i],
+                    *run.optic_mm,
+                ]
+            )
+    return rows
+
+
 def main(out: Path) -> None:
     rng = np.random.default_rng(SEED)
     out.mkdir(parents=True, exist_ok=True)
@@ -237,28 +261,10 @@ def main(out: Path) -> None:
     plate = simulate_plate(truth, data[1].data, poses, rng)  # type: ignore[arg-type]
     dead = rng.uniform(-300.0, 300.0, len(STATIONS))
     trac = simulate_multilateration(truth, data[2].data, STATIONS, dead, rng)  # type: ignore[arg-type]
-    rows = []
-    for run in laser.runs:
-        for i in range(run.n):
-            pos = "" if run.kind == "squareness" else f"{run.position_mm[i]:.3f}"
-            direction = "" if run.kind == "squareness" else int(run.direction[i])
-            axis = "xyz"[run.axis] + ("xyz"[run.component] if run.kind == "squareness" else "")
-            rows.append(
-                [
-                    axis,
-                    run.quantity,
-                    pos,
-                    f"{run.value[i]:.4f}",
-                    direction,
-                    run.run,
-                    *run.points_mm[i],
-                    *run.optic_mm,
-                ]
-            )
     write_csv(
         out / "laser.csv",
         laser_header,
-        rows,
+        simulated_laser_rows(laser),
         "laser interferometer runs: error = true - indicated, um / urad",
     )
     write_csv(
