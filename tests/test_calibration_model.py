@@ -111,6 +111,7 @@ def _refit_change(problem, theta, states, v, h=1.0):  # type: ignore[no-untyped-
     return changes
 
 
+@pytest.mark.timeout(900)  # a full calibration plus ~25 re-fits: minutes on a loaded 2-core machine
 def test_unseen_directions_change_no_reading_and_seen_ones_do(mixed) -> None:  # type: ignore[no-untyped-def]
     _, plan_path = mixed
     result = calibrate(read_plan(plan_path))
@@ -136,6 +137,7 @@ def test_unseen_directions_change_no_reading_and_seen_ones_do(mixed) -> None:  #
     assert max(_refit_change(problem, theta, states, v / np.max(np.abs(v)), 1.0)) > 1e-2
 
 
+@pytest.mark.timeout(900)  # a full calibration
 def test_written_machine_predicts_the_data_to_the_noise(tmp_path: Path) -> None:
     """The laser readings predicted by the written machine through the simulator's own formulas
     (relative runs, straightness lines removed) differ from the data by the noise only."""
