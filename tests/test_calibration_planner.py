@@ -77,6 +77,7 @@ def test_predicted_u_matches_the_spread_of_30_simulated_calibrations(tmp_path: P
     mc = json.loads((tmp_path / "plan.json").read_text())["monte_carlo"]
     assert mc["trials"] == 30
     ratio = mc["spread_over_predicted_u"]["overall"]
+    print(f"spread / predicted U: {ratio:.3f}; coverage of U {mc['coverage_of_predicted_U']:.3f}")
     assert 0.7 <= ratio <= 1.3, mc
     assert 0.85 <= mc["coverage_of_predicted_U"] <= 0.995, mc
 
