@@ -136,8 +136,10 @@ def _fmt(c: Any) -> str:
 
 
 def report_html(r: CalibrationResult, payload: dict[str, Any]) -> str:
-    """The one HTML page of the report (self-contained: the PNGs inline). Long because it is the
-    page's template, section after section in reading order; no logic to split out."""
+    """The one HTML page of the report (self-contained: the PNGs inline).
+
+    Long on purpose: it is the page's template, section after section in reading order; no
+    logic to split out."""
     esc = html.escape
     ds_rows = []
     for d in payload["datasets"]:
