@@ -3,6 +3,7 @@
 from .diagnosis import Diagnosis, diagnose
 from .effects import Effect, EvalContext, effect_from_table, known_causes, register_effect
 from .errors import (
+    CalibrationError,
     CmmCompError,
     GridFileError,
     MachineFileError,
@@ -44,6 +45,7 @@ __all__ = [
     "MODEL_CHAINS",
     "TABLE_COMPONENTS",
     "ArmDeflection",
+    "CalibrationError",
     "Chain",
     "CmmCompError",
     "Component",

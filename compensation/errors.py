@@ -11,6 +11,7 @@ client errors on ``RuntimeError``/``TimeoutError`` so that importing it stays li
 from __future__ import annotations
 
 __all__ = [
+    "CalibrationError",
     "CmmCompError",
     "ExportError",
     "GridFileError",
@@ -82,3 +83,8 @@ class ExportError(CmmCompError, ValueError):
 
 class RealDataError(CmmCompError, ValueError):
     """A real-data file is malformed; the message names the file, the line and the problem."""
+
+
+class CalibrationError(CmmCompError, ValueError):
+    """A calibration plan or one of its data files is malformed, or the data cannot give what is
+    asked: the message names the file, the line or key, the field and what is allowed."""

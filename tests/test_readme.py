@@ -120,7 +120,7 @@ sys.exit(main(["demo", "--json", sys.argv[1]]))
 @pytest.mark.timeout(1800)
 def test_your_own_machine_runs_as_printed(tmp_path: Path) -> None:
     (tmp_path / "examples").symlink_to(ROOT / "examples", target_is_directory=True)
-    lines = _block_with("cmm-comp grid build examples/")
+    lines = _block_with("cmm-comp calibrate examples/")
     ran = []
     for line in lines:
         if line.startswith("cmm-comp daemon --config"):
@@ -131,7 +131,10 @@ def test_your_own_machine_runs_as_printed(tmp_path: Path) -> None:
         print(f"{run.wall_s:7.1f} s wall {run.cpu_s:7.1f} s CPU  {line}")
         assert run.code == 0, f"{line}\n{run.err}"
         ran.append(line)
-    assert len(ran) >= 6
+    assert len(ran) >= 8
+    calibration = json.loads((tmp_path / "calibration-report" / "calibration.json").read_text())
+    assert calibration["model"] and calibration["errors"] and calibration["gauge"]
+    assert json.loads((tmp_path / "plan.json").read_text())  # the planner's prediction
     summary = json.loads((tmp_path / "report" / "summary.json").read_text())
     assert len(summary["diagonals_um"]) == 4
     for png in ("report/map.png", "report/parametric_errors.png", "e0.png"):

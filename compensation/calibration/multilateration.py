@@ -1,0 +1,103 @@
+"""Sequential multilateration (docs/formats.md §10.4): ``station,point,x,y,z,length_mm`` (and
+optionally ``T_x,T_y,T_z,T_wp``), read and checked.
+
+The machine moves the reflector to the indicated point (x, y, z) mm; the tracking
+interferometer at ``station`` reports a length (mm) with an unknown dead-path offset per
+station, so a length may be negative. Stations are numbered in order of first appearance; the
+plan gives one rough position per station (``station_guess_mm``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import CalibrationError
+from ..parametric_errors import AXES
+from .csvtable import TEMPERATURES, PointsFile, read_csv_table
+from .plan import MultilaterationSpec
+
+__all__ = ["MIN_POINTS_PER_STATION", "MIN_STATIONS", "MultilaterationData", "read_multilateration"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+MIN_POINTS_PER_STATION = 4
+MIN_STATIONS = 4
+
+
+@dataclass(frozen=True)
+class MultilaterationData(PointsFile):
+    """One ``[[multilateration]]`` entry: ``stations`` (names, order of first appearance),
+    ``station`` index per row, ``q_mm`` (N, 3) indicated points, ``length_mm`` (N,)."""
+
+    spec: MultilaterationSpec
+    stations: tuple[str, ...]
+    station: IntArray
+    q_mm: FloatArray
+    length_mm: FloatArray
+    lines: tuple[int, ...]
+    temps_C: dict[str, FloatArray] = field(default_factory=dict)
+
+
+def read_multilateration(
+    spec: MultilaterationSpec,
+    lower_mm: FloatArray,
+    upper_mm: FloatArray,
+    *,
+    need_values: bool = True,
+) -> MultilaterationData:
+    """Read one ``[[multilateration]]`` entry: ≥ 4 stations, ≥ 4 points each, one guess per
+    station, points within the plan's volume. ``need_values`` False (the planner): empty
+    ``length_mm`` cells are allowed (NaN)."""
+    table = read_csv_table(
+        spec.file,
+        ("station", "point", "x", "y", "z", "length_mm"),
+        TEMPERATURES,
+    )
+    q = np.column_stack([table.numbers(a) for a in AXES])
+    length = table.numbers("length_mm", allow_empty=not need_values)
+    names = table.text("station")
+    table.text("point")  # required, any label
+    stations: list[str] = []
+    first: list[int] = []
+    idx = np.empty(len(table), dtype=np.intp)
+    for i, s in enumerate(names):
+        if s not in stations:
+            stations.append(s)
+            first.append(i)
+        idx[i] = stations.index(s)
+    for k, name in enumerate(stations):
+        count = int(np.sum(idx == k))
+        if count < MIN_POINTS_PER_STATION:
+            raise table.fail(
+                first[k],
+                "station",
+                f"station {name!r} has {count} point(s); a station's "
+                f"position and dead path need ≥ {MIN_POINTS_PER_STATION}",
+            )
+    if len(stations) < MIN_STATIONS:
+        raise table.fail(
+            None,
+            "station",
+            f"{len(stations)} station(s) ({', '.join(stations)}); "
+            f"multilateration with unknown station positions needs ≥ {MIN_STATIONS}",
+        )
+    if spec.station_guess_mm.shape[0] != len(stations):
+        raise CalibrationError(
+            f"{spec.file}: the file has {len(stations)} stations ({', '.join(stations)}) but "
+            f"{spec.where}.station_guess_mm gives {spec.station_guess_mm.shape[0]} positions: "
+            "one per station, in order of first appearance"
+        )
+    table.check_inside(q, lower_mm, upper_mm, "point")
+    temps = table.temperatures()
+    return MultilaterationData(
+        spec=spec,
+        stations=tuple(stations),
+        station=idx,
+        q_mm=q,
+        length_mm=length,
+        lines=table.lines,
+        temps_C=temps,
+    )

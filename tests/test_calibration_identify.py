@@ -1,0 +1,65 @@
+"""Identification with hidden truth: random machines of several of the ten models, each data kind
+alone and all mixed, simulated by tests/calibration_sim.py (public machine API only, the
+contract's definitions, noise, unknown plate poses, stations known to ±30 mm, dead paths) and
+calibrated through the real command line. The identified volumetric error at the calibration
+stylus, compared with the truth after removing the best rigid motion, must be within 20 % of the
+truth's RMS and its U (k = 2) must cover about 95 % of (node, component) — over the runs pooled
+90–99 %, each run ≥ 80 %. benchmarks/bench_calibrate_accuracy.py runs the same over more
+machines.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from calibration_sim import Setup, compare, run_cli, simulate
+
+SETUP = Setup(
+    lower=np.zeros(3), upper=np.array([700.0, 600.0, 500.0]), stylus=np.array([0.0, 0.0, -120.0])
+)
+CASES = [
+    (("laser",), "MB2", 1),
+    (("laser",), "CY1", 2),
+    (("plate",), "FB1", 3),
+    (("plate",), "MH2", 4),
+    (("multilateration",), "FH1", 5),
+    (("multilateration",), "CX1", 6),
+    (("laser", "plate", "multilateration"), "MB1", 7),
+    (("laser", "plate", "multilateration"), "FB2", 8),
+]
+RESULTS: list[dict[str, float]] = []
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize(("kinds", "model", "seed"), CASES)
+def test_identified_error_within_its_uncertainty(
+    tmp_path: Path, kinds: tuple[str, ...], model: str, seed: int
+) -> None:
+    machine, plan = simulate(
+        tmp_path, model, SETUP, kinds, np.random.default_rng(seed), nodes=9, wave=False
+    )
+    proc = run_cli(
+        ["calibrate", str(plan), "-o", "machine.toml", "--report", "report", "--quiet"],
+        tmp_path,
+        500,
+    )
+    assert proc.returncode == 0, proc.stderr
+    result = compare(machine, tmp_path / "report" / "volumetric_u.csv")
+    RESULTS.append(result)
+    assert result["rms_percent"] <= 20.0, result
+    assert result["coverage"] >= 0.8, result
+
+
+@pytest.mark.slow
+def test_pooled_coverage_is_about_95_percent() -> None:
+    if len(RESULTS) < len(CASES):
+        pytest.skip("needs the parametrised identification runs of this module first")
+    pooled = float(np.mean([r["coverage"] for r in RESULTS]))
+    assert 0.90 <= pooled <= 0.99, [round(r["coverage"], 3) for r in RESULTS]

@@ -1,0 +1,172 @@
+"""The identification's observation models and gauge analysis against independent oracles:
+
+* the first-order Jacobian the solver steps with against central finite differences of the exact
+  model, for every reading kind (laser quantities and squareness, plate centres with their pose
+  and ball parameters, multilateration lengths with station and dead path);
+* the exact chain against the paper's first-order form: their difference is second order (it
+  shrinks 100× when the errors shrink 10×);
+* identifiability by brute force: a direction the gauge report says no reading sees changes no
+  reading (finite differences of the exact model, nuisance re-fitted by least squares), a
+  direction it does not list does; the rigid rotations are unseen by every kind;
+* the written machine predicts the data through the test simulator's own formulas (public
+  machine API) with the scatter of the noise.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from calibration_sim import Setup, random_machine, simulate
+
+from cmm_comp.compensation.calibration.calibrate import calibrate
+from cmm_comp.compensation.calibration.datasets import build_problem, load_datasets
+from cmm_comp.compensation.calibration.plan import read_plan
+
+SETUP = Setup(
+    lower=np.zeros(3), upper=np.array([600.0, 500.0, 400.0]), stylus=np.array([0.0, 0.0, -100.0])
+)
+
+
+@pytest.fixture(scope="module")
+def mixed(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Path]:
+    folder = tmp_path_factory.mktemp("mixed")
+    rng = np.random.default_rng(7)
+    return simulate(
+        folder, "FB1", SETUP, ("laser", "plate", "multilateration"), rng, nodes=7, wave=False
+    )
+
+
+def _problem(plan_path: Path):  # type: ignore[no-untyped-def]
+    plan = read_plan(plan_path)
+    return build_problem(plan, load_datasets(plan))
+
+
+def test_jacobians_match_finite_differences_of_the_exact_model(mixed) -> None:  # type: ignore[no-untyped-def]
+    _, plan_path = mixed
+    problem = _problem(plan_path)
+    rng = np.random.default_rng(3)
+    theta = rng.normal(0.0, 3.0, problem.p)  # µm, µrad: a machine of a few µm
+    states = [b.initial_state(problem.model, theta) for b in problem.blocks]
+    for block, state in zip(problem.blocks, states, strict=True):
+        lin = block.linearize(problem.model, theta, state)
+        typical = float(np.max(np.abs(lin.jac_machine)))
+        # machine parameters
+        for j in rng.choice(problem.p, 12, replace=False):
+            h = 1e-3
+            d = np.zeros(problem.p)
+            d[j] = h
+            up = block.linearize(problem.model, theta + d, state).residual
+            dn = block.linearize(problem.model, theta - d, state).residual
+            fd = (up - dn) / (2 * h)
+            # first order vs exact: the difference is of the order of the angles (~1e-5 here)
+            tol = 1e-3 * float(np.max(np.abs(fd))) + 1e-4 * typical
+            assert np.max(np.abs(fd - lin.jac_machine[:, j])) < tol, (block.kind, j)
+        # nuisance parameters (poses, balls, stations, dead paths): exact derivatives
+        for j in range(min(block.n_nuisance, 16)):
+            h = 1e-2
+            d = np.zeros(block.n_nuisance)
+            d[j] = h
+            up = block.linearize(problem.model, theta, block.advance(state, d)).residual
+            dn = block.linearize(problem.model, theta, block.advance(state, -d)).residual
+            fd = (up - dn) / (2 * h)
+            assert np.max(np.abs(fd - lin.jac_nuisance[:, j])) < 1e-5 * max(
+                1.0, np.max(np.abs(fd))
+            ), (block.kind, j)
+
+
+def test_exact_minus_first_order_is_second_order(mixed) -> None:  # type: ignore[no-untyped-def]
+    _, plan_path = mixed
+    problem = _problem(plan_path)
+    rng = np.random.default_rng(5)
+    direction = rng.normal(0.0, 1.0, problem.p)
+    pts = problem.blocks[1].pts  # the plate's centres, with its stylus
+    gaps = []
+    for scale in (20.0, 2.0):
+        theta = scale * direction
+        exact, _ = problem.model.exact(theta, pts)
+        first = np.einsum("nip,p->ni", problem.model.error_jacobian(pts), theta)
+        gaps.append(float(np.max(np.abs(exact - first))))
+    assert gaps[1] > 0
+    assert 60.0 < gaps[0] / gaps[1] < 140.0  # quadratic: 10× smaller errors, 100× smaller gap
+
+
+def _refit_change(problem, theta, states, v, h=1.0):  # type: ignore[no-untyped-def]
+    """RMS change of every reading when θ moves by h·v, the nuisance re-fitted (one exact
+    Gauss–Newton step from finite differences): ≈ 0 when no reading sees v."""
+    changes = []
+    for block, state in zip(problem.blocks, states, strict=True):
+        base = block.linearize(problem.model, theta, state)
+        moved = block.linearize(problem.model, theta + h * v, state)
+        dr = moved.residual - base.residual
+        if block.n_nuisance:
+            coef, *_ = np.linalg.lstsq(base.jac_nuisance, -dr, rcond=None)
+            dr = dr + base.jac_nuisance @ coef
+        changes.append(float(np.sqrt(np.mean(dr**2))))
+    return changes
+
+
+@pytest.mark.timeout(900)  # a full calibration plus ~25 re-fits: minutes on a loaded 2-core machine
+def test_unseen_directions_change_no_reading_and_seen_ones_do(mixed) -> None:  # type: ignore[no-untyped-def]
+    _, plan_path = mixed
+    result = calibrate(read_plan(plan_path))
+    problem, sol = result.problem, result.solution
+    theta, states = sol.theta, sol.states
+    # rigid rotations of the whole volume: no data kind sees them
+    for k in range(3):
+        r = problem.rotations[:, k]
+        assert max(_refit_change(problem, theta, states, r, 10.0)) < 1e-3  # 10 µrad → < 1 nm
+        assert "rotation" in result.gauge["rigid_body"][3 + k]["freedom"]
+        assert result.gauge["rigid_body"][3 + k]["seen_by"] == []
+    # the pinned null directions (in θ), and a random direction for contrast
+    root = np.sqrt(problem.ridge_internal)
+    null = problem.null
+    assert null.shape[1] > 0  # one stylus, lines through the middle: some combinations unseen
+    for i in range(null.shape[1]):
+        x = null[:, i] / root
+        v = problem.theta(x)
+        v = v / np.max(np.abs(v))
+        assert max(_refit_change(problem, theta, states, v, 1.0)) < 2e-3, i
+    rng = np.random.default_rng(11)
+    v = rng.normal(0.0, 1.0, problem.p)
+    assert max(_refit_change(problem, theta, states, v / np.max(np.abs(v)), 1.0)) > 1e-2
+
+
+@pytest.mark.timeout(900)  # a full calibration
+def test_written_machine_predicts_the_data_to_the_noise(tmp_path: Path) -> None:
+    """The laser readings predicted by the written machine through the simulator's own formulas
+    (relative runs, straightness lines removed) differ from the data by the noise only."""
+    from calibration_sim import laser_file
+
+    from cmm_comp.compensation.calibration.report import write_outputs
+
+    rng = np.random.default_rng(21)
+    truth = random_machine(rng, "MH1", SETUP, wave=False)
+    laser_file(truth, SETUP, rng, tmp_path / "laser.csv")
+    from calibration_sim import write_plan
+
+    plan_path = write_plan(tmp_path, "MH1", SETUP, ("laser",), None, nodes=11)
+    result = calibrate(read_plan(plan_path))
+    write_outputs(result, tmp_path / "machine.toml", None)
+    from cmm_comp.compensation import Machine
+
+    written = Machine.from_toml(tmp_path / "machine.toml")
+    noise_free = tmp_path / "predicted.csv"
+    laser_file(
+        written,
+        Setup(SETUP.lower, SETUP.upper, SETUP.stylus, 0.0, 0.0),
+        np.random.default_rng(0),
+        noise_free,
+    )
+    data = np.genfromtxt(tmp_path / "laser.csv", delimiter=",", skip_header=2, dtype=str)
+    pred = np.genfromtxt(noise_free, delimiter=",", skip_header=2, dtype=str)
+    linear = data[:, 1] == "linear_um"
+    d = data[linear, 3].astype(float) - pred[linear, 3].astype(float)
+    runs = data[linear, 5]
+    resid = np.concatenate([d[runs == r] - np.mean(d[runs == r]) for r in np.unique(runs)])
+    assert 0.12 < np.sqrt(np.mean(resid**2)) < 0.3  # the simulated σ is 0.2 µm
