@@ -108,13 +108,43 @@ def realdata_dir() -> Path:
     return REALDATA
 
 
+def _npm_ci_once(npm: str) -> str | None:
+    """``npm ci`` in tests/mcap_ts unless its node_modules already holds exactly the locked
+    packages (a stamp: the lock file's SHA-256, written after a successful ``npm ci``). Under an
+    exclusive file lock: pytest-xdist's workers share the folder, and a second ``npm ci`` would
+    delete node_modules under a reader of the first. None, or why it failed."""
+    import fcntl
+    import hashlib
+
+    lock_sha = hashlib.sha256((MCAP_TS / "package-lock.json").read_bytes()).hexdigest()
+    stamp = MCAP_TS / "node_modules" / ".cmm-comp-npm-ci"
+    with open(MCAP_TS / ".npm-ci.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if stamp.is_file() and stamp.read_text() == lock_sha:
+            return None
+        try:
+            done = subprocess.run(
+                [npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"],
+                cwd=MCAP_TS,
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
+        except subprocess.TimeoutExpired:
+            return f"npm ci in {MCAP_TS} took more than 600 s"
+        if done.returncode != 0:
+            return f"npm ci in {MCAP_TS} failed: {done.stderr.strip()[-500:]}"
+        stamp.write_text(lock_sha)
+    return None
+
+
 @pytest.fixture(scope="session")
 def mcap_ts() -> Callable[..., dict[str, Any]]:
     """``read(path, *count_keys)``: the file read by the official TypeScript MCAP reader
     (``@mcap/core``'s ``McapIndexedReader`` and ``McapStreamReader``, what Foxglove and
     Lichtblick use; pinned in ``tests/mcap_ts/package-lock.json``), as the JSON object
-    ``tests/mcap_ts/read_mcap.mjs`` prints. ``npm ci`` installs the pinned packages once per
-    session. Without node/npm or the npm registry the tests skip, saying why; with
+    ``tests/mcap_ts/read_mcap.mjs`` prints. ``npm ci`` installs the pinned packages once
+    (:func:`_npm_ci_once`). Without node/npm or the npm registry the tests skip, saying why; with
     ``CMM_COMP_REQUIRE_NODE=1`` (the CI) they fail."""
 
     def unavailable(why: str) -> None:
@@ -126,18 +156,9 @@ def mcap_ts() -> Callable[..., dict[str, Any]]:
     if node is None or npm is None:
         unavailable("node and npm are needed to read logs with @mcap/core (not on PATH)")
     assert node is not None and npm is not None
-    try:
-        done = subprocess.run(
-            [npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"],
-            cwd=MCAP_TS,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-    except subprocess.TimeoutExpired:
-        unavailable(f"npm ci in {MCAP_TS} took more than 600 s")
-    if done.returncode != 0:
-        unavailable(f"npm ci in {MCAP_TS} failed: {done.stderr.strip()[-500:]}")
+    why_not = _npm_ci_once(npm)
+    if why_not is not None:
+        unavailable(why_not)
 
     def read(path: Path, *count_keys: str) -> dict[str, Any]:
         counts = [a for key in count_keys for a in ("--count", key)]

@@ -4,7 +4,9 @@ failed when a user ran them, while our own tests ran something else).
 :func:`bash_blocks` reads the fenced ``bash`` blocks of a Markdown file and returns their command
 lines (comments dropped, ``\\`` continuations joined); :func:`run_cli` runs one ``cmm-comp …``
 line in this process through the CLI's own ``main()`` (the entry point the installed script
-calls), from a working directory, and measures its CPU time (all threads: numba's included).
+calls), from a working directory, and measures its CPU time (all threads: numba's included);
+:func:`cli` runs an argument list the same way and answers like ``subprocess.run`` (for tests of
+a command's output, where the process boundary is not what is tested: tests/README.md rule 6).
 """
 
 from __future__ import annotations
@@ -14,13 +16,16 @@ import io
 import os
 import re
 import shlex
+import subprocess
+import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from cmm_comp.cli.main import main as cli_main
 
-__all__ = ["CliRun", "bash_blocks", "run_cli"]
+__all__ = ["CliRun", "bash_blocks", "cli", "run_cli"]
 
 
 def bash_blocks(path: Path) -> list[list[str]]:
@@ -59,6 +64,18 @@ def run_cli(line: str, cwd: Path) -> CliRun:
     """Run the ``cmm-comp …`` command ``line`` (shell words, no pipes) in ``cwd`` in-process."""
     words = shlex.split(line)
     assert words and words[0] == "cmm-comp", f"not a cmm-comp command: {line}"
+    return _run(words[1:], cwd, line)
+
+
+def cli(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    """``cmm-comp *args`` in this process (in ``cwd``, default the current folder), its exit
+    code, stdout and stderr as ``subprocess.run(..., capture_output=True, text=True)`` gives."""
+    argv = [str(a) for a in args]
+    run = _run(argv, Path.cwd() if cwd is None else cwd, shlex.join(["cmm-comp", *argv]))
+    return subprocess.CompletedProcess(["cmm-comp", *argv], run.code, run.out, run.err)
+
+
+def _run(argv: Sequence[str], cwd: Path, line: str) -> CliRun:
     out, err = io.StringIO(), io.StringIO()
     before = os.getcwd()
     t0, c0 = time.perf_counter(), time.process_time()
@@ -66,12 +83,20 @@ def run_cli(line: str, cwd: Path) -> CliRun:
         os.chdir(cwd)
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
-                code = cli_main(words[1:])
+                code = cli_main(list(argv))
             except SystemExit as exc:  # argparse: a usage error (2) or --help (0)
-                code = exc.code if isinstance(exc.code, int) else 2
+                code = _exit_code(exc)
     finally:
         os.chdir(before)
     return CliRun(
         line, code, out.getvalue(), err.getvalue(),
         time.perf_counter() - t0, time.process_time() - c0,
     )  # fmt: skip
+
+
+def _exit_code(exc: SystemExit) -> int:
+    """The status the interpreter would exit with (a message: printed to stderr, status 1)."""
+    if exc.code is None or isinstance(exc.code, int):
+        return exc.code or 0
+    print(exc.code, file=sys.stderr)
+    return 1

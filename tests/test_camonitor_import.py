@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from doc_commands import cli
 
 from cmm_comp.cli.main import main
 from cmm_comp.compensation.errors import CmmCompError, RealDataError
@@ -433,10 +432,7 @@ def test_real_ess_import(realdata_dir: Path) -> None:
 def test_real_ess_cli(realdata_dir: Path, tmp_path: Path) -> None:
     log = realdata_dir / "ess-target-b02" / "x_230_2.log"
     out = tmp_path / "ess"
-    cmd = [sys.executable, "-m", "cmm_comp.cli", "import", "camonitor", str(log), "--axis", "x"]
-    proc = subprocess.run(
-        [*cmd, *ESS_ARGS, "--out-dir", str(out)], capture_output=True, text=True, timeout=300
-    )
+    proc = cli("import", "camonitor", log, "--axis", "x", *ESS_ARGS, "--out-dir", out)
     assert proc.returncode == 0, proc.stderr
     assert "reading" in proc.stderr  # progress
     for name in ("machine.toml", "measurements.csv", "summary.json", "import.png"):
@@ -455,14 +451,10 @@ def test_real_ess_dense_diagnosis_names_what_is_in_it(realdata_dir: Path, tmp_pa
     docs/discovery.md) and the drift with time; held-out RMS by cycle clearly below before."""
     log = realdata_dir / "ess-target-b02" / "x_230_2.log"
     out = tmp_path / "ess"
-    cli = [sys.executable, "-m", "cmm_comp.cli"]
-    imp = [*cli, "import", "camonitor", str(log), "--axis", "x", *ESS_ARGS, "--out-dir", str(out)]
-    assert subprocess.run(imp, capture_output=True, text=True, timeout=300).returncode == 0
+    imp = cli("import", "camonitor", log, "--axis", "x", *ESS_ARGS, "--out-dir", out)
+    assert imp.returncode == 0, imp.stderr
     result = out / "diagnosis.json"
-    diag = [*cli, "diagnose", str(out / "machine.toml"), str(out / "measurements.csv")]
-    proc = subprocess.run(
-        [*diag, "--json", str(result)], capture_output=True, text=True, timeout=300
-    )
+    proc = cli("diagnose", out / "machine.toml", out / "measurements.csv", "--json", result)
     assert proc.returncode == 0, proc.stderr
     d = json.loads(result.read_text())
     causes = [(e["cause"], e.get("component") or e.get("axis")) for e in d["effects"]]

@@ -1,13 +1,13 @@
-"""The model layer's CLI commands end to end (real subprocesses, real files)."""
+"""The model layer's CLI commands end to end (the CLI's main() in this process, real files)."""
 
 from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
+from doc_commands import cli as run_cli_args
 
 from cmm_comp.compensation import Machine
 
@@ -16,13 +16,7 @@ NPL = ROOT / "examples" / "machines" / "npl-bridge.toml"
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", *args],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
+    return run_cli_args(*args, cwd=ROOT)
 
 
 def test_seed_export_import_round_trip(tmp_path: Path) -> None:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import re
 import subprocess
-import sys
 
 import pytest
+from doc_commands import cli
 from hypothesis import given
 from hypothesis import strategies as st
 from test_daemon_support import ROOT
@@ -254,12 +254,7 @@ def test_numeric_setting_probe(tmp_path, key: str, probe: str) -> None:
 
 
 def _check(args: list[str]) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "daemon", "--check", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    return cli("daemon", "--check", *args)
 
 
 def _config_lines(stderr: str) -> list[str]:

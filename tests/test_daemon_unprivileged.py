@@ -2,8 +2,9 @@
 read-only installation, no home, and (first) no writable cache for numba at all.
 
 The installation is real: a venv made from ``/usr/bin/python3`` (an interpreter under /root is
-unreadable to ``nobody``) in a folder ``nobody`` can read, the project installed into it by pip
-(not editable), then made read-only. Its daemon folder is made by the command in the unit's own
+unreadable to ``nobody``) in a folder ``nobody`` can read, the project's wheel installed into it
+by pip (not editable), then made read-only (the dependencies copied from this environment when
+the interpreters match: see ``_install``). Its daemon folder is made by the command in the unit's own
 install lines (``cmm-comp daemon init /etc/cmm-comp … --logs /var/log/cmm-comp``, every absolute
 path moved under the test's folder, plus a ``udp_multicast`` bus for the test's controller).
 
@@ -33,6 +34,7 @@ import pwd
 import shlex
 import shutil
 import subprocess
+import sys
 import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -40,7 +42,7 @@ from pathlib import Path
 
 import pytest
 from daemon_process import check_answers, controller_on, stop, wait_ready
-from source_copy import copy_sources
+from source_copy import copy_dependencies, project_wheel
 from systemd_unit import API_PATHS, parse_unit
 from test_daemon_support import free_udp_port
 from test_systemd_unit import UNIT_PATH, install_command
@@ -53,7 +55,7 @@ READY_S = 900.0
 """A start without a cache compiles every kernel: ~20 s of CPU alone, minutes on a machine
 whose 2 cores are shared by other test runs."""
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(3600)]
+pytestmark = pytest.mark.timeout(3600)
 
 
 def _why_not() -> str | None:
@@ -110,22 +112,42 @@ def _root_env(tree: Tree) -> dict[str, str]:
     }
 
 
-def _install(tree: Tree) -> None:
-    """A venv from the system Python at the unit's /opt/cmm-comp/.venv, the project installed
-    by pip (not editable) from a copy of the sources, then read-only."""
+def _install(tree: Tree, wheel: Path) -> None:
+    """A venv from the system Python at the unit's /opt/cmm-comp/.venv, the project's wheel
+    installed into it by pip (not editable), then read-only.
+
+    The unit's install line (``pip install /path/to/cmm-comp``) also downloads every dependency
+    and compiles its bytecode: minutes, and nothing this test is about. When the system Python
+    is this interpreter's minor version (the same wheels and bytecode fit it), the dependencies
+    the wheel declares are copied from this environment instead (:func:`copy_dependencies`;
+    ``pip check`` in the new venv then confirms they satisfy the wheel) and only the project
+    goes through pip; otherwise pip installs everything, as the unit's line does."""
     venv = Path(tree.host("/opt/cmm-comp/.venv"))
-    subprocess.run([SYSTEM_PYTHON, "-m", "venv", venv], check=True, timeout=300)
-    src = copy_sources(tree.root / "src")
-    pip = subprocess.run(
-        [venv / "bin" / "python", "-m", "pip", "install", "--no-cache-dir", "-q", str(src)],
-        capture_output=True,
-        text=True,
-        timeout=1800,
-        env={**_root_env(tree), "HOME": str(tree.root)},
-    )
-    assert pip.returncode == 0, f"pip install of the project failed:\n{pip.stderr[-3000:]}"
-    shutil.rmtree(src)
+    subprocess.run([SYSTEM_PYTHON, "-m", "venv", "--without-pip", venv], check=True, timeout=300)
+    py = venv / "bin" / "python"
+    pip = [sys.executable, "-m", "pip", "--python", str(py)]
+    env = {**_root_env(tree), "HOME": str(tree.root)}
+    site = subprocess.check_output(
+        [py, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], text=True
+    ).strip()
+    if _system_minor() == sys.version_info[:2]:
+        copy_dependencies(wheel, Path(site))
+        args = ["install", "--no-deps", "--no-index", "-q", str(wheel)]
+    else:
+        args = ["install", "--no-cache-dir", "-q", str(wheel)]
+    run = subprocess.run([*pip, *args], capture_output=True, text=True, timeout=1800, env=env)
+    assert run.returncode == 0, f"pip install of the project failed:\n{run.stderr[-3000:]}"
+    check = subprocess.run([*pip, "check"], capture_output=True, text=True, timeout=300, env=env)
+    assert check.returncode == 0, check.stdout + check.stderr
     subprocess.run(["chmod", "-R", "a+rX,a-w", str(tree.root / "opt")], check=True)
+
+
+def _system_minor() -> tuple[int, int]:
+    out = subprocess.check_output(
+        [SYSTEM_PYTHON, "-c", "import sys; print(*sys.version_info[:2])"], text=True
+    )
+    major, minor = out.split()
+    return int(major), int(minor)
 
 
 def _init_daemon_folder(tree: Tree) -> None:
@@ -150,7 +172,7 @@ def _init_daemon_folder(tree: Tree) -> None:
 
 
 @pytest.fixture(scope="module")
-def tree() -> Iterator[Tree]:
+def tree(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Tree]:
     reason = _why_not()
     if reason is not None:
         pytest.skip(reason)
@@ -158,7 +180,7 @@ def tree() -> Iterator[Tree]:
     try:
         root.chmod(0o755)  # mkdtemp makes 0700: nobody could not even enter it
         t = Tree(root, free_udp_port())
-        _install(t)
+        _install(t, project_wheel(tmp_path_factory))
         _init_daemon_folder(t)
         yield t
     finally:

@@ -14,12 +14,11 @@ Oracles are physics stated independently of the candidate code:
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_commands import cli
 
 from cmm_comp.compensation.diagnosis import diagnose
 from cmm_comp.compensation.effects import (
@@ -106,21 +105,7 @@ def test_drift_is_named_and_extend_leaves_it_out(npl: Machine, tmp_path: Path) -
     drift = next(e for e in d.entries if e["cause"] == "drift")
     assert drift["compensable"] is False
     csv = write_measurements(tmp_path / "m.csv", data)
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cmm_comp.cli",
-            "extend",
-            str(NPL),
-            str(csv),
-            "-o",
-            str(tmp_path / "x.toml"),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    out = cli("extend", NPL, csv, "-o", tmp_path / "x.toml")
     assert out.returncode == 0, out.stderr
     assert "not added: drift" in out.stdout
     assert "drift" not in (tmp_path / "x.toml").read_text()

@@ -12,8 +12,6 @@ import functools
 import hashlib
 import io
 import json
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
@@ -21,6 +19,7 @@ import numpy as np
 import pytest
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 from cryptography.hazmat.primitives.serialization import load_pem_public_key
+from doc_commands import cli
 from test_daemon_support import NPL, ROOT, npl_machine
 
 from cmm_comp.cli.main import main as cli_main
@@ -209,14 +208,14 @@ def test_daemon_check_refuses_unsigned_grid_in_one_line(tmp_path: Path, keys, un
     grid = tmp_path / "g.grid"
     grid.write_bytes(unsigned)
     args = [
-        sys.executable, "-m", "cmm_comp.cli", "daemon", "--check",
+        "daemon", "--check",
         "--grid-path", str(grid), "--grid-machine", str(NPL),
         "--grid-public-key", str(keys["ours"][1]),
         "--can-interface", "virtual", "--metrics-port", "0",  # --check opens the bus, binds the port
     ]  # fmt: skip
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=120)
+    proc = cli(*args)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.count("\n") == 1 and "grid is not signed" in proc.stderr
     sign_grid(grid, keys["ours"][0])
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=120)
+    proc = cli(*args)
     assert proc.returncode == 0 and "signed by key" in proc.stdout, proc.stderr

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import asyncio
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from doc_commands import cli
 from test_daemon_support import (
     NPL,
     ROOT,
@@ -42,13 +41,7 @@ def test_demo_in_process_e0_ten_times_smaller(tmp_path) -> None:
 
 def test_demo_cli_writes_summary_json(tmp_path) -> None:
     out = tmp_path / "summary.json"
-    proc = subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "demo", "--json", str(out), "--random", "50"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=100,
-    )
+    proc = cli("demo", "--json", out, "--random", "50", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "E0 after compensation" in proc.stdout and "[demo]" in proc.stderr
     summary = json.loads(out.read_text())
@@ -112,39 +105,26 @@ def test_modbus_rejects_bad_requests() -> None:
 
 
 def test_examples_daemon_toml_checks_with_overrides(tmp_path) -> None:
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cmm_comp.cli",
-            "daemon",
-            "--config",
-            str(ROOT / "examples" / "daemon.toml"),
-            "--grid-path",
-            str(npl_grid_path()),
-            "--grid-machine",
-            str(NPL),
-            "--grid-public-key",
-            str(signing_key()[1]),
-            # --check opens the bus, binds the metrics port and checks the log folder
-            "--can-interface",
-            "virtual",
-            "--metrics-port",
-            "0",
-            "--mcap-path",
-            str(tmp_path / "logs"),
-            "--check",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
+    proc = cli(
+        "daemon",
+        "--config",
+        str(ROOT / "examples" / "daemon.toml"),
+        "--grid-path",
+        str(npl_grid_path()),
+        "--grid-machine",
+        str(NPL),
+        "--grid-public-key",
+        str(signing_key()[1]),
+        # --check opens the bus, binds the metrics port and checks the log folder
+        "--can-interface",
+        "virtual",
+        "--metrics-port",
+        "0",
+        "--mcap-path",
+        str(tmp_path / "logs"),
+        "--check",
     )
     assert proc.returncode == 0, proc.stderr
     assert "sha256" in proc.stdout
-    bad = subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "daemon", "--can-bitrate", "fast", "--check"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    bad = cli("daemon", "--can-bitrate", "fast", "--check")
     assert bad.returncode == 2 and "can.bitrate" in bad.stderr and "Traceback" not in bad.stderr

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_commands import cli
 
 from cmm_comp.compensation.errors import MachineFileError
 from cmm_comp.compensation.machine import Machine
@@ -265,21 +266,12 @@ def test_every_complete_toml_example_of_the_formats_doc_loads(tmp_path: Path) ->
 
 
 def test_cli_prints_load_warnings(tmp_path: Path) -> None:
-    import subprocess
-    import sys
-
     text = (
         MINIMAL
         + "[errors.dx_x]\nposition = [0.0, 500.0]\nvalue = [0.0, 1.0]\ncriterion = 'end_points'\n"
     )
     path = write(tmp_path, text)
-    r = subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", "diagonals", str(path)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
+    r = cli("diagonals", path, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     assert "warning" in r.stderr and "errors.dx_x.criterion" in r.stderr
 

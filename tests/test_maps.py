@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_commands import cli as _cli
 
 from cmm_comp.compensation.machine import Machine
 from cmm_comp.compensation.reports.maps import (
@@ -91,16 +90,6 @@ def test_line_report_bandwidth_and_max() -> None:
     assert rep.bandwidth_um == pytest.approx(r.max() - r.min())
     with pytest.raises(ValueError, match="axis must be"):
         line_report(m, "w", (0, 0, 0))
-
-
-def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "cmm_comp.cli", *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        timeout=120,
-    )
 
 
 def test_cli_map_and_diagonals(tmp_path: Path) -> None:

@@ -16,7 +16,7 @@ import venv
 from pathlib import Path
 
 import pytest
-from source_copy import copy_sources
+from source_copy import project_wheel
 
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = ("compensation", "protocol", "daemon", "sim_controller", "cli")
@@ -58,8 +58,9 @@ def test_python_daemon_and_cmm_comp_daemon_coexist(tmp_path: Path) -> None:
     assert "site-packages" in run.stdout
 
 
-@pytest.mark.slow
-def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> None:
+def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(
+    tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
+) -> None:
     """Build and install the real wheel (not the editable finder) into a new venv that also sees
     python-daemon; import both and run a command that reads package data and does real work."""
     env_dir = tmp_path / "venv"
@@ -75,27 +76,7 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
     # the editable finder of this environment is a .pth *file*, which a path entry does not run.
     outer = sysconfig.get_paths()["purelib"]
     (purelib / "outer.pth").write_text(outer + "\n")
-    # build from a copy: setuptools leaves build/ and *.egg-info in the folder it builds
-    src = copy_sources(tmp_path / "src")
-    wheel_dir = tmp_path / "wheel"
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "wheel",
-            "--no-deps",
-            "--no-build-isolation",
-            "-q",
-            "-w",
-            str(wheel_dir),
-            str(src),
-        ],
-        check=True,
-        capture_output=True,
-        timeout=300,
-    )
-    (wheel,) = wheel_dir.glob("cmm_comp-*.whl")
+    wheel = project_wheel(tmp_path_factory)  # built from a copy of the sources
     import zipfile
 
     with zipfile.ZipFile(wheel) as whl:  # the licence travels with the wheel's metadata

@@ -3,8 +3,10 @@
 Oracle: the Modbus Application Protocol Specification V1.1b3 (function codes, request/response
 layouts, exception responses = function code | 0x80 + code, the per-function state diagrams:
 01 function not supported, 03 quantity / byte count / length, 02 address, 04 device failure)
-and the Messaging on TCP/IP Implementation Guide V1.0b (MBAP header). Every frame below is
-packed by hand with ``struct`` (tests/test_protocol_modbus_support.py), not with our codec.
+and the Messaging on TCP/IP Implementation Guide V1.0b (MBAP header). Every frame is
+packed by hand with ``struct`` (the cases in tests/modbus_spec_cases.py, shared with
+benchmarks/bench_modbus_conformance.py, which sends them to pymodbus's server too), not with
+our codec.
 """
 
 from __future__ import annotations
@@ -13,19 +15,17 @@ import struct
 from collections.abc import Iterator
 
 import pytest
-from test_protocol_modbus_support import WAIT_S, RawClient, frame, threaded_server, wait_for
+from modbus_spec_cases import (
+    BAD_FRAMES,
+    EXCEPTION_CASES,
+    ExceptionCase,
+    frame,
+    read_pdu,
+    write_multiple_pdu,
+)
+from test_protocol_modbus_support import WAIT_S, RawClient, threaded_server, wait_for
 
 from cmm_comp.protocol import AnswerBlock, MapDevice, ReadingBlock, Status
-from cmm_comp.protocol import modbus_map as mm
-
-
-def read_pdu(fc: int, address: int, count: int) -> bytes:
-    return struct.pack(">BHH", fc, address, count)
-
-
-def write_multiple_pdu(address: int, values: list[int], byte_count: int | None = None) -> bytes:
-    n = 2 * len(values) if byte_count is None else byte_count
-    return struct.pack(f">BHHB{len(values)}H", 16, address, len(values), n, *values)
 
 
 @pytest.fixture
@@ -34,50 +34,9 @@ def client() -> Iterator[RawClient]:
         yield raw
 
 
-@pytest.mark.parametrize(
-    ("pdu", "expected"),
-    [
-        # FC3/FC4: quantity 1..125 (0x7D), else 03 — before any address check
-        (read_pdu(3, 0, 0), b"\x83\x03"),
-        (read_pdu(3, 200, 126), b"\x83\x03"),
-        (read_pdu(3, 0, 0xFFFF), b"\x83\x03"),
-        (read_pdu(4, 0, 0), b"\x84\x03"),
-        (read_pdu(4, 200, 126), b"\x84\x03"),
-        (read_pdu(3, 200, 125), b"\x83\x02"),  # quantity fine, 200..324 not all defined
-        (read_pdu(3, 50, 1), b"\x83\x02"),
-        (read_pdu(4, 0xFFFF, 1), b"\x84\x02"),
-        (read_pdu(3, 0, 3) + b"\x00", b"\x83\x03"),  # PDU longer than FC3's 5 bytes
-        (b"\x03\x00\x00", b"\x83\x03"),  # truncated PDU
-        # FC6: one register; a read-only or undefined register is 02, a bad value 03
-        (struct.pack(">BHH", 6, mm.REG_STATUS, 0), b"\x86\x02"),
-        (struct.pack(">BHH", 6, 150, 0), b"\x86\x02"),
-        (struct.pack(">BHH", 6, mm.REG_DIR_X, 3), b"\x86\x03"),
-        (struct.pack(">BHHB", 6, mm.REG_SEQ, 1, 0), b"\x86\x03"),  # 6 bytes
-        # FC16: quantity 1..123 (0x7B) and byte count = 2 × quantity, else 03
-        (struct.pack(">BHHB", 16, 200, 124, 248) + bytes(8), b"\x90\x03"),  # 124 > 0x7B
-        (write_multiple_pdu(200, [0] * 123), b"\x90\x02"),  # largest quantity; 200..322 undefined
-        (struct.pack(">BHHB", 16, 200, 0, 0), b"\x90\x03"),
-        (write_multiple_pdu(200, [0, 0], byte_count=3), b"\x90\x03"),
-        (write_multiple_pdu(200, [0, 0])[:-1], b"\x90\x03"),  # fewer bytes than byte count
-        (write_multiple_pdu(200, [0, 0]) + b"\x00\x00", b"\x90\x03"),  # more bytes
-        (b"\x10\x00\xc8", b"\x90\x03"),
-        (write_multiple_pdu(300, [1]), b"\x90\x02"),  # ANSWER is read-only
-        (write_multiple_pdu(118, [0, 0, 0]), b"\x90\x02"),  # runs off READING
-        (write_multiple_pdu(mm.REG_READING_FLAGS, [8]), b"\x90\x03"),  # reserved bit
-        # functions this server does not implement: 01 with the request's code | 0x80
-        (read_pdu(1, 0, 1), b"\x81\x01"),  # read coils
-        (read_pdu(2, 0, 1), b"\x82\x01"),  # read discrete inputs
-        (struct.pack(">BHH", 5, 0, 0xFF00), b"\x85\x01"),  # write single coil
-        (struct.pack(">BHHBB", 15, 0, 1, 1, 1), b"\x8f\x01"),  # write multiple coils
-        (b"\x17" + bytes(9), b"\x97\x01"),  # read/write multiple registers
-        (b"\x08\x00\x00\x12\x34", b"\x88\x01"),  # diagnostics
-        (b"\x41", b"\xc1\x01"),  # undefined function code 65
-        (b"\x7f\x00", b"\xff\x01"),
-        (b"\x2b\x0d\x00\x00", b"\xab\x01"),  # FC43 with MEI 13 (CANopen): not implemented
-    ],
-)
-def test_exception_responses(client: RawClient, pdu: bytes, expected: bytes) -> None:
-    assert client.request(pdu) == expected
+@pytest.mark.parametrize("case", EXCEPTION_CASES, ids=[c.what for c in EXCEPTION_CASES])
+def test_exception_responses(client: RawClient, case: ExceptionCase) -> None:
+    assert client.request(case.pdu) == case.expected
 
 
 def test_normal_responses_byte_for_byte(client: RawClient) -> None:
@@ -116,18 +75,7 @@ def test_wrong_unit_gets_no_response_and_the_connection_stays_usable() -> None:
         assert served.recorder.wrong_units == [7, 2]
 
 
-@pytest.mark.parametrize(
-    ("garbage", "reason"),
-    [
-        (frame(read_pdu(3, 0, 1), protocol_id=1), "protocol id"),
-        (frame(read_pdu(3, 0, 1), protocol_id=0xFFFF), "protocol id"),
-        (frame(read_pdu(3, 0, 1), length=65535), "length field 65535"),
-        (frame(read_pdu(3, 0, 1), length=255), "length field 255"),
-        (frame(b"", length=1), "length field 1"),
-        (frame(b"", length=0), "length field 0"),
-        (b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", "protocol id"),
-    ],
-)
+@pytest.mark.parametrize(("garbage", "reason"), BAD_FRAMES)
 def test_bad_frames_close_the_connection_and_are_reported(garbage: bytes, reason: str) -> None:
     with threaded_server(MapDevice()) as served:
         with RawClient(served.port) as raw:

@@ -16,18 +16,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+from modbus_spec_cases import frame
+
 from cmm_comp.protocol import MapDevice, MbapListener, MbapServer
+
+__all__ = ["WAIT_S", "RawClient", "Served", "frame", "threaded_server", "wait_for"]
 
 WAIT_S = 10.0
 """Generous upper bound for anything the tests wait on (loaded 2-core machine)."""
-
-
-def frame(
-    pdu: bytes, tid: int = 1, unit: int = 1, protocol_id: int = 0, length: int | None = None
-) -> bytes:
-    """An MBAP frame packed by hand: >HHHB header, then the PDU."""
-    n = len(pdu) + 1 if length is None else length
-    return struct.pack(">HHHB", tid, protocol_id, n, unit) + pdu
 
 
 class RawClient:

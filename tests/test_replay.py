@@ -4,13 +4,12 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 
 import can
 import numpy as np
 import pytest
+from doc_commands import cli
 from test_daemon_support import base_config, channel, daemon_and_controller, npl_grid_path
 
 from cmm_comp.daemon.sessionlog.replay import ReplayError, replay_offline, replay_to_bus
@@ -46,22 +45,7 @@ def test_replay_other_grid_reports_differences(session, tmp_path) -> None:
     assert report.grid_sha256 != report.session_grid_sha256
     assert report.compared == 60 and report.max_abs_diff_um > 0.01
     out = tmp_path / "r.json"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cmm_comp.cli",
-            "replay",
-            str(session),
-            "--grid",
-            str(coarse),
-            "--json",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    proc = cli("replay", session, "--grid", coarse, "--json", out)
     assert proc.returncode == 0, proc.stderr
     assert "max |replayed − sent|" in proc.stdout
     assert json.loads(out.read_text())["compared"] == 60
