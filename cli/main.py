@@ -22,6 +22,7 @@ _REGISTRARS: tuple[tuple[str, str], ...] = (
     ("cmm_comp.cli.mcap", "add_parsers"),
     ("cmm_comp.cli.uncertainty", "add_parsers"),
     ("cmm_comp.cli.export", "add_parsers"),
+    ("cmm_comp.cli.fleet", "add_parsers"),
 )
 
 

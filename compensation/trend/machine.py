@@ -156,7 +156,7 @@ def _effect_changes(
     if presence is not None:
         found.append(presence)
     n_param_tests = 2 * max(len(series.parameters), 1)
-    for pname in sorted(series.parameters):
+    for pname in series.parameters:
         change = _parameter_change(series, pname, days, dates, alpha / 2 / n_param_tests)
         if change is not None:
             found.append(change)
@@ -227,7 +227,7 @@ def machine_trend(
             "named": [bool(x) for x in series.named],
             "named_in": int(series.named.sum()),
             "parameters": {
-                p: _parameter_trend(days, dates, v) for p, v in sorted(series.parameters.items())
+                p: _parameter_trend(days, dates, v) for p, v in series.parameters.items()
             },
         }
         changes.extend(_effect_changes(series, days, dates, cfg.alpha))
