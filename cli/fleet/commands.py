@@ -117,14 +117,15 @@ class _Plan:
 
 def _run(args: argparse.Namespace, command: str, plan: _Plan) -> int:
     """Shared body: check flags, connect, run the plan's jobs, write OUT."""
-    from .engine import DaskMissing, Progress, dask_client, run_jobs
+    from .engine import DaskMissing, LazyClient, Progress, import_distributed, run_jobs
 
     problem = _check_flags(args)
     if problem:
         return fail(f"fleet {command}: {problem}")
     say = _say(command)
     try:
-        with dask_client(args.workers, args.scheduler) as client:
+        import_distributed()  # says how to install Dask before anything is hashed
+        with LazyClient(args.workers, args.scheduler) as client:
             progress = Progress(f"fleet {command}", len(plan.jobs), quiet=args.quiet)
             run = run_jobs(
                 client,

@@ -27,7 +27,15 @@ from .discover import Job
 from .store import ResultStore
 from .tasks import code_fingerprint, worker_fingerprint
 
-__all__ = ["DaskMissing", "FleetRun", "Progress", "dask_client", "run_jobs"]
+__all__ = [
+    "DaskMissing",
+    "FleetRun",
+    "LazyClient",
+    "Progress",
+    "dask_client",
+    "import_distributed",
+    "run_jobs",
+]
 
 INSTALL_HINT = (
     "cmm-comp fleet runs on Dask's distributed scheduler, which is not installed: "
@@ -41,7 +49,7 @@ class DaskMissing(RuntimeError):
     """``distributed`` cannot be imported (the message says how to install it)."""
 
 
-def _import_distributed() -> Any:
+def import_distributed() -> Any:
     try:
         import distributed
     except ImportError:
@@ -53,7 +61,7 @@ def _import_distributed() -> Any:
 def dask_client(workers: int | None, address: str | None) -> Iterator[Any]:
     """A client on a new LocalCluster (``workers`` processes × 1 thread; default 2) or on the
     scheduler at ``address``; workers checked (module docstring); closed on exit."""
-    distributed = _import_distributed()
+    distributed = import_distributed()
     with contextlib.ExitStack() as stack:
         if address:
             client = stack.enter_context(distributed.Client(address, timeout="30s"))
@@ -155,8 +163,29 @@ def _fail(run: FleetRun, job: Job, error: str, say: Callable[[str], None]) -> No
     say(f"{job.path}: {error}")
 
 
+class LazyClient:
+    """The client of :func:`dask_client`, started on first use (a run whose sessions are all
+    stored starts no cluster); a context manager closing it."""
+
+    def __init__(self, workers: int | None, address: str | None) -> None:
+        self.workers, self.address = workers, address
+        self._stack = contextlib.ExitStack()
+        self._client: Any = None
+
+    def get(self) -> Any:
+        if self._client is None:
+            self._client = self._stack.enter_context(dask_client(self.workers, self.address))
+        return self._client
+
+    def __enter__(self) -> LazyClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stack.close()
+
+
 def run_jobs(
-    client: Any,
+    client: LazyClient,
     jobs: Sequence[Job],
     task: Callable[..., dict[str, Any]],
     key_of: Callable[[Job], str],
@@ -168,14 +197,15 @@ def run_jobs(
     say: Callable[[str], None] = lambda _line: None,
 ) -> FleetRun:
     """Run ``task(*job.args)`` for every job not stored yet (module docstring)."""
-    distributed = _import_distributed()
-    run = FleetRun(workers=sum(client.nthreads().values()))
-    limit = window or 2 * max(run.workers, 1) + 1
+    distributed = import_distributed()
+    run = FleetRun()
+    limit = window or 3
     todo = iter(jobs)
     inflight: dict[Any, Job] = {}
     done = 0
-    pending = distributed.as_completed()
+    pending: Any = None
     t0 = time.perf_counter()
+    dask: Any = None
     exhausted = False
     while True:
         while not exhausted and len(inflight) < limit:
@@ -193,7 +223,13 @@ def run_jobs(
                 run.cached += 1
                 done += 1
                 continue
-            future = client.submit(task, *job.args, pure=False)
+            if dask is None:  # first session to run: start (or join) the cluster
+                dask = client.get()
+                run.workers = sum(dask.nthreads().values())
+                limit = window or 2 * max(run.workers, 1) + 1
+                pending = distributed.as_completed()
+                t0 = time.perf_counter()  # timings from a running cluster
+            future = dask.submit(task, *job.args, pure=False)
             inflight[future] = job
             pending.add(future)
         if not inflight:

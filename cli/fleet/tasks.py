@@ -28,15 +28,18 @@ from typing import Any
 __all__ = ["code_fingerprint", "diagnose_task", "file_sha256", "replay_task"]
 
 #: Packages whose source makes a result: a change in any of them invalidates stored results.
-_PACKAGES = ("compensation", "protocol", "daemon", "cli")
+_PACKAGES = ("compensation", "protocol", "daemon")
+#: The CLI's own modules that a task runs (the rest of the CLI only orchestrates).
+_CLI_FILES = ("common.py", "diagnosis.py", "fleet/tasks.py")
 #: Libraries whose version can change the numbers.
 _LIBRARIES = ("numpy", "scipy", "numba", "mcap")
 
 
 @functools.cache
 def code_fingerprint() -> str:
-    """SHA-256 over this installation's source (the packages of :data:`_PACKAGES`, every
-    ``.py`` file, path and bytes) and the versions of Python and :data:`_LIBRARIES`."""
+    """SHA-256 over the source that computes a result (every ``.py`` file of the packages of
+    :data:`_PACKAGES` and the CLI files of :data:`_CLI_FILES`, path and bytes) and the versions
+    of Python and :data:`_LIBRARIES`."""
     from importlib import import_module
     from importlib.metadata import PackageNotFoundError, version
 
@@ -44,8 +47,14 @@ def code_fingerprint() -> str:
     for name in _PACKAGES:
         root = Path(str(import_module(f"cmm_comp.{name}").__file__)).parent
         for path in sorted(root.rglob("*.py")):
+            if name == "compensation" and path.parent.name == "trend":
+                continue  # trends are computed when OUT is written, never stored
             digest.update(f"{name}/{path.relative_to(root).as_posix()}\0".encode())
             digest.update(path.read_bytes())
+    cli = Path(__file__).resolve().parents[1]
+    for rel in _CLI_FILES:
+        digest.update(f"cli/{rel}\0".encode())
+        digest.update((cli / rel).read_bytes())
     parts = [platform.python_version()]
     for lib in _LIBRARIES:
         try:

@@ -7,7 +7,7 @@ number of sessions:
   naming the effect the same in every session), against "it changed once"? Statistic: the
   largest binomial likelihood-ratio G over every split point; p-value from the exact conditional
   distribution given the number of sessions that named it (every arrangement enumerated up to
-  :data:`EXACT_LIMIT` of them, else :data:`PERMUTATIONS` random ones with a fixed seed). No
+  :data:`EXACT_MAX_SESSIONS` sessions, else :data:`PERMUTATIONS` random ones with a fixed seed). No
   distributional assumption; with few sessions the smallest p-value reachable is
   ``2 / C(n, n/2)`` (:func:`smallest_presence_p`), so a change cannot be shown on too short a
   series — it is said, never guessed.
@@ -25,7 +25,6 @@ trend anyway (it holds the reproducibility of the session itself).
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -33,7 +32,7 @@ import numpy as np
 from scipy import stats
 
 __all__ = [
-    "EXACT_LIMIT",
+    "EXACT_MAX_SESSIONS",
     "PERMUTATIONS",
     "LineFit",
     "PresenceChange",
@@ -45,10 +44,10 @@ __all__ = [
     "trend_change",
 ]
 
-EXACT_LIMIT = 200_000
-"""Up to this many arrangements the presence test enumerates them all (exact p-value)."""
+EXACT_MAX_SESSIONS = 18
+"""Up to this many sessions the presence test enumerates every arrangement (exact p-value)."""
 PERMUTATIONS = 20_000
-"""Random arrangements drawn beyond :data:`EXACT_LIMIT` (seeded: the same series gives the same
+"""Random arrangements drawn beyond :data:`EXACT_MAX_SESSIONS` (seeded: the same series gives the same
 p-value); the p-value is then ``(1 + count) / (1 + PERMUTATIONS)``."""
 
 
@@ -100,11 +99,11 @@ def presence_change(named: np.ndarray, seed: int = 0) -> PresenceChange:
         return PresenceChange(1.0, 0, 0, m, n, True)
     g_obs, split = _max_g(x[None, :])
     count = math.comb(n, m)
-    exact = count <= EXACT_LIMIT
-    if exact:
-        rows = np.zeros((count, n), dtype=np.int8)
-        for r, ones in enumerate(itertools.combinations(range(n), m)):
-            rows[r, list(ones)] = 1
+    exact = n <= EXACT_MAX_SESSIONS
+    if exact:  # every n-bit pattern with m ones
+        codes = np.arange(1 << n, dtype=np.uint32)
+        bits = ((codes[:, None] >> np.arange(n, dtype=np.uint32)) & 1).astype(np.int8)
+        rows = bits[bits.sum(axis=1) == m]
     else:
         rng = np.random.default_rng(seed)
         rows = rng.permuted(np.tile(x, (PERMUTATIONS, 1)), axis=1)
