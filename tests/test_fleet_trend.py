@@ -144,7 +144,7 @@ def test_effects_are_taken_generically() -> None:
             "note": "x",
             "flag": True,
             "bad": float("nan"),
-        },  # fmt: skip
+        },
     }
     name, cause, keys = effect_identity(entry)
     assert (name, cause, keys) == (

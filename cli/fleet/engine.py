@@ -137,6 +137,9 @@ class FleetRun:
     compute_s: list[float] = field(default_factory=list)
     cpu_s: list[float] = field(default_factory=list)
     workers: int = 0
+    wait_s: float = 0.0
+    """Time the client spent waiting for a result (the rest of ``wall_s`` is its own work:
+    hashing inputs, storing results)."""
 
     def stats(self) -> dict[str, Any]:
         """The ``run`` section of OUT: counts, wall, Σ compute, and the overhead per session
@@ -155,6 +158,7 @@ class FleetRun:
             overhead = (self.wall_s * self.workers - busy) / self.ran
             out["overhead_per_session_s"] = round(overhead, 4)
             out["compute_per_session_s"] = round(busy / self.ran, 4)
+            out["client_per_session_s"] = round((self.wall_s - self.wait_s) / self.ran, 5)
         return out
 
 
@@ -234,7 +238,9 @@ def run_jobs(
             pending.add(future)
         if not inflight:
             break
+        t_wait = time.perf_counter()
         future = next(pending)
+        run.wait_s += time.perf_counter() - t_wait
         job = inflight.pop(future)
         try:
             result = future.result()

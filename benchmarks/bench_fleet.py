@@ -1,0 +1,222 @@
+"""``cmm-comp fleet diagnose`` on 2 workers vs 1, Dask's overhead per session, and a projection
+to 100 workers from measured task times and scheduler latency.
+
+A fleet of ``--machines`` × ``--dates`` sessions (default 10 × 21 = 210, 400 points each, the
+default slow changes) is generated once; then, in each of ``--rounds`` rounds, the command runs
+as a user runs it (``cmm-comp fleet diagnose ROOT --json OUT --workers W --quiet``, a fresh OUT
+so nothing is stored before) with W = 1 and W = 2, in alternating order. Per run: the process
+wall, the engine's wall (cluster running), Σ task compute (wall inside the task) and Σ task CPU,
+the client's own time per session, the load average before and after (the machine is shared).
+
+* speedup = wall(1 worker) / wall(2 workers), same round;
+* parallel efficiency = Σ task CPU / (engine wall × workers): what share of the workers' time was
+  spent computing (on a machine others load, the speedup falls with it; CPU time does not);
+* overhead per session = (engine wall × workers − Σ task compute) / sessions, as a share of the
+  mean task compute: everything Dask and the client add (scheduling, transfer, storing, idling);
+* scheduler latency: a no-op task's round trip (submit → result, one at a time) and the no-op
+  throughput of a bulk submission, on a 2-worker LocalCluster;
+* projection: T(W) = N · max((c + o) / W, s, k), with c the mean task compute, o the per-session
+  overhead at 1 worker, s the scheduler's time per task (1 / no-op throughput) and k the client's
+  time per session; efficiency(W) = N · c / (W · T(W)).
+
+    .venv/bin/python benchmarks/bench_fleet.py [--machines 10] [--dates 21] [--rounds 2]
+
+Prints a table and writes ``benchmarks/results/fleet.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+MACHINE = ROOT / "examples" / "machines" / "npl-bridge.toml"
+CMM = str(Path(sys.executable).parent / "cmm-comp")
+
+
+def run_fleet(root: Path, out: Path, workers: int) -> dict[str, Any]:
+    load_before = os.getloadavg()
+    t0 = time.perf_counter()
+    proc = subprocess.run(
+        [
+            CMM,
+            "fleet",
+            "diagnose",
+            str(root),
+            "--json",
+            str(out),
+            "--workers",
+            str(workers),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"fleet diagnose failed ({proc.returncode}):\n{proc.stderr}")
+    run = json.loads(out.read_text())["run"]
+    shutil.rmtree(out.with_name(out.name + ".results"))
+    out.unlink()
+    n = run["sessions_run"]
+    return {
+        "workers": workers,
+        "process_wall_s": wall,
+        **run,
+        "efficiency": run["task_cpu_s"] / (run["wall_s"] * workers),
+        "overhead_share": run["overhead_per_session_s"] / run["compute_per_session_s"],
+        "cpu_per_session_s": run["task_cpu_s"] / n,
+        "load_before": load_before,
+        "load_after": os.getloadavg(),
+    }
+
+
+def _noop(x: int) -> int:
+    return x
+
+
+def scheduler_latency(rounds: int = 200, bulk: int = 2000) -> dict[str, float]:
+    """No-op round trip (s, median of ``rounds``) and bulk throughput (tasks/s)."""
+    import logging
+    import statistics
+
+    from distributed import Client, LocalCluster
+
+    with (
+        LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        client.submit(_noop, -1, pure=False).result()
+        trips = []
+        for i in range(rounds):
+            t0 = time.perf_counter()
+            client.submit(_noop, i, pure=False).result()
+            trips.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        futures = client.map(_noop, range(bulk), pure=False)
+        client.gather(futures)
+        elapsed = time.perf_counter() - t0
+    return {
+        "roundtrip_median_s": statistics.median(trips),
+        "roundtrip_p90_s": sorted(trips)[int(0.9 * len(trips))],
+        "bulk_tasks_per_s": bulk / elapsed,
+    }
+
+
+def project(one: dict[str, Any], sched: dict[str, float], n: int, workers: int) -> dict[str, float]:
+    """The model of the module docstring, from the 1-worker run's figures."""
+    c = one["compute_per_session_s"]
+    o = max(one["overhead_per_session_s"], 0.0)
+    s = 1.0 / sched["bulk_tasks_per_s"]
+    k = one["client_per_session_s"]
+    t = n * max((c + o) / workers, s, k)
+    return {"workers": workers, "wall_s": t, "efficiency": n * c / (workers * t)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--machines", type=int, default=10)
+    ap.add_argument("--dates", type=int, default=21)
+    ap.add_argument("--points", type=int, default=400)
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fleet.json"))
+    args = ap.parse_args(argv)
+
+    from cmm_comp.compensation import Machine
+    from cmm_comp.sim_controller.fleet import default_fleet, write_fleet
+
+    with tempfile.TemporaryDirectory(prefix="bench-fleet-") as tmp:
+        root = Path(tmp) / "plant"
+        spec = default_fleet(
+            Machine.from_toml(MACHINE), args.machines, args.dates, n_points=args.points
+        )
+        write_fleet(root, spec)
+        n = len(spec.machines) * len(spec.dates)
+        print(
+            f"fleet: {n} sessions ({args.machines} machines × {args.dates} dates, "
+            f"{args.points} points)",
+            flush=True,
+        )
+        sched = scheduler_latency()
+        runs = []
+        for r in range(args.rounds):
+            for w in (1, 2) if r % 2 == 0 else (2, 1):
+                res = run_fleet(root, Path(tmp) / f"out-{r}-{w}.json", w)
+                res["round"] = r
+                runs.append(res)
+                print(
+                    f"round {r}: {w} worker(s): {res['wall_s']:.1f} s (process "
+                    f"{res['process_wall_s']:.1f} s), efficiency {res['efficiency']:.2f}, "
+                    f"load {res['load_before'][0]:.1f}→{res['load_after'][0]:.1f}",
+                    flush=True,
+                )
+    rounds = []
+    for r in range(args.rounds):
+        one, two = (next(x for x in runs if x["round"] == r and x["workers"] == w) for w in (1, 2))
+        rounds.append(
+            {
+                "round": r,
+                "speedup": one["wall_s"] / two["wall_s"],
+                "speedup_process": one["process_wall_s"] / two["process_wall_s"],
+                "cpu_ratio_2_to_1": two["cpu_per_session_s"] / one["cpu_per_session_s"],
+            }
+        )
+    one = min((x for x in runs if x["workers"] == 1), key=lambda x: x["wall_s"])
+    projection = [project(one, sched, 10_000, w) for w in (1, 2, 10, 100)]
+    result = {
+        "sessions": n,
+        "cpu_count": os.cpu_count(),
+        "scheduler": sched,
+        "runs": runs,
+        "rounds": rounds,
+        "projection_10000_sessions": projection,
+        "note": "machine shared with other jobs: see load_before/load_after per run",
+    }
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+
+    print(
+        f"\n{'round':>5} {'W':>2} {'wall s':>8} {'eff':>5} {'overhead/session':>17} "
+        f"{'compute/session':>16} {'cpu/session':>12} {'load':>10}"
+    )
+    for x in runs:
+        print(
+            f"{x['round']:>5} {x['workers']:>2} {x['wall_s']:>8.1f} {x['efficiency']:>5.2f} "
+            f"{x['overhead_per_session_s'] * 1000:>10.1f} ms ({x['overhead_share']:.1%}) "
+            f"{x['compute_per_session_s']:>14.3f} s {x['cpu_per_session_s']:>10.3f} s "
+            f"{x['load_before'][0]:>4.1f}→{x['load_after'][0]:<4.1f}"
+        )
+    for r in rounds:
+        print(
+            f"round {r['round']}: speedup 2 vs 1 worker {r['speedup']:.2f}× (process "
+            f"{r['speedup_process']:.2f}×); CPU per session 2w/1w {r['cpu_ratio_2_to_1']:.2f}"
+        )
+    print(
+        f"scheduler: no-op round trip {sched['roundtrip_median_s'] * 1000:.2f} ms (median), "
+        f"{sched['bulk_tasks_per_s']:.0f} no-op tasks/s in bulk"
+    )
+    for p in projection:
+        print(
+            f"projection, 10 000 sessions on {p['workers']:>3} workers: {p['wall_s'] / 3600:.2f} h, "
+            f"efficiency {p['efficiency']:.2f}"
+        )
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
