@@ -79,6 +79,14 @@ def add_parsers(subparsers: Any) -> None:
 
 
 def _check_root(root: str) -> Path | None:
+    """ROOT resolved, or None after saying what is wrong (Dask missing is said first)."""
+    from .engine import DaskMissing, import_distributed
+
+    try:
+        import_distributed()
+    except DaskMissing as exc:
+        fail(str(exc))
+        return None
     path = Path(root)
     if not path.is_dir():
         fail(f"fleet: {root}: no such directory (ROOT holds one directory per machine)")
@@ -117,14 +125,13 @@ class _Plan:
 
 def _run(args: argparse.Namespace, command: str, plan: _Plan) -> int:
     """Shared body: check flags, connect, run the plan's jobs, write OUT."""
-    from .engine import DaskMissing, LazyClient, Progress, import_distributed, run_jobs
+    from .engine import DaskMissing, LazyClient, Progress, run_jobs
 
     problem = _check_flags(args)
     if problem:
         return fail(f"fleet {command}: {problem}")
     say = _say(command)
     try:
-        import_distributed()  # says how to install Dask before anything is hashed
         with LazyClient(args.workers, args.scheduler) as client:
             progress = Progress(f"fleet {command}", len(plan.jobs), quiet=args.quiet)
             run = run_jobs(

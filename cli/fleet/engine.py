@@ -64,7 +64,7 @@ def dask_client(workers: int | None, address: str | None) -> Iterator[Any]:
     distributed = import_distributed()
     with contextlib.ExitStack() as stack:
         if address:
-            client = stack.enter_context(distributed.Client(address, timeout="30s"))
+            client = stack.enter_context(distributed.Client(address, timeout="15s"))
             try:
                 client.wait_for_workers(1, timeout=WORKER_WAIT_S)
             except TimeoutError:
