@@ -119,7 +119,7 @@ def test_fleet_on_a_real_scheduler_equals_local_cluster(tmp_path: Path, cluster:
 
     assert strip(remote) == strip(local)
     assert remote["machines"] == local["machines"]
-    session = tmp_path / "plant" / "cmm-02" / "2026-02-02"
+    session = tmp_path / "plant" / "cmm-02" / "2026-01-26"
     cmm(
         "diagnose",
         str(session / "machine.toml"),
@@ -128,7 +128,7 @@ def test_fleet_on_a_real_scheduler_equals_local_cluster(tmp_path: Path, cluster:
         str(tmp_path / "one.json"),
     )
     one = json.loads((tmp_path / "one.json").read_text())
-    (mine,) = [s for s in strip(remote) if s["path"] == "cmm-02/2026-02-02"]
+    (mine,) = [s for s in strip(remote) if s["path"] == "cmm-02/2026-01-26"]
     assert mine["diagnosis"] == {k: v for k, v in one.items() if k != "elapsed_s"}
 
 
