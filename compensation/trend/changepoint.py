@@ -25,6 +25,7 @@ trend anyway (it holds the reproducibility of the session itself).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -73,22 +74,36 @@ def _xlogx(x: np.ndarray) -> np.ndarray:
 def _max_g(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per row of a (R, n) 0/1 matrix: the largest binomial G over splits 1…n−1, and where."""
     n = rows.shape[1]
+    tab = _xlogx(np.arange(n + 1, dtype=float))  # x·log x of every count that can occur
     k = np.arange(1, n)
-    a = np.cumsum(rows, axis=1)[:, :-1].astype(float)  # named before each split
-    m = rows.sum(axis=1, keepdims=True).astype(float)
+    a = np.cumsum(rows, axis=1, dtype=np.int32)[:, :-1]  # named before each split
+    m = a[:, -1:] + rows[:, -1:]
     b = m - a
-    ll = (
-        _xlogx(a)
-        + _xlogx(k - a)
-        - _xlogx(k + 0.0)
-        + _xlogx(b)
-        + _xlogx(n - k - b)
-        - _xlogx(n - k + 0.0)
-    )
-    ll0 = _xlogx(m) + _xlogx(n - m) - _xlogx(np.full_like(m, n))
+    ll = tab[a] + tab[k - a] - tab[k] + tab[b] + tab[n - k - b] - tab[n - k]
+    ll0 = tab[m] + tab[n - m] - tab[n]
     g = 2.0 * (ll - ll0)
     best = np.argmax(g, axis=1)
     return g[np.arange(len(rows)), best], best + 1
+
+
+@functools.lru_cache(maxsize=512)
+def _null_g(n: int, m: int, seed: int) -> tuple[np.ndarray, bool]:
+    """The sorted null distribution of the statistic for ``m`` named of ``n`` (it depends on
+    nothing else): every arrangement, or :data:`PERMUTATIONS` random ones."""
+    if n <= EXACT_MAX_SESSIONS:  # every n-bit pattern with m ones
+        codes = np.arange(1 << n, dtype=np.uint32)
+        bits = ((codes[:, None] >> np.arange(n, dtype=np.uint32)) & 1).astype(np.int8)
+        rows = bits[bits.sum(axis=1) == m]
+        exact = True
+    else:
+        x = np.zeros(n, dtype=np.int8)
+        x[:m] = 1
+        rows = np.random.default_rng(seed).permuted(np.tile(x, (PERMUTATIONS, 1)), axis=1)
+        exact = False
+    g, _ = _max_g(rows)
+    g.sort()
+    g.flags.writeable = False
+    return g, exact
 
 
 def presence_change(named: np.ndarray, seed: int = 0) -> PresenceChange:
@@ -98,18 +113,9 @@ def presence_change(named: np.ndarray, seed: int = 0) -> PresenceChange:
     if n < 2 or m in (0, n):
         return PresenceChange(1.0, 0, 0, m, n, True)
     g_obs, split = _max_g(x[None, :])
-    count = math.comb(n, m)
-    exact = n <= EXACT_MAX_SESSIONS
-    if exact:  # every n-bit pattern with m ones
-        codes = np.arange(1 << n, dtype=np.uint32)
-        bits = ((codes[:, None] >> np.arange(n, dtype=np.uint32)) & 1).astype(np.int8)
-        rows = bits[bits.sum(axis=1) == m]
-    else:
-        rng = np.random.default_rng(seed)
-        rows = rng.permuted(np.tile(x, (PERMUTATIONS, 1)), axis=1)
-    g_null, _ = _max_g(rows)
-    hits = int(np.sum(g_null >= g_obs[0] - 1e-9))
-    p = hits / count if exact else (1 + hits) / (1 + PERMUTATIONS)
+    g_null, exact = _null_g(n, m, seed)
+    hits = len(g_null) - int(np.searchsorted(g_null, g_obs[0] - 1e-9, side="left"))
+    p = hits / len(g_null) if exact else (1 + hits) / (1 + len(g_null))
     s = int(split[0])
     return PresenceChange(float(p), s, int(x[:s].sum()), int(x[s:].sum()), n, exact)
 
@@ -187,35 +193,26 @@ def step_change(v: np.ndarray) -> StepChange | None:
     n = len(v)
     if n < 4:
         return None
-    best: StepChange | None = None
-    splits = range(2, n - 1)
-    for k in splits:
-        a, b = v[:k], v[k:]
-        rss = float(np.sum((a - a.mean()) ** 2) + np.sum((b - b.mean()) ** 2))
-        sd = math.sqrt(rss / (n - 2))
-        diff = float(b.mean() - a.mean())
-        se = sd * math.sqrt(1.0 / len(a) + 1.0 / len(b))
-        if se == 0.0:
-            p = 0.0 if diff != 0.0 else 1.0
-        else:
-            p = float(2.0 * stats.t.sf(abs(diff) / se, n - 2))
-        if best is None or p < best.p_value:
-            best = StepChange(
-                p,
-                k,
-                float(a.mean()),
-                sd / math.sqrt(len(a)),
-                float(b.mean()),
-                sd / math.sqrt(len(b)),
-                rss,
-            )
-    assert best is not None
+    k = np.arange(2, n - 1)  # values before each split (≥ 2 each side)
+    centre = float(v.mean())  # sums of squares about the mean: no cancellation
+    c1, c2 = np.cumsum(v - centre), np.cumsum((v - centre) ** 2)
+    mean_a = c1[k - 1] / k
+    mean_b = (c1[-1] - c1[k - 1]) / (n - k)
+    rss_a = c2[k - 1] - k * mean_a**2
+    rss_b = (c2[-1] - c2[k - 1]) - (n - k) * mean_b**2
+    rss = np.maximum(rss_a + rss_b, 0.0)
+    sd = np.sqrt(rss / (n - 2))
+    se = sd * np.sqrt(1.0 / k + 1.0 / (n - k))
+    diff = np.abs(mean_b - mean_a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = np.where(se > 0, 2.0 * stats.t.sf(diff / se, n - 2), np.where(diff > 0, 0.0, 1.0))
+    i = int(np.argmin(p))
     return StepChange(
-        min(1.0, best.p_value * len(splits)),
-        best.split,
-        best.before,
-        best.u_before,
-        best.after,
-        best.u_after,
-        best.rss,
+        min(1.0, float(p[i]) * len(k)),
+        int(k[i]),
+        float(mean_a[i]) + centre,
+        float(sd[i] / math.sqrt(k[i])),
+        float(mean_b[i]) + centre,
+        float(sd[i] / math.sqrt(n - k[i])),
+        float(rss[i]),
     )
