@@ -231,7 +231,7 @@ def run_jobs(
                 dask = client.get()
                 run.workers = sum(dask.nthreads().values())
                 limit = window or 2 * max(run.workers, 1) + 1
-                pending = distributed.as_completed()
+                pending = distributed.as_completed(with_results=True, raise_errors=False)
                 t0 = time.perf_counter()  # timings from a running cluster
             future = dask.submit(task, *job.args, pure=False)
             inflight[future] = job
@@ -239,12 +239,12 @@ def run_jobs(
         if not inflight:
             break
         t_wait = time.perf_counter()
-        future = next(pending)
+        future, result = next(pending)  # results gathered in the background
         run.wait_s += time.perf_counter() - t_wait
         job = inflight.pop(future)
-        try:
-            result = future.result()
-        except Exception as exc:  # the task's own errors are answers: this is a crash
+        if future.status == "error" or isinstance(result, BaseException):
+            exc = result[1] if isinstance(result, tuple) else result
+            # the task's own errors are answers: this is a crash, a killed worker, a cancel
             _fail(run, job, f"task failed: {type(exc).__name__}: {exc}", say)
         else:
             _take(run, job, result, store, say)
