@@ -228,8 +228,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     for p in projection:
         print(
-            f"projection, 10 000 sessions on {p['workers']:>3} workers: {p['wall_s'] / 3600:.2f} h, "
-            f"efficiency {p['efficiency']:.2f}"
+            f"projection ({p['cores']}), 10 000 sessions on {p['workers']:>3} workers: "
+            f"{p['wall_s'] / 3600:.2f} h, efficiency {p['efficiency']:.2f}"
         )
     print(f"wrote {args.out}")
     return 0
