@@ -67,13 +67,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     def action(diagnosis: Any) -> int:
         write_json_atomic(Path(args.json), diagnosis.to_json())  # standard JSON, else refused
-        if args.report:
-            from cmm_comp.compensation.diagnosis.report import write_report
+        from cmm_comp.compensation.diagnosis.report import display_label, write_report
 
+        if args.report:
             write_report(diagnosis, args.report, title=f"Diagnosis of {args.machine}")
+        machine = diagnosis.residuals.machine
         print(
             f"verdict: {diagnosis.verdict}; "
-            + ", ".join(e.get("label", e["cause"]) for e in diagnosis.entries)
+            + ", ".join(
+                display_label(e.get("label", e["cause"]), machine) for e in diagnosis.entries
+            )
             + f"; held-out RMS {diagnosis.summary['heldout_rms_um']['before']:.3f} → "
             f"{diagnosis.summary['heldout_rms_um']['after']:.3f} µm"
         )
