@@ -13,6 +13,13 @@ the client's own time per session, the load average before and after (the machin
   spent computing (on a machine others load, the speedup falls with it; CPU time does not);
 * overhead per session = (engine wall × workers − Σ task compute) / sessions, as a share of the
   mean task compute: everything Dask and the client add (scheduling, transfer, storing, idling);
+* CPU-time figures (reliable on a loaded machine, where the wall is not): the CPU of the whole
+  command's process tree (client, scheduler, nannies, workers; ``getrusage`` of the waited-for
+  children) against Σ task CPU: Dask's CPU per session (tree − tasks − the fixed CPU of a run,
+  i.e. imports and cluster start/stop, measured as tree − task on a fleet of one session) as a
+  share of the task CPU; and the CPU-bound speedup 2 · tree CPU(1 worker) / tree CPU(2 workers),
+  what 2 dedicated cores give when the command's CPU spreads over both (2 if the second worker
+  costs no extra CPU; the serial part, starting the cluster, is in both trees);
 * scheduler latency: a no-op task's round trip (submit → result, one at a time) and the no-op
   throughput of a bulk submission, on a 2-worker LocalCluster;
 * projection: T(W) = N · max((c + o) / W, s, k), with c the mean task compute, o the per-session
@@ -29,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -42,8 +50,15 @@ MACHINE = ROOT / "examples" / "machines" / "npl-bridge.toml"
 CMM = str(Path(sys.executable).parent / "cmm-comp")
 
 
+def _children_cpu_s() -> float:
+    """CPU time (user + system, s) of this process's waited-for descendants so far."""
+    use = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return use.ru_utime + use.ru_stime
+
+
 def run_fleet(root: Path, out: Path, workers: int) -> dict[str, Any]:
     load_before = os.getloadavg()
+    cpu0 = _children_cpu_s()
     t0 = time.perf_counter()
     proc = subprocess.run(
         [
@@ -61,6 +76,7 @@ def run_fleet(root: Path, out: Path, workers: int) -> dict[str, Any]:
         text=True,
     )
     wall = time.perf_counter() - t0
+    tree_cpu = _children_cpu_s() - cpu0
     if proc.returncode != 0:
         raise SystemExit(f"fleet diagnose failed ({proc.returncode}):\n{proc.stderr}")
     run = json.loads(out.read_text())["run"]
@@ -74,9 +90,18 @@ def run_fleet(root: Path, out: Path, workers: int) -> dict[str, Any]:
         "efficiency": run["task_cpu_s"] / (run["wall_s"] * workers),
         "overhead_share": run["overhead_per_session_s"] / run["compute_per_session_s"],
         "cpu_per_session_s": run["task_cpu_s"] / n,
+        "process_tree_cpu_s": tree_cpu,
         "load_before": load_before,
         "load_after": os.getloadavg(),
     }
+
+
+def _uptime() -> str:
+    """``uptime``'s line (the load of the machine the figures were measured under)."""
+    try:
+        return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
+    except OSError:
+        return "load average: {:.2f}, {:.2f}, {:.2f}".format(*os.getloadavg())
 
 
 def _noop(x: int) -> int:
@@ -96,7 +121,7 @@ def scheduler_latency(rounds: int = 200, bulk: int = 2000) -> dict[str, float]:
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
-            silence_logs=logging.ERROR,
+            silence_logs=logging.CRITICAL,
         ) as cluster,
         Client(cluster) as client,
     ):
@@ -164,12 +189,27 @@ def main(argv: list[str] | None = None) -> int:
             f"{args.points} points)",
             flush=True,
         )
+        uptime_before = _uptime()
+        print(f"load: {uptime_before}", flush=True)
         sched = scheduler_latency()
+        # the fixed CPU of a run (imports, cluster start and stop): a fleet of one session
+        one_root = Path(tmp) / "one"
+        first = min(p.parent for p in root.glob("*/*/measurements.csv"))
+        shutil.copytree(first, one_root / first.parent.name / first.name)
+        start_cpu = {}
+        for w in (1, 2):
+            res = run_fleet(one_root, Path(tmp) / f"one-{w}.json", w)
+            start_cpu[w] = res["process_tree_cpu_s"] - res["task_cpu_s"]
+            print(f"fixed CPU of a run on {w} worker(s): {start_cpu[w]:.1f} s", flush=True)
         runs = []
         for r in range(args.rounds):
             for w in (1, 2) if r % 2 == 0 else (2, 1):
                 res = run_fleet(root, Path(tmp) / f"out-{r}-{w}.json", w)
                 res["round"] = r
+                res["start_cpu_s"] = start_cpu[w]
+                dask_cpu = res["process_tree_cpu_s"] - res["task_cpu_s"] - start_cpu[w]
+                res["dask_cpu_per_session_s"] = dask_cpu / res["sessions_run"]
+                res["dask_cpu_share"] = dask_cpu / res["task_cpu_s"]
                 runs.append(res)
                 print(
                     f"round {r}: {w} worker(s): {res['wall_s']:.1f} s (process "
@@ -186,6 +226,7 @@ def main(argv: list[str] | None = None) -> int:
                 "speedup": one["wall_s"] / two["wall_s"],
                 "speedup_process": one["process_wall_s"] / two["process_wall_s"],
                 "cpu_ratio_2_to_1": two["cpu_per_session_s"] / one["cpu_per_session_s"],
+                "speedup_cpu_bound": 2 * one["process_tree_cpu_s"] / two["process_tree_cpu_s"],
             }
         )
     one = min((x for x in runs if x["workers"] == 1), key=lambda x: x["wall_s"])
@@ -201,6 +242,8 @@ def main(argv: list[str] | None = None) -> int:
         "runs": runs,
         "rounds": rounds,
         "projection_10000_sessions": projection,
+        "uptime_before": uptime_before,
+        "uptime_after": _uptime(),
         "note": "machine shared with other jobs: see load_before/load_after per run",
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -208,19 +251,20 @@ def main(argv: list[str] | None = None) -> int:
 
     print(
         f"\n{'round':>5} {'W':>2} {'wall s':>8} {'eff':>5} {'overhead/session':>17} "
-        f"{'compute/session':>16} {'cpu/session':>12} {'load':>10}"
+        f"{'compute/session':>16} {'cpu/session':>12} {'Dask CPU':>9} {'load':>10}"
     )
     for x in runs:
         print(
             f"{x['round']:>5} {x['workers']:>2} {x['wall_s']:>8.1f} {x['efficiency']:>5.2f} "
             f"{x['overhead_per_session_s'] * 1000:>10.1f} ms ({x['overhead_share']:.1%}) "
             f"{x['compute_per_session_s']:>14.3f} s {x['cpu_per_session_s']:>10.3f} s "
-            f"{x['load_before'][0]:>4.1f}→{x['load_after'][0]:<4.1f}"
+            f"{x['dask_cpu_share']:>9.1%} {x['load_before'][0]:>4.1f}→{x['load_after'][0]:<4.1f}"
         )
     for r in rounds:
         print(
             f"round {r['round']}: speedup 2 vs 1 worker {r['speedup']:.2f}× (process "
-            f"{r['speedup_process']:.2f}×); CPU per session 2w/1w {r['cpu_ratio_2_to_1']:.2f}"
+            f"{r['speedup_process']:.2f}×); CPU-bound speedup {r['speedup_cpu_bound']:.2f}×; "
+            f"CPU per session 2w/1w {r['cpu_ratio_2_to_1']:.2f}"
         )
     print(
         f"scheduler: no-op round trip {sched['roundtrip_median_s'] * 1000:.2f} ms (median), "
@@ -231,6 +275,7 @@ def main(argv: list[str] | None = None) -> int:
             f"projection ({p['cores']}), 10 000 sessions on {p['workers']:>3} workers: "
             f"{p['wall_s'] / 3600:.2f} h, efficiency {p['efficiency']:.2f}"
         )
+    print(f"load after: {result['uptime_after']}")
     print(f"wrote {args.out}")
     return 0
 

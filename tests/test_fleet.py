@@ -62,7 +62,24 @@ def _matches(change: dict[str, Any], injected: dict[str, Any]) -> bool:
 
 
 def test_trend_names_exactly_the_injected_changes(fleet: dict[str, Any]) -> None:
-    out, truth = fleet["out"], fleet["truth"]
+    _assert_trend_names_exactly(fleet["out"], fleet["truth"])
+
+
+def test_trend_names_exactly_the_injected_changes_other_seed_and_size(tmp_path: Path) -> None:
+    """Another fleet than the worked example's: other noise and points (seed 1), five machines
+    (the reversal on cmm-05, two clean machines), the reversal on another date."""
+    cmm("fleet", "generate", "plant", "--machines", "5", "--dates", "12", "--points", "200",
+        "--seed", "1", "--start", "2026-04-06", cwd=tmp_path)  # fmt: skip
+    cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--workers", "2", "--quiet",
+        cwd=tmp_path)  # fmt: skip
+    out = json.loads((tmp_path / "fleet.json").read_text())
+    truth = json.loads((tmp_path / "plant" / "fleet-truth.json").read_text())
+    assert {c["machine"] for c in _changing(truth)} == {"cmm-02", "cmm-05"}
+    _assert_trend_names_exactly(out, truth)
+    _assert_dated_and_rated(out, truth)
+
+
+def _assert_trend_names_exactly(out: dict[str, Any], truth: dict[str, Any]) -> None:
     assert sorted(out["machines"]) == sorted(truth["machines"])
     assert len(out["sessions"]) == len(truth["machines"]) * len(truth["dates"])
     assert out["failed"] == []
@@ -87,7 +104,10 @@ def test_trend_names_exactly_the_injected_changes(fleet: dict[str, Any]) -> None
 
 
 def test_appearance_is_dated_and_creep_rate_matches(fleet: dict[str, Any]) -> None:
-    out, truth = fleet["out"], fleet["truth"]
+    _assert_dated_and_rated(fleet["out"], fleet["truth"])
+
+
+def _assert_dated_and_rated(out: dict[str, Any], truth: dict[str, Any]) -> None:
     for injected in _changing(truth):
         section = out["machines"][injected["machine"]]
         found = [c for c in section["changes"] if _matches(c, injected)]
