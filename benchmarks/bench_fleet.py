@@ -121,6 +121,8 @@ def scheduler_latency(rounds: int = 200, bulk: int = 2000) -> dict[str, float]:
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
+            # no dashboard; its HTTP server (health) on a free port, not 8787
+            scheduler_kwargs={"dashboard_address": ":0"},
             silence_logs=logging.CRITICAL,
         ) as cluster,
         Client(cluster) as client,

@@ -78,6 +78,8 @@ def dask_client(workers: int | None, address: str | None) -> Iterator[Any]:
                     threads_per_worker=1,
                     processes=True,
                     dashboard_address=None,
+                    # no dashboard; its HTTP server (health) on a free port, not 8787
+                    scheduler_kwargs={"dashboard_address": ":0"},
                     silence_logs=logging.ERROR,
                 )
             )
