@@ -17,7 +17,10 @@ the client's own time per session, the load average before and after (the machin
   command's process tree (client, scheduler, nannies, workers; ``getrusage`` of the waited-for
   children) against Σ task CPU: Dask's CPU per session (tree − tasks − the fixed CPU of a run,
   i.e. imports and cluster start/stop, measured as tree − task on a fleet of one session) as a
-  share of the task CPU; and the CPU-bound speedup 2 · tree CPU(1 worker) / tree CPU(2 workers),
+  share of the task CPU, as measured; since part of it accrues per second whatever the
+  sessions (heartbeats, event loops: measured as an idle cluster's CPU per second, 20 s), also
+  the per-session rest, and the share on dedicated cores (per-session rest + background over a
+  session's c / W seconds); and the CPU-bound speedup 2 · tree CPU(1 worker) / tree CPU(2 workers),
   what 2 dedicated cores give when the command's CPU spreads over both (2 if the second worker
   costs no extra CPU; the serial part, starting the cluster, is in both trees);
 * scheduler latency: a no-op task's round trip (submit → result, one at a time) and the no-op
@@ -102,6 +105,28 @@ def _uptime() -> str:
         return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
     except OSError:
         return "load average: {:.2f}, {:.2f}, {:.2f}".format(*os.getloadavg())
+
+
+def background_cpu_rate(workers: int, seconds: float = 20.0) -> float:
+    """CPU s per wall s that the command's cluster (``dask_client``, as ``fleet`` starts it)
+    spends with no task to run: heartbeats, event loops, monitors, in every process of the
+    tree. A run accrues it for as long as it lasts, so a loaded machine, which stretches the
+    wall, inflates it per session; it is therefore counted apart from the per-session part."""
+    import psutil
+
+    from cmm_comp.cli.fleet.engine import dask_client
+
+    with dask_client(workers, None) as client:
+        client.submit(_noop, 0, pure=False).result()
+        me = psutil.Process()
+
+        def tree() -> float:
+            procs = [me, *me.children(recursive=True)]
+            return sum(sum(p.cpu_times()[:2]) for p in procs)
+
+        c0, t0 = tree(), time.perf_counter()
+        time.sleep(seconds)
+        return (tree() - c0) / (time.perf_counter() - t0)
 
 
 def _noop(x: int) -> int:
@@ -203,6 +228,8 @@ def main(argv: list[str] | None = None) -> int:
             res = run_fleet(one_root, Path(tmp) / f"one-{w}.json", w)
             start_cpu[w] = res["process_tree_cpu_s"] - res["task_cpu_s"]
             print(f"fixed CPU of a run on {w} worker(s): {start_cpu[w]:.1f} s", flush=True)
+        background = {w: background_cpu_rate(w) for w in (1, 2)}
+        print(f"background CPU of an idle cluster: {background} CPU s per s", flush=True)
         runs = []
         for r in range(args.rounds):
             for w in (1, 2) if r % 2 == 0 else (2, 1):
@@ -212,6 +239,12 @@ def main(argv: list[str] | None = None) -> int:
                 dask_cpu = res["process_tree_cpu_s"] - res["task_cpu_s"] - start_cpu[w]
                 res["dask_cpu_per_session_s"] = dask_cpu / res["sessions_run"]
                 res["dask_cpu_share"] = dask_cpu / res["task_cpu_s"]
+                # apart: what accrues per second of the run, and what per session
+                res["background_cpu_per_s"] = background[w]
+                per_session = (dask_cpu - background[w] * res["wall_s"]) / res["sessions_run"]
+                res["dask_cpu_per_session_net_s"] = per_session
+                c = res["cpu_per_session_s"]  # on w dedicated cores a session lasts c / w
+                res["dask_cpu_share_dedicated"] = (per_session + background[w] * c / w) / c
                 runs.append(res)
                 print(
                     f"round {r}: {w} worker(s): {res['wall_s']:.1f} s (process "
@@ -253,14 +286,14 @@ def main(argv: list[str] | None = None) -> int:
 
     print(
         f"\n{'round':>5} {'W':>2} {'wall s':>8} {'eff':>5} {'overhead/session':>17} "
-        f"{'compute/session':>16} {'cpu/session':>12} {'Dask CPU':>9} {'load':>10}"
+        f"{'compute/session':>16} {'cpu/session':>12} {'Dask CPU':>9} {'dedicated':>9} {'load':>10}"
     )
     for x in runs:
         print(
             f"{x['round']:>5} {x['workers']:>2} {x['wall_s']:>8.1f} {x['efficiency']:>5.2f} "
             f"{x['overhead_per_session_s'] * 1000:>10.1f} ms ({x['overhead_share']:.1%}) "
             f"{x['compute_per_session_s']:>14.3f} s {x['cpu_per_session_s']:>10.3f} s "
-            f"{x['dask_cpu_share']:>9.1%} {x['load_before'][0]:>4.1f}→{x['load_after'][0]:<4.1f}"
+            f"{x['dask_cpu_share']:>9.1%} {x['dask_cpu_share_dedicated']:>9.1%} {x['load_before'][0]:>4.1f}→{x['load_after'][0]:<4.1f}"
         )
     for r in rounds:
         print(
