@@ -27,9 +27,12 @@ the client's own time per session, the load average before and after (the machin
   throughput of a bulk submission, on a 2-worker LocalCluster;
 * projection: T(W) = N · max((c + o) / W, s, k), with c the mean task compute, o the per-session
   overhead at 1 worker, s the scheduler's time per task (1 / no-op throughput) and k the client's
-  time per session; efficiency(W) = N · c / (W · T(W)).
+  time per session; efficiency(W) = N · c / (W · T(W)). Three cases (:data:`CASES`): c as the
+  task's wall here, c as its CPU (dedicated cores), and also o, s, k divided by the stretch the
+  load put on the tasks (task wall / task CPU).
 
     .venv/bin/python benchmarks/bench_fleet.py [--machines 10] [--dates 21] [--rounds 2]
+    .venv/bin/python benchmarks/bench_fleet.py --reproject benchmarks/results/fleet.json
 
 Prints a table and writes ``benchmarks/results/fleet.json``.
 """
@@ -169,20 +172,27 @@ def scheduler_latency(rounds: int = 200, bulk: int = 2000) -> dict[str, float]:
     }
 
 
+CASES = ("as measured here", "dedicated", "dedicated, o s k de-stretched")
+
+
 def project(
-    one: dict[str, Any], sched: dict[str, float], n: int, workers: int, dedicated: bool
+    one: dict[str, Any], sched: dict[str, float], n: int, workers: int, case: str
 ) -> dict[str, Any]:
-    """The model of the module docstring, from the 1-worker run's figures: ``dedicated`` takes
-    c as the task's CPU time per session (what it needs of a core of its own), else its wall
-    time here (on this shared machine); o, s, k as measured here (loaded: pessimistic)."""
-    c = one["cpu_per_session_s"] if dedicated else one["compute_per_session_s"]
-    o = max(one["overhead_per_session_s"], 0.0)
-    s = 1.0 / sched["bulk_tasks_per_s"]
-    k = one["client_per_session_s"]
+    """The model of the module docstring, from the 1-worker run's figures. ``as measured
+    here``: c is the task's wall per session on this (shared) machine; ``dedicated``: c is its
+    CPU time per session (what it needs of a core of its own), o, s, k as measured here (loaded:
+    pessimistic); ``… de-stretched``: o, s, k too divided by the stretch the load put on the
+    tasks (task wall / task CPU), as if client and scheduler had cores of their own as well."""
+    stretch = one["compute_per_session_s"] / one["cpu_per_session_s"]
+    c = one["compute_per_session_s"] if case == CASES[0] else one["cpu_per_session_s"]
+    scale = 1.0 / stretch if case == CASES[2] else 1.0
+    o = max(one["overhead_per_session_s"], 0.0) * scale
+    s = scale / sched["bulk_tasks_per_s"]
+    k = one["client_per_session_s"] * scale
     t = n * max((c + o) / workers, s, k)
     return {
         "workers": workers,
-        "cores": "dedicated" if dedicated else "as measured here",
+        "cores": case,
         "c_s": c,
         "o_s": o,
         "s_s": s,
@@ -192,6 +202,23 @@ def project(
     }
 
 
+def projections(runs: list[dict[str, Any]], sched: dict[str, float]) -> list[dict[str, Any]]:
+    """Every case of :func:`project` for 10 000 sessions on 1, 2, 10 and 100 workers, from the
+    fastest 1-worker run."""
+    one = min((x for x in runs if x["workers"] == 1), key=lambda x: x["wall_s"])
+    return [project(one, sched, 10_000, w, case) for case in CASES for w in (1, 2, 10, 100)]
+
+
+def print_projection(projection: list[dict[str, Any]]) -> None:
+    for p in projection:
+        print(
+            f"projection ({p['cores']}), 10 000 sessions on {p['workers']:>3} workers: "
+            f"{p['wall_s'] / 3600:.2f} h, efficiency {p['efficiency']:.2f} "
+            f"(c {p['c_s'] * 1000:.0f} ms, o {p['o_s'] * 1000:.1f}, s {p['s_s'] * 1000:.1f}, "
+            f"k {p['k_s'] * 1000:.1f})"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--machines", type=int, default=10)
@@ -199,7 +226,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--points", type=int, default=400)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "fleet.json"))
+    ap.add_argument(
+        "--reproject",
+        metavar="RESULTS",
+        help="only recompute the projection of a results JSON (rewritten in place)",
+    )
     args = ap.parse_args(argv)
+    if args.reproject:
+        saved = json.loads(Path(args.reproject).read_text())
+        saved["projection_10000_sessions"] = projections(saved["runs"], saved["scheduler"])
+        Path(args.reproject).write_text(json.dumps(saved, indent=2) + "\n")
+        print_projection(saved["projection_10000_sessions"])
+        return 0
 
     from cmm_comp.compensation import Machine
     from cmm_comp.sim_controller.fleet import default_fleet, write_fleet
@@ -264,12 +302,7 @@ def main(argv: list[str] | None = None) -> int:
                 "speedup_cpu_bound": 2 * one["process_tree_cpu_s"] / two["process_tree_cpu_s"],
             }
         )
-    one = min((x for x in runs if x["workers"] == 1), key=lambda x: x["wall_s"])
-    projection = [
-        project(one, sched, 10_000, w, dedicated)
-        for dedicated in (False, True)
-        for w in (1, 2, 10, 100)
-    ]
+    projection = projections(runs, sched)
     result = {
         "sessions": n,
         "cpu_count": os.cpu_count(),
@@ -305,11 +338,7 @@ def main(argv: list[str] | None = None) -> int:
         f"scheduler: no-op round trip {sched['roundtrip_median_s'] * 1000:.2f} ms (median), "
         f"{sched['bulk_tasks_per_s']:.0f} no-op tasks/s in bulk"
     )
-    for p in projection:
-        print(
-            f"projection ({p['cores']}), 10 000 sessions on {p['workers']:>3} workers: "
-            f"{p['wall_s'] / 3600:.2f} h, efficiency {p['efficiency']:.2f}"
-        )
+    print_projection(projection)
     print(f"load after: {result['uptime_after']}")
     print(f"wrote {args.out}")
     return 0
