@@ -19,8 +19,8 @@ the client's own time per session, the load average before and after (the machin
   i.e. imports and cluster start/stop, measured as tree − task on a fleet of one session) as a
   share of the task CPU, as measured; since part of it accrues per second whatever the
   sessions (heartbeats, event loops: measured as an idle cluster's CPU per second, 20 s), also
-  the per-session rest, and the share on dedicated cores (per-session rest + background over a
-  session's c / W seconds); and the CPU-bound speedup 2 · tree CPU(1 worker) / tree CPU(2 workers),
+  the per-session rest (clamped at 0), and the share on dedicated cores (per-session rest +
+  background over a session's c / W seconds); and the CPU-bound speedup 2 · tree CPU(1 worker) / tree CPU(2 workers),
   what 2 dedicated cores give when the command's CPU spreads over both (2 if the second worker
   costs no extra CPU; the serial part, starting the cluster, is in both trees);
 * scheduler latency: a no-op task's round trip (submit → result, one at a time) and the no-op
@@ -172,6 +172,17 @@ def scheduler_latency(rounds: int = 200, bulk: int = 2000) -> dict[str, float]:
     }
 
 
+def on_dedicated_cores(res: dict[str, Any]) -> None:
+    """Dask's CPU per session apart: what accrues per second of the run (an idle cluster's
+    background rate × the run's wall) and the per-session rest (clamped at 0: a busy cluster
+    spends less than an idle one's background); on W dedicated cores a session lasts c / W."""
+    w, c = res["workers"], res["cpu_per_session_s"]
+    dask_cpu = res["dask_cpu_per_session_s"] * res["sessions_run"]
+    rest = (dask_cpu - res["background_cpu_per_s"] * res["wall_s"]) / res["sessions_run"]
+    res["dask_cpu_per_session_net_s"] = rest
+    res["dask_cpu_share_dedicated"] = (max(rest, 0.0) + res["background_cpu_per_s"] * c / w) / c
+
+
 CASES = ("as measured here", "dedicated", "dedicated, o s k de-stretched")
 
 
@@ -229,11 +240,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--reproject",
         metavar="RESULTS",
-        help="only recompute the projection of a results JSON (rewritten in place)",
+        help="only recompute the derived figures and the projection of a results JSON (in place)",
     )
     args = ap.parse_args(argv)
     if args.reproject:
         saved = json.loads(Path(args.reproject).read_text())
+        for res in saved["runs"]:
+            if "background_cpu_per_s" in res:
+                on_dedicated_cores(res)
         saved["projection_10000_sessions"] = projections(saved["runs"], saved["scheduler"])
         Path(args.reproject).write_text(json.dumps(saved, indent=2) + "\n")
         print_projection(saved["projection_10000_sessions"])
@@ -277,12 +291,8 @@ def main(argv: list[str] | None = None) -> int:
                 dask_cpu = res["process_tree_cpu_s"] - res["task_cpu_s"] - start_cpu[w]
                 res["dask_cpu_per_session_s"] = dask_cpu / res["sessions_run"]
                 res["dask_cpu_share"] = dask_cpu / res["task_cpu_s"]
-                # apart: what accrues per second of the run, and what per session
                 res["background_cpu_per_s"] = background[w]
-                per_session = (dask_cpu - background[w] * res["wall_s"]) / res["sessions_run"]
-                res["dask_cpu_per_session_net_s"] = per_session
-                c = res["cpu_per_session_s"]  # on w dedicated cores a session lasts c / w
-                res["dask_cpu_share_dedicated"] = (per_session + background[w] * c / w) / c
+                on_dedicated_cores(res)
                 runs.append(res)
                 print(
                     f"round {r}: {w} worker(s): {res['wall_s']:.1f} s (process "
