@@ -21,6 +21,8 @@ from .common import load_machine, write_text_atomic
 if TYPE_CHECKING:
     import numpy as np
 
+    from cmm_comp.compensation.grid import CorrectionGrid
+
 __all__ = [
     "add_parsers",
     "cmd_correct",
@@ -172,7 +174,7 @@ def cmd_grid_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def grid_info_lines(grid: Any, header: dict[str, Any], sha256: str) -> list[str]:
+def grid_info_lines(grid: CorrectionGrid, header: dict[str, Any], sha256: str) -> list[str]:
     """The header of a grid file in words (steps, signals, probe, U, provenance)."""
     import numpy as np
 
@@ -206,7 +208,7 @@ def grid_info_lines(grid: Any, header: dict[str, Any], sha256: str) -> list[str]
     return lines
 
 
-def _uncertainty_lines(grid: Any, header: dict[str, Any]) -> list[str]:
+def _uncertainty_lines(grid: CorrectionGrid, header: dict[str, Any]) -> list[str]:
     """U of the grid: its range at the nodes (probe offset, reference temperatures) and how it
     was computed, with the inputs defaulted and taken as zero."""
     import numpy as np
@@ -219,9 +221,7 @@ def _uncertainty_lines(grid: Any, header: dict[str, Any]) -> list[str]:
     refs = {s.name: np.full(len(nodes), s.reference) for s in grid.signals}
     temps = {k: v for k, v in refs.items() if k.startswith("T_")}
     inputs = {k: v for k, v in refs.items() if not k.startswith("T_")}
-    _, status, u_um = grid.correct(
-        nodes, probe, temps or None, inputs or None, with_uncertainty=True
-    )
+    _, status, u_um = grid.correct_with_uncertainty(nodes, probe, temps or None, inputs or None)
     ok = status == "ok"
     if not ok.any():  # not reachable: every signal is at its reference
         return [f"uncertainty: no node corrected ({sorted(set(status.tolist()))})"]
@@ -310,8 +310,8 @@ def cmd_correct(args: argparse.Namespace) -> int:
     signals = {c: cols[c] for c in _signal_columns() if c in cols}
     temps = {k: v for k, v in signals.items() if k.startswith("T_")}
     inputs = {k: v for k, v in signals.items() if not k.startswith("T_")}
-    corrected, status, u_um = grid.correct(
-        pts, stylus, temps or None, inputs or None, with_uncertainty=True
+    corrected, status, u_um = grid.correct_with_uncertainty(
+        pts, stylus, temps or None, inputs or None
     )
     out = Path(args.output)
     buf = io.StringIO(newline="")

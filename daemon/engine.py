@@ -281,8 +281,8 @@ class CorrectionEngine:
                     inputs[key] = np.array([float(v) if v else math.nan for v in signs])
             u_rows: list[list[float]] | None = None
             if with_u:
-                out, st, u_arr = loaded.grid.correct(
-                    np.array(pts), stylus, temps, inputs or None, with_uncertainty=True
+                out, st, u_arr = loaded.grid.correct_with_uncertainty(
+                    np.array(pts), stylus, temps, inputs or None
                 )
                 u_rows = u_arr.tolist()
             else:

@@ -62,7 +62,7 @@ def test_interpolated_U_matches_first_order_at_any_point_and_stylus(
     rng = np.random.default_rng(0)
     pts = rng.uniform(machine.volume.lower_mm, machine.volume.upper_mm, (12, 3))
     for stylus in (np.array([0.0, 0.0, -100.0]), np.array([60.0, -45.0, -210.0])):
-        _, status, u_grid = with_u.correct(pts, stylus, TEMPS, with_uncertainty=True)
+        _, status, u_grid = with_u.correct_with_uncertainty(pts, stylus, TEMPS)
         assert np.all(status == "ok")
         oracle = 2.0 * _first_order_u(machine, pts, np.broadcast_to(stylus, pts.shape), TEMPS)
         # Monte Carlo at the nodes: 4 standard errors of a u from TRIALS; plus interpolation
@@ -77,25 +77,28 @@ def test_correction_is_untouched_by_carrying_U(
 ) -> None:
     pts = np.random.default_rng(1).uniform(plain.lower_mm, plain.upper_mm, (300, 3))
     a, sa = plain.correct(pts, (0, 0, -100), TEMPS)
-    b, sb, _ = with_u.correct(pts, (0, 0, -100), TEMPS, with_uncertainty=True)
+    b, sb, _ = with_u.correct_with_uncertainty(pts, (0, 0, -100), TEMPS)
     c, sc = with_u.correct(pts, (0, 0, -100), TEMPS)
     assert np.array_equal(a, b) and np.array_equal(a, c)
     assert list(sa) == list(sb) == list(sc)
     assert plain.correct_point(pts[0], (0, 0, -100), TEMPS) == with_u.correct_point(
         pts[0], (0, 0, -100), TEMPS
     )
+    assert len(with_u.correct(pts[:1], (0, 0, -100), TEMPS)) == 2  # U only when asked by name
+    with pytest.raises(TypeError, match="with_uncertainty"):
+        with_u.correct(pts, (0, 0, -100), TEMPS, with_uncertainty=True)  # type: ignore[call-arg]
 
 
 def test_U_is_nan_unless_the_status_is_ok(plain: CorrectionGrid, with_u: CorrectionGrid) -> None:
     pts = np.array([[100, 100, 100], [np.nan, 0, 0], [5000, 0, 0], [100, 100, 100.0]])
     temps = {"T_x": np.array([20.0, 20.0, 20.0, np.nan]), "T_y": 20.0, "T_wp": 20.0}
-    _, status, u = with_u.correct(pts, (0, 0, -100), temps, with_uncertainty=True)
+    _, status, u = with_u.correct_with_uncertainty(pts, (0, 0, -100), temps)
     assert list(status) == ["ok", "invalid_input", "outside_volume", "no_temperature"]
     assert np.all(np.isfinite(u[0])) and np.all(np.isnan(u[1:]))
-    _, status, u = with_u.correct(pts, (0, 0, -100), temps, outside="clamp", with_uncertainty=True)
+    _, status, u = with_u.correct_with_uncertainty(pts, (0, 0, -100), temps, outside="clamp")
     assert status[2] == "clamped_outside_volume" and np.all(np.isnan(u[2]))
     scalars = {"T_x": 20.0, "T_y": 20.0, "T_wp": 20.0}
-    _, _, none = plain.correct(pts[:1], (0, 0, -100), scalars, with_uncertainty=True)
+    _, _, none = plain.correct_with_uncertainty(pts[:1], (0, 0, -100), scalars)
     assert not plain.has_uncertainty and np.all(np.isnan(none))
     u_plain, st = plain.uncertainty_point(pts[0], (0, 0, -100), scalars)
     assert st == "ok" and np.all(np.isnan(u_plain))
@@ -114,8 +117,8 @@ def test_file_round_trip_is_version_2_and_hashes_the_U_member(
     loaded = CorrectionGrid.load(path)
     assert loaded.sha256 == sha and loaded.has_uncertainty
     pts = np.random.default_rng(2).uniform(with_u.lower_mm, with_u.upper_mm, (40, 3))
-    _, _, u0 = with_u.correct(pts, (0, 0, -100), TEMPS, with_uncertainty=True)
-    _, _, u1 = loaded.correct(pts, (0, 0, -100), TEMPS, with_uncertainty=True)
+    _, _, u0 = with_u.correct_with_uncertainty(pts, (0, 0, -100), TEMPS)
+    _, _, u1 = loaded.correct_with_uncertainty(pts, (0, 0, -100), TEMPS)
     assert np.array_equal(u0, u1)
     with zipfile.ZipFile(path) as zf:
         members = {n.removesuffix(".npy"): np.load(io.BytesIO(zf.read(n))) for n in zf.namelist()}
@@ -210,8 +213,8 @@ def test_grid_with_U_pickles(with_u: CorrectionGrid) -> None:
     again = pickle.loads(pickle.dumps(with_u))
     pts = np.array([[100.0, 200.0, 300.0]])
     assert np.array_equal(
-        again.correct(pts, (0, 0, 0), TEMPS, with_uncertainty=True)[2],
-        with_u.correct(pts, (0, 0, 0), TEMPS, with_uncertainty=True)[2],
+        again.correct_with_uncertainty(pts, (0, 0, 0), TEMPS)[2],
+        with_u.correct_with_uncertainty(pts, (0, 0, 0), TEMPS)[2],
     )
 
 
@@ -257,11 +260,11 @@ def test_compiled_U_equals_the_numpy_formulas(with_u: CorrectionGrid) -> None:
     pts = rng.uniform(with_u.lower_mm, with_u.upper_mm, (n, 3))
     sty = rng.normal(0.0, 80.0, (n, 3))
     temps = {"T_x": rng.uniform(17, 25, n), "T_y": 21.0, "T_wp": rng.uniform(18, 24, n)}
-    _, status, u = with_u.correct(pts, sty, temps, with_uncertainty=True)
+    _, status, u = with_u.correct_with_uncertainty(pts, sty, temps)
     assert np.all(status == "ok")
     cov = np.empty((n, 15))
-    tables = with_u._u_tables()
-    eval_spline(pts, *tables, gu.coefficients(with_u.axes), cov)
+    tables = tuple(with_u.kernel_tables.spline)
+    eval_spline(pts, tables, gu.coefficients(with_u.axes), cov)
     full = {k: np.broadcast_to(np.asarray(v, float), (n,)) for k, v in temps.items()}
     var = variance_from_covariance(cov, sty) + gu.thermal.variance_um2(pts, full) + gu.probe_um**2
     assert np.allclose(u, 2.0 * np.sqrt(var), rtol=1e-12, atol=1e-12)

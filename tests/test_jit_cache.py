@@ -17,11 +17,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-from cmm_comp.compensation.grid import kernels
+from cmm_comp.compensation.grid import quaternion_kernels
 
 NO_LOCATOR = {"NUMBA_CACHE_LOCATOR_CLASSES": "ZipCacheLocator"}
 MODULES = (
     "cmm_comp.compensation.grid.kernels",
+    "cmm_comp.compensation.grid.quaternion_kernels",
     "cmm_comp.compensation.grid.uncertainty",
     "cmm_comp.compensation.uncertainty.chain_kernel",
 )
@@ -48,14 +49,14 @@ def test_kernels_import_and_compute_without_a_cache(tmp_path: Path) -> None:
     code = (
         "import importlib, json\n"
         f"for m in {MODULES!r}: importlib.import_module(m)\n"
-        "from cmm_comp.compensation.grid import kernels as k\n"
+        "from cmm_comp.compensation.grid import kernels as k, quaternion_kernels as qk\n"
         "print(json.dumps({'cache': k.kernels_cache_dir(),\n"
-        "                  'q': list(k._qmul(0.9, 0.1, -0.2, 0.3, 0.5, -0.5, 0.5, 0.5)),\n"
-        "                  'exp': list(k._qexp(1e-3, 2e-3, -3e-3))}))\n"
+        "                  'q': list(qk.qmul(0.9, 0.1, -0.2, 0.3, 0.5, -0.5, 0.5, 0.5)),\n"
+        "                  'exp': list(qk.qexp(1e-3, 2e-3, -3e-3))}))\n"
     )
     run = _python(code, tmp_path)
     assert run.returncode == 0, run.stderr
     out = json.loads(run.stdout)
     assert out["cache"] is None  # compiled in memory
-    assert out["q"] == list(kernels._qmul(0.9, 0.1, -0.2, 0.3, 0.5, -0.5, 0.5, 0.5))
-    assert out["exp"] == list(kernels._qexp(1e-3, 2e-3, -3e-3))
+    assert out["q"] == list(quaternion_kernels.qmul(0.9, 0.1, -0.2, 0.3, 0.5, -0.5, 0.5, 0.5))
+    assert out["exp"] == list(quaternion_kernels.qexp(1e-3, 2e-3, -3e-3))

@@ -18,14 +18,12 @@ from .export import (
     ExportOptions,
     ExportResult,
     describe,
-    direction_combinations,
-    evaluation_points,
     export_tables,
-    measure_residual,
     validate_axes,
 )
 from .limits import ExportError
 from .plan import Plan
+from .residual import direction_combinations, evaluation_points, measure_residual
 from .splines import Knots
 
 __all__ = [

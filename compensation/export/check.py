@@ -154,7 +154,7 @@ def check_tables(
         )
     kn = _check_knots(machine, input_axis)
     unit, inside, outside = _step_values(kn)
-    a, k = AXES[input_axis].upper(), AXES[output_axis].upper()
+    axes = (input_axis, output_axis)
     report: dict[str, Any] = {
         "format": fmt,
         "machine": machine.name,
@@ -166,48 +166,81 @@ def check_tables(
         "outside_mm": outside,
         "expected_output_move_mm": {"documented": -CHECK_STEP_MM, "opposite": CHECK_STEP_MM},
     }
-    files: dict[str, str] = {}
     if fmt == "sinumerik-cec":
-        table = CecTable(input_axis, output_axis, kn, np.round(unit * CHECK_STEP_MM, 4))
-        table.role = f"SIGN CHECK: +{CHECK_STEP_MM:.4f} mm on {k} around {a} = {inside:g} mm"
-        header = [
-            f"cmm-comp export --check-table: SIGN CHECK for {machine.name} - not a compensation;",
-            "load it alone, check with a dial indicator (check-table.txt), then remove it",
-        ]
-        files["NC_CEC.INI"] = render_cec([table], axis_names, header)
-        text = _cec_sign_text(machine, report, axis_names, input_axis, output_axis)
-        if products:
-            prod_files, prod_report, prod_text = _cec_product_check(
-                machine, input_axis, output_axis, axis_names
-            )
-            files.update(prod_files)
-            report["product_check"] = prod_report
-            text += "\n" + prod_text
-        report["unverified"] = unverified(fmt, products=products)
+        files, text = _cec_check(machine, report, kn, unit, axes, axis_names, products)
     else:
-        lo_k, hi_k = machine.volume.lower_mm[output_axis], machine.volume.upper_mm[output_axis]
-        lead = make_knots(output_axis, float(lo_k), float(hi_k), 2, 1e-4)
-        entry = TwinCatList(
-            output_axis,
-            lead,
-            np.zeros(2, np.int64),
-            np.zeros(2, np.int64),
-            False,
-            input_axis,
-            kn,
-            np.round(unit * CHECK_STEP_MM * 1e4).astype(np.int64),
-        )
-        header = [
-            f"cmm-comp export --check-table: SIGN CHECK of the cross compensation, {machine.name};",
-            "not a compensation: load it alone, check with a dial indicator, then remove it",
-        ]
-        nr = axis_numbers[output_axis]
-        files[f"achskw{nr}.lis"] = render_twincat(entry, axis_numbers, axis_names, header)
-        files["startup-snippet.txt"] = render_startup([entry], axis_numbers)
-        text = _twincat_sign_text(machine, report, axis_numbers, input_axis, output_axis)
-        report["unverified"] = unverified(fmt, cross=True)
+        files, text = _twincat_check(machine, report, kn, unit, axes, axis_names, axis_numbers)
     files["check-table.txt"] = text
     return CheckResult(fmt, files, text, report)
+
+
+def _cec_check(
+    machine: Machine,
+    report: dict[str, Any],
+    kn: Knots,
+    unit: np.ndarray,
+    axes: tuple[int, int],
+    axis_names: Sequence[str],
+    products: bool,
+) -> tuple[dict[str, str], str]:
+    """The CEC sign check of ``axes`` (input, output) (and with ``products`` the product
+    check): files and instructions; ``report`` gets the format's entries."""
+    input_axis, output_axis = axes
+    a, k = AXES[input_axis].upper(), AXES[output_axis].upper()
+    inside = report["inside_mm"]
+    table = CecTable(input_axis, output_axis, kn, np.round(unit * CHECK_STEP_MM, 4))
+    table.role = f"SIGN CHECK: +{CHECK_STEP_MM:.4f} mm on {k} around {a} = {inside:g} mm"
+    header = [
+        f"cmm-comp export --check-table: SIGN CHECK for {machine.name} - not a compensation;",
+        "load it alone, check with a dial indicator (check-table.txt), then remove it",
+    ]
+    files = {"NC_CEC.INI": render_cec([table], axis_names, header)}
+    text = _cec_sign_text(machine, report, axis_names, input_axis, output_axis)
+    if products:
+        prod_files, prod_report, prod_text = _cec_product_check(
+            machine, input_axis, output_axis, axis_names
+        )
+        files.update(prod_files)
+        report["product_check"] = prod_report
+        text += "\n" + prod_text
+    report["unverified"] = unverified("sinumerik-cec", products=products)
+    return files, text
+
+
+def _twincat_check(
+    machine: Machine,
+    report: dict[str, Any],
+    kn: Knots,
+    unit: np.ndarray,
+    axes: tuple[int, int],
+    axis_names: Sequence[str],
+    axis_numbers: Sequence[int],
+) -> tuple[dict[str, str], str]:
+    """The TwinCAT cross-compensation sign check of ``axes`` (input, output): files and
+    instructions; ``report`` gets the format's entries."""
+    input_axis, output_axis = axes
+    lo_k, hi_k = machine.volume.lower_mm[output_axis], machine.volume.upper_mm[output_axis]
+    lead = make_knots(output_axis, float(lo_k), float(hi_k), 2, 1e-4)
+    entry = TwinCatList(
+        output_axis,
+        lead,
+        np.zeros(2, np.int64),
+        np.zeros(2, np.int64),
+        False,
+        input_axis,
+        kn,
+        np.round(unit * CHECK_STEP_MM * 1e4).astype(np.int64),
+    )
+    header = [
+        f"cmm-comp export --check-table: SIGN CHECK of the cross compensation, {machine.name};",
+        "not a compensation: load it alone, check with a dial indicator, then remove it",
+    ]
+    nr = axis_numbers[output_axis]
+    files = {f"achskw{nr}.lis": render_twincat(entry, axis_numbers, axis_names, header)}
+    files["startup-snippet.txt"] = render_startup([entry], axis_numbers)
+    text = _twincat_sign_text(machine, report, axis_numbers, input_axis, output_axis)
+    report["unverified"] = unverified("twincat-cnc", cross=True)
+    return files, text
 
 
 def _indicator_steps(k: str) -> list[str]:

@@ -14,7 +14,6 @@ import math
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from itertools import product
 from typing import Any
 
 import numpy as np
@@ -22,10 +21,11 @@ import numpy as np
 from ..machine import Machine
 from ..parametric_errors import AXES
 from .check import unverified
-from .decompose import Decomposition, decompose, direction_axes, model_error_um
+from .decompose import Decomposition, decompose, direction_axes
 from .limits import POINT_LIMITS, ExportError
 from .linuxcnc import build_linuxcnc, linuxcnc_error_um, render_linuxcnc
 from .plan import Plan, left_out, own_axis_plan
+from .residual import direction_combinations, measure_residual
 from .sinumerik import build_cec, cec_correction_mm, render_cec, total_extremes_mm
 from .splines import FloatArray, Knots, make_knots
 from .twincat import build_twincat, render_startup, render_twincat, twincat_error_um
@@ -44,7 +44,6 @@ FORMATS = ("sinumerik-cec", "twincat-cnc", "linuxcnc")
 _QUANTUM_MM = 1e-4  # positions: 0.1 µm (TwinCAT's length unit; 4 decimals in the other files)
 _MAX_EVAL_STEPS = 201
 _MAX_EVAL_POINTS = 2_000_000  # grid nodes × direction combinations
-_CHUNK = 100_000  # points per model evaluation (bounds the memory)
 #: points per table this exporter fits (the fit's memory grows ~0.35 MB per point: 4001 → 1.5 GB)
 _MAX_TABLE_POINTS = 5000
 
@@ -178,66 +177,6 @@ def _check_eval_steps(steps: Sequence[int]) -> tuple[int, int, int]:
     return int(steps[0]), int(steps[1]), int(steps[2])
 
 
-def _stats(r: FloatArray, what: str) -> dict[str, Any]:
-    """RMS and max µm of the 3-D vector and per axis; :class:`ExportError` naming ``what`` when
-    one is not a finite number (an error so large that its square overflows, or a table value
-    beyond what the control's arithmetic holds): never a NaN/inf figure reported as a result."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        norm = np.linalg.norm(r, axis=1)
-        rms, peak = float(np.sqrt(np.mean(norm**2))), float(np.max(norm))
-        per_axis = {
-            AXES[k]: {
-                "rms": float(np.sqrt(np.mean(r[:, k] ** 2))),
-                "max": float(np.max(np.abs(r[:, k]))),
-            }
-            for k in range(3)
-        }
-    figures = [rms, peak] + [v for a in per_axis.values() for v in a.values()]
-    if not all(math.isfinite(v) for v in figures):
-        raise ExportError(
-            f"{what} over the working volume is not a finite number (RMS {rms:g} µm, "
-            f"max {peak:g} µm): the machine description's errors are too large to "
-            "export; check its error tables (µm, µrad)"
-        )
-    return {"rms": rms, "max": peak, "per_axis": per_axis}
-
-
-def evaluation_points(machine: Machine, steps: Sequence[int]) -> FloatArray:
-    """The evaluation grid (N, 3) mm: ``steps`` nodes per axis over the volume, C order."""
-    nodes = machine.volume.nodes(tuple(int(s) for s in steps))  # type: ignore[arg-type]
-    mesh = np.meshgrid(*nodes, indexing="ij")
-    return np.stack([m.ravel() for m in mesh], axis=1)
-
-
-def direction_combinations(dir_axes: Sequence[int]) -> list[dict[int, float]]:
-    """Every combination of ±1 for the axes whose error depends on the direction ({} if none)."""
-    return [dict(zip(dir_axes, c, strict=True)) for c in product((1.0, -1.0), repeat=len(dir_axes))]
-
-
-def measure_residual(
-    machine: Machine,
-    tool_mm: FloatArray,
-    represented_um: Callable[[FloatArray, FloatArray], FloatArray],
-    steps: Sequence[int],
-) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(residual, uncompensated) statistics µm over the evaluation grid and direction
-    combinations: residual = model error − the error the tables take off."""
-    q_all = evaluation_points(machine, steps)
-    res, raw = [], []
-    for combo in direction_combinations(direction_axes(machine)):
-        for start in range(0, len(q_all), _CHUNK):
-            q = q_all[start : start + _CHUNK]
-            e = model_error_um(machine, q, tool_mm, combo)
-            dirs = np.ones_like(q)
-            for a, s in combo.items():
-                dirs[:, a] = s
-            with np.errstate(over="ignore", invalid="ignore"):
-                res.append(e - represented_um(q, dirs))
-            raw.append(e)
-    raw_stats = _stats(np.concatenate(raw), "the model's error")
-    return _stats(np.concatenate(res), "the residual after the written tables"), raw_stats
-
-
 def _header(machine: Machine, fmt: str, tool: FloatArray) -> list[str]:
     return [
         f"cmm-comp export --format {fmt}: {machine.name} ({machine.model})",
@@ -259,9 +198,35 @@ def export_tables(
     (default: the machine's probe offset). :class:`ExportError` names any limit it cannot meet.
 
     Floating-point overflow on the way (errors of absurd size) is not warned about here: the
-    measured residual is checked to be finite at the end (:func:`_stats`)."""
+    measured residual is checked to be finite at the end (:func:`.residual.error_stats`)."""
     with np.errstate(over="ignore", invalid="ignore"):
         return _export_tables(machine, fmt, tool_mm, options, progress)
+
+
+@dataclass
+class _Written:
+    """One format's tables in memory: ``files`` (name → text), a row per table for the report,
+    the error they take off (``represented(q_mm, dirs) → µm``), the plan, and the format's
+    own report entries (``limits``, ``unverified`` …)."""
+
+    files: dict[str, str]
+    tables: list[dict[str, Any]]
+    represented: Callable[[FloatArray, FloatArray], FloatArray]
+    plan: Plan
+    extra: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """The checked inputs of an export: tool offset (mm), evaluation steps, points per table
+    and axis, the format's point limit and its source, and the table positions per axis."""
+
+    tool: FloatArray
+    steps: tuple[int, int, int]
+    counts: list[int]
+    limit: int
+    source: str
+    knots: tuple[Knots, Knots, Knots]
 
 
 def _export_tables(
@@ -275,6 +240,24 @@ def _export_tables(
         raise ExportError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     opts = options or ExportOptions()
     say = progress or (lambda _line: None)
+    setup = _setup(machine, fmt, tool_mm, opts)
+    ranks = 2 if (fmt == "sinumerik-cec" and opts.products) else 0
+    counts = setup.counts
+    say(f"fitting {fmt} tables ({counts[0]}/{counts[1]}/{counts[2]} points on X/Y/Z)")
+    d = decompose(machine, setup.tool, setup.knots, interaction_ranks=ranks)
+    header = _header(machine, fmt, setup.tool)
+    write = {"sinumerik-cec": _sinumerik, "twincat-cnc": _twincat, "linuxcnc": _linuxcnc}[fmt]
+    out = write(machine, d, opts, setup, header)
+    say("measuring the residual as the control interpolates")
+    residual, raw = measure_residual(machine, setup.tool, out.represented, setup.steps)
+    report = _report(machine, fmt, setup, d, out, residual, raw)
+    return ExportResult(fmt, out.files, report, out.tables, out.represented, d, out.plan, residual)
+
+
+def _setup(
+    machine: Machine, fmt: str, tool_mm: Sequence[float] | FloatArray | None, opts: ExportOptions
+) -> _Setup:
+    """The export's inputs checked (:class:`ExportError` naming the limit) before any fit."""
     if tool_mm is None:
         tool = _check_tool(machine, machine.probe.offset_mm, "the machine's probe offset (--tool)")
     else:
@@ -307,69 +290,42 @@ def _export_tables(
                 f"{kn.count} points {_QUANTUM_MM * 1000:g} µm apart or more (the position "
                 f"resolution written): {hint}"
             )
-    ranks = 2 if (fmt == "sinumerik-cec" and opts.products) else 0
-    say(f"fitting {fmt} tables ({counts[0]}/{counts[1]}/{counts[2]} points on X/Y/Z)")
-    d = decompose(machine, tool, knots, interaction_ranks=ranks)
-    header = _header(machine, fmt, tool)
-    files: dict[str, str] = {}
-    tables_info: list[dict[str, Any]] = []
-    extra: dict[str, Any] = {}
-    represented: Callable[[FloatArray, FloatArray], FloatArray]
-    if fmt == "sinumerik-cec":
-        if opts.max_tables < 1:
-            raise ExportError(f"--max-tables must be at least 1, got {opts.max_tables}")
-        if not (0 < opts.cec_max_sum_mm < math.inf):
+    return _Setup(tool, steps, counts, limit, source, knots)
+
+
+def _sinumerik(
+    machine: Machine, d: Decomposition, opts: ExportOptions, setup: _Setup, header: list[str]
+) -> _Written:
+    """Siemens CEC tables (``NC_CEC.INI``): within the table count and MD32720's total."""
+    if opts.max_tables < 1:
+        raise ExportError(f"--max-tables must be at least 1, got {opts.max_tables}")
+    if not (0 < opts.cec_max_sum_mm < math.inf):
+        raise ExportError(f"--cec-max-sum-mm must be a positive number, got {opts.cec_max_sum_mm}")
+    sign = -1 if opts.invert_sign else 1
+    cec, plan = build_cec(
+        d, max_tables=opts.max_tables, products=opts.products, sign=sign, min_rms_um=opts.min_rms_um
+    )
+    peak, exact = total_extremes_mm(cec, d.direction_axes)
+    for k in range(3):
+        if peak[k] > opts.cec_max_sum_mm:
             raise ExportError(
-                f"--cec-max-sum-mm must be a positive number, got {opts.cec_max_sum_mm}"
+                f"sinumerik-cec: the total compensation of {AXES[k].upper()} reaches "
+                f"{'' if exact else 'up to '}{peak[k]:.4f} mm, above MD32720 $MA_CEC_MAX_SUM = {opts.cec_max_sum_mm:g} mm "
+                "(the control would limit it and raise an alarm, leaving a wrong correction): "
+                "set --cec-max-sum-mm to your control's value, or correct the gross errors first"
             )
-        sign = -1 if opts.invert_sign else 1
-        cec, plan = build_cec(
-            d,
-            max_tables=opts.max_tables,
-            products=opts.products,
-            sign=sign,
-            min_rms_um=opts.min_rms_um,
-        )
-        peak, exact = total_extremes_mm(cec, d.direction_axes)
-        for k in range(3):
-            if peak[k] > opts.cec_max_sum_mm:
-                raise ExportError(
-                    f"sinumerik-cec: the total compensation of {AXES[k].upper()} reaches "
-                    f"{'' if exact else 'up to '}{peak[k]:.4f} mm, above MD32720 $MA_CEC_MAX_SUM = {opts.cec_max_sum_mm:g} mm "
-                    "(the control would limit it and raise an alarm, leaving a wrong correction): "
-                    "set --cec-max-sum-mm to your control's value, or correct the gross errors first"
-                )
-        files["NC_CEC.INI"] = render_cec(cec, opts.cec_axis_names, header)
+    files = {"NC_CEC.INI": render_cec(cec, opts.cec_axis_names, header)}
 
-        def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
-            # the axis moves by minus the total (K3's sign statement; docs/export.md)
-            return sign * 1000.0 * cec_correction_mm(cec, q, dirs)
+    def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
+        # the axis moves by minus the total (K3's sign statement; docs/export.md)
+        return sign * 1000.0 * cec_correction_mm(cec, q, dirs)
 
-        for i, t in enumerate(cec):
-            tables_info.append(
-                {
-                    "table": i,
-                    "input": AXES[t.input_axis],
-                    "output": AXES[t.output_axis],
-                    "role": t.role,
-                    "direction": t.direction,
-                    "mult_by_table": None if t.mult_by is None else t.mult_by + 1,
-                    "points": t.knots.count,
-                    "min_mm": t.knots.start_mm,
-                    "max_mm": t.knots.end_mm,
-                    "step_mm": t.knots.step_mm,
-                    "max_abs_mm": round(float(np.max(np.abs(t.values_mm))), 7),
-                    # what the compensation asks of the output axis per mm of the input axis
-                    "max_slope_um_per_mm": round(
-                        1000.0 * float(np.max(np.abs(np.diff(t.values_mm)))) / t.knots.step_mm, 6
-                    ),
-                }
-            )
-        extra["limits"] = {
+    extra: dict[str, Any] = {
+        "limits": {
             "max_tables": opts.max_tables,
             "tables_written": len(cec),
-            "max_points": limit,
-            "points_source": source,
+            "max_points": setup.limit,
+            "points_source": setup.source,
             "cec_max_sum_mm": opts.cec_max_sum_mm,
             "total_compensation_peak_mm": peak.tolist(),
             "total_compensation_peak_exact": exact,
@@ -380,97 +336,151 @@ def _export_tables(
                 (1000.0 * float(np.max(np.abs(t.values_mm))) for t in cec if t.mult_by is not None),
                 default=0.0,
             ),
-        }
-        extra["unverified"] = unverified(fmt, products=bool(plan.products))
-        if opts.products and plan.products:
-            flat, _ = build_cec(
-                d, max_tables=opts.max_tables, products=False, sign=sign, min_rms_um=opts.min_rms_um
-            )
-            extra["residual_without_products_um"] = measure_residual(
-                machine, tool, lambda q, s: sign * 1000.0 * cec_correction_mm(flat, q, s), steps
-            )[0]
-    elif fmt == "twincat-cnc":
-        plan = own_axis_plan(d, cross=opts.twincat_cross, min_rms_um=opts.min_rms_um)
-        cross_sign = -1 if opts.invert_sign else 1
-        lists = build_twincat(plan, knots, cross_sign)
-        for entry in lists:
-            nr = opts.twincat_axis_numbers[entry.axis]
-            files[f"achskw{nr}.lis"] = render_twincat(
-                entry, opts.twincat_axis_numbers, opts.twincat_axis_names, header
-            )
-            tables_info.append(
-                {
-                    "list": f"achskw{nr}.lis",
-                    "axis": AXES[entry.axis],
-                    "leadscrew_points": entry.knots.count,
-                    "bilateral": entry.bilateral,
-                    "cross_master": None
-                    if entry.cross_master is None
-                    else AXES[entry.cross_master],
-                    "cross_points": None if entry.cross_knots is None else entry.cross_knots.count,
-                }
-            )
-        files["startup-snippet.txt"] = render_startup(lists, opts.twincat_axis_numbers)
+        },
+        "unverified": unverified("sinumerik-cec", products=bool(plan.products)),
+    }
+    if opts.products and plan.products:
+        flat, _ = build_cec(
+            d, max_tables=opts.max_tables, products=False, sign=sign, min_rms_um=opts.min_rms_um
+        )
+        extra["residual_without_products_um"] = measure_residual(
+            machine,
+            setup.tool,
+            lambda q, s: sign * 1000.0 * cec_correction_mm(flat, q, s),
+            setup.steps,
+        )[0]
+    return _Written(files, [_cec_row(i, t) for i, t in enumerate(cec)], represented, plan, extra)
 
-        def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
-            return twincat_error_um(lists, q, dirs, cross_sign)
 
-        extra["limits"] = {
-            "max_points": limit,
-            "points_source": source,
+def _cec_row(i: int, t: Any) -> dict[str, Any]:
+    """The report's row of CEC table ``i``."""
+    return {
+        "table": i,
+        "input": AXES[t.input_axis],
+        "output": AXES[t.output_axis],
+        "role": t.role,
+        "direction": t.direction,
+        "mult_by_table": None if t.mult_by is None else t.mult_by + 1,
+        "points": t.knots.count,
+        "min_mm": t.knots.start_mm,
+        "max_mm": t.knots.end_mm,
+        "step_mm": t.knots.step_mm,
+        "max_abs_mm": round(float(np.max(np.abs(t.values_mm))), 7),
+        # what the compensation asks of the output axis per mm of the input axis
+        "max_slope_um_per_mm": round(
+            1000.0 * float(np.max(np.abs(np.diff(t.values_mm)))) / t.knots.step_mm, 6
+        ),
+    }
+
+
+def _twincat(
+    machine: Machine, d: Decomposition, opts: ExportOptions, setup: _Setup, header: list[str]
+) -> _Written:
+    """Beckhoff TwinCAT CNC axis compensation lists (``achskw<n>.lis``) and the start-up lines."""
+    plan = own_axis_plan(d, cross=opts.twincat_cross, min_rms_um=opts.min_rms_um)
+    cross_sign = -1 if opts.invert_sign else 1
+    lists = build_twincat(plan, setup.knots, cross_sign)
+    files: dict[str, str] = {}
+    rows: list[dict[str, Any]] = []
+    for entry in lists:
+        nr = opts.twincat_axis_numbers[entry.axis]
+        files[f"achskw{nr}.lis"] = render_twincat(
+            entry, opts.twincat_axis_numbers, opts.twincat_axis_names, header
+        )
+        rows.append(
+            {
+                "list": f"achskw{nr}.lis",
+                "axis": AXES[entry.axis],
+                "leadscrew_points": entry.knots.count,
+                "bilateral": entry.bilateral,
+                "cross_master": None if entry.cross_master is None else AXES[entry.cross_master],
+                "cross_points": None if entry.cross_knots is None else entry.cross_knots.count,
+            }
+        )
+    files["startup-snippet.txt"] = render_startup(lists, opts.twincat_axis_numbers)
+
+    def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
+        return twincat_error_um(lists, q, dirs, cross_sign)
+
+    extra = {
+        "limits": {
+            "max_points": setup.limit,
+            "points_source": setup.source,
             "value_range": "SGN32 in 0.1 µm",
-        }
-        extra["unverified"] = unverified(fmt, cross=any(e.cross_master is not None for e in lists))
-    else:
-        plan = own_axis_plan(d, cross=False, min_rms_um=opts.min_rms_um)
-        joints = build_linuxcnc(plan, knots, opts.linuxcnc_file_type)
-        for j in joints:
-            n = opts.linuxcnc_joints[j.axis]
-            files[f"joint{n}.comp"] = render_linuxcnc(j)
-            tables_info.append(
-                {
-                    "file": f"joint{n}.comp",
-                    "joint": n,
-                    "axis": AXES[j.axis],
-                    "points": len(j.nominal_mm),
-                    "file_type": j.file_type,
-                }
-            )
-        files["linuxcnc-joints.ini"] = _linuxcnc_ini(joints, opts, header)
+        },
+        "unverified": unverified(
+            "twincat-cnc", cross=any(e.cross_master is not None for e in lists)
+        ),
+    }
+    return _Written(files, rows, represented, plan, extra)
 
-        def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
-            return linuxcnc_error_um(joints, q, dirs)
 
-        extra["limits"] = {"max_points": limit, "points_source": source}
-    say("measuring the residual as the control interpolates")
-    residual, raw = measure_residual(machine, tool, represented, steps)
-    report: dict[str, Any] = {
+def _linuxcnc(
+    machine: Machine, d: Decomposition, opts: ExportOptions, setup: _Setup, header: list[str]
+) -> _Written:
+    """LinuxCNC joint compensation files (``joint<n>.comp``) and the INI lines naming them."""
+    plan = own_axis_plan(d, cross=False, min_rms_um=opts.min_rms_um)
+    joints = build_linuxcnc(plan, setup.knots, opts.linuxcnc_file_type)
+    files: dict[str, str] = {}
+    rows: list[dict[str, Any]] = []
+    for j in joints:
+        n = opts.linuxcnc_joints[j.axis]
+        files[f"joint{n}.comp"] = render_linuxcnc(j)
+        rows.append(
+            {
+                "file": f"joint{n}.comp",
+                "joint": n,
+                "axis": AXES[j.axis],
+                "points": len(j.nominal_mm),
+                "file_type": j.file_type,
+            }
+        )
+    files["linuxcnc-joints.ini"] = _linuxcnc_ini(joints, opts, header)
+
+    def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
+        return linuxcnc_error_um(joints, q, dirs)
+
+    extra = {"limits": {"max_points": setup.limit, "points_source": setup.source}}
+    return _Written(files, rows, represented, plan, extra)
+
+
+def _report(
+    machine: Machine,
+    fmt: str,
+    setup: _Setup,
+    d: Decomposition,
+    out: _Written,
+    residual: dict[str, Any],
+    raw: dict[str, Any],
+) -> dict[str, Any]:
+    """The export's JSON report (docs/export.md)."""
+    combos = len(direction_combinations(d.direction_axes))
+    return {
         "format": fmt,
         "machine": machine.name,
         "model": machine.model,
         "machine_sha256": machine.identity_sha256(),
         "source": machine.source,
-        "tool_mm": tool.tolist(),
+        "tool_mm": setup.tool.tolist(),
         "temperatures_C": "reference",
         "reference_C": machine.thermal.reference_C,
-        "files": sorted(files),
-        "tables": tables_info,
-        "points_per_axis": counts,
+        "files": sorted(out.files),
+        "tables": out.tables,
+        "points_per_axis": setup.counts,
         "evaluation": {
-            "grid_steps": list(steps),
+            "grid_steps": list(setup.steps),
             "direction_axes": [AXES[a] for a in d.direction_axes],
-            "direction_combinations": len(direction_combinations(d.direction_axes)),
-            "points": int(np.prod(steps)) * len(direction_combinations(d.direction_axes)),
+            "direction_combinations": combos,
+            "points": int(np.prod(setup.steps)) * combos,
         },
         "uncompensated_um": raw,
         "residual_um": residual,
-        "left_out": _with_remainder(left_out(d, plan), residual),
+        "left_out": _with_remainder(left_out(d, out.plan), residual),
         "not_modelled_here": _runtime_parts(machine),
         "convention": "error = true - indicated (µm); residual = model error - what the tables "
         "take off, evaluated as the control interpolates; RMS and max of the 3-D vector",
-        **extra,
+        **out.extra,
     }
-    return ExportResult(fmt, files, report, tables_info, represented, d, plan, residual)
 
 
 def _with_remainder(rows: list[dict[str, Any]], residual: dict[str, Any]) -> list[dict[str, Any]]:

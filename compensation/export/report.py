@@ -20,8 +20,9 @@ from matplotlib.figure import Figure
 
 from ..parametric_errors import AXES
 from .decompose import model_error_um
-from .export import ExportResult, direction_combinations, evaluation_points
+from .export import ExportResult
 from .limits import ExportError
+from .residual import direction_combinations, evaluation_points
 
 __all__ = ["export_figure_png", "export_html", "report_json"]
 

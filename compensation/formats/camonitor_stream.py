@@ -342,16 +342,12 @@ def _cycles(
     ), "motion (a new cycle at each start of a forward pass)"
 
 
-def align_streams(
-    log: Mapping[str, PvSeries], opts: StreamOptions, progress: Progress | None = None
-) -> AlignedStream:
-    """Align the position and reference streams of ``log`` (see the module docstring).
-
-    Raises:
-        RealDataError: a PV is missing or has too few samples, the streams do not overlap, the
-            reference does not follow the position, or no sample is left to keep.
-    """
-    say = progress or (lambda _msg: None)
+def _read_streams(
+    log: Mapping[str, PvSeries], opts: StreamOptions
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, dict[str, float], list[str]]:
+    """The reference (times s, raw values) and position (times s, mm) streams, isolated spikes
+    left out; the position from the encoder PV when one is given (its counts mapped onto the
+    position PV at rest); the timestamp jitter of each (s) and notes for the report."""
     tr, raw, ref_spikes = _series(log, opts.reference_pv, "reference")
     tp, xp, pos_spikes = _series(log, opts.position_pv, "position")
     notes: list[str] = []
@@ -374,6 +370,46 @@ def align_streams(
         )
         tp, xp = te, g * enc_counts + o
         jitter["position"] = jitter.pop("encoder")
+    return tr, raw, tp, xp, jitter, notes
+
+
+def _kept(
+    inside: NDArray[np.bool_],
+    direction: NDArray[np.int64],
+    cycle: NDArray[np.int64],
+    state: NDArray[np.str_],
+    v: FloatArray,
+    opts: StreamOptions,
+) -> tuple[NDArray[np.bool_], dict[str, int]]:
+    """The reference samples kept (within the position stream, a known direction, a cycle of
+    the test, not accelerating and not too fast unless asked) and how many went where."""
+    keep = inside & (direction != 0) & (cycle > 0)
+    counts = {
+        "reference_samples": int(inside.size),
+        "outside_position_stream": int((~inside).sum()),
+        "direction_unknown": int((inside & (direction == 0)).sum()),
+        "outside_cycles": int((inside & (direction != 0) & (cycle == 0)).sum()),
+    }
+    if not opts.keep_accelerating:
+        counts["accelerating"] = int((keep & (state == "accelerating")).sum())
+        keep &= state != "accelerating"
+    if opts.max_speed_mm_s is not None:
+        counts["too_fast"] = int((keep & (np.abs(v) > opts.max_speed_mm_s)).sum())
+        keep &= np.abs(v) <= opts.max_speed_mm_s
+    return keep, counts
+
+
+def align_streams(
+    log: Mapping[str, PvSeries], opts: StreamOptions, progress: Progress | None = None
+) -> AlignedStream:
+    """Align the position and reference streams of ``log`` (see the module docstring).
+
+    Raises:
+        RealDataError: a PV is missing or has too few samples, the streams do not overlap, the
+            reference does not follow the position, or no sample is left to keep.
+    """
+    say = progress or (lambda _msg: None)
+    tr, raw, tp, xp, jitter, notes = _read_streams(log, opts)
     lo, hi = max(tr[0], tp[0], 0.0), min(tr[-1], tp[-1])
     if hi <= lo:
         raise RealDataError(
@@ -388,8 +424,7 @@ def align_streams(
         g0, o0 = _fit_map(raw[at_rest], motion.at(tr[at_rest]), opts.reference_scale)
     else:
         g0, o0 = _fit_map(raw[inside], motion.at(tr[inside]), opts.reference_scale)
-    k0 = motion.interval(tr)
-    cycle, cycles_from = _cycles(log, opts, tr, motion.direction[k0])
+    cycle, cycles_from = _cycles(log, opts, tr, motion.direction[motion.interval(tr)])
     in_test = tr[cycle > 0]
     if in_test.size < 3:
         raise RealDataError("no reference sample lies within a cycle of the test")
@@ -408,21 +443,7 @@ def align_streams(
     if not _has_test_numbers(log, opts):  # the motion's cycles, with the aligned directions
         cycle, cycles_from = _cycles(log, opts, tr, direction)
     v, a = np.where(motion.rest[k], 0.0, motion.v[k]), motion.a[k]
-    keep = inside & (direction != 0) & (cycle > 0)
-    counts = {
-        "reference_samples": int(tr.size),
-        "outside_position_stream": int((~inside).sum()),
-        "direction_unknown": int((inside & (direction == 0)).sum()),
-        "outside_cycles": int((inside & (direction != 0) & (cycle == 0)).sum()),
-    }
-    if not opts.keep_accelerating:
-        counts["accelerating"] = int((keep & (state == "accelerating")).sum())
-        keep &= state != "accelerating"
-    if opts.max_speed_mm_s is not None:
-        counts["too_fast"] = int((keep & (np.abs(v) > opts.max_speed_mm_s)).sum())
-        keep &= np.abs(v) <= opts.max_speed_mm_s
-    if keep.sum() < 3:
-        raise RealDataError(f"only {int(keep.sum())} reference sample(s) left after alignment")
+    keep, counts = _kept(inside, direction, cycle, state, v, opts)
     x = motion.at(tq[keep])
     gain, offset = _fit_map(raw[keep], x, opts.reference_scale)
     h = float(np.median(np.diff(motion.t)))

@@ -396,9 +396,34 @@ def write_seed_fileset(machine: Machine, directory: str | Path, name: str) -> li
     if desc.get("effects"):
         raise ValueError("effects cannot be written as seed files (use machine.toml)")
     spec = name.upper()
-    texts: dict[str, str] = {}
     head = f"MACHINE {spec}\nTYPE {machine.model}\n"
+    texts = {f"{spec}S.CTL": _ctl_text(machine, spec, head)}
+    texts.update(_error_texts(desc.get("errors", {}), spec, head))
+    texts.update(_squareness_texts(desc.get("squareness", {}), spec, head))
+    for ext, axis in THERMAL_EXT.items():
+        coef = float(machine.thermal.expansion[AXES.index(axis)])
+        texts[f"{spec}S.{ext}"] = (
+            f"# {spec}S.{ext}: expansion coefficient of {axis.upper()}, µm/(m·°C)\n"
+            f"{head}VALUE {_fmt(coef)}\n"
+        )
 
+    out_dir = Path(directory)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stale = index_seed_files(out_dir).get(spec, {})
+    for (kind, ext), path in stale.items():  # a previous set of this machine: no leftovers
+        if f"{spec}{kind}.{ext}" not in texts:
+            path.unlink()
+    written = []
+    for fname, text in texts.items():
+        path = out_dir / fname
+        path.write_text(text, encoding="utf-8")
+        written.append(path)
+    return written
+
+
+def _ctl_text(machine: Machine, spec: str, head: str) -> str:
+    """The master control file ``<spec>S.CTL`` (section 3.2): volume, probe, thermal, arm."""
+    desc: Mapping[str, Any] = machine.description
     vol = machine.volume
     ctl = [
         f"# {spec}S.CTL: master control file (Park, Burdekin & Peggs, section 3.2)",
@@ -428,10 +453,15 @@ def write_seed_fileset(machine: Machine, directory: str | Path, name: str) -> li
         ctl.append(f"PHI1 {_fmt(machine.arm.phi1)}")
     if machine.arm.phi2:
         ctl.append(f"PHI2 {_fmt(machine.arm.phi2)}")
-    texts[f"{spec}S.CTL"] = "\n".join(ctl) + "\n"
+    return "\n".join(ctl) + "\n"
 
+
+def _error_texts(errors: Mapping[str, Any], spec: str, head: str) -> dict[str, str]:
+    """The error table files ``<spec>S.<ext>`` and their random parts ``<spec>R.<ext>`` of the
+    description's ``[errors]`` (ValueError when a table has both random forms)."""
+    texts: dict[str, str] = {}
     ext_of = {c: e for e, c in TABLE_EXT.items()}
-    for comp, tbl in desc.get("errors", {}).items():
+    for comp, tbl in errors.items():
         ext = ext_of[comp]
         unit = "um" if comp[0] == "d" else "urad"
         lines = [f"# {spec}S.{ext}: {comp}, systematic", head + f"UNIT {unit}"]
@@ -460,8 +490,12 @@ def write_seed_fileset(machine: Machine, directory: str | Path, name: str) -> li
             raise ValueError(
                 f"{comp}: both a tabulated random part and a band; seed files hold one"
             )
+    return texts
 
-    sq_desc = desc.get("squareness", {})
+
+def _squareness_texts(sq_desc: Mapping[str, Any], spec: str, head: str) -> dict[str, str]:
+    """The squareness files (µrad) and their random parts."""
+    texts: dict[str, str] = {}
     for ext, comp in SQUARENESS_EXT.items():
         lines = [f"# {spec}S.{ext}: squareness {comp}, µrad", head.rstrip("\n")]
         if "offset" in sq_desc:
@@ -471,22 +505,4 @@ def write_seed_fileset(machine: Machine, directory: str | Path, name: str) -> li
         rnd = sq_desc.get("random", {}).get(comp)
         if rnd is not None:
             texts[f"{spec}R.{ext}"] = f"{head}VALUE {_fmt(rnd)}\n"
-    for ext, axis in THERMAL_EXT.items():
-        coef = float(th.expansion[AXES.index(axis)])
-        texts[f"{spec}S.{ext}"] = (
-            f"# {spec}S.{ext}: expansion coefficient of {axis.upper()}, µm/(m·°C)\n"
-            f"{head}VALUE {_fmt(coef)}\n"
-        )
-
-    out_dir = Path(directory)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    stale = index_seed_files(out_dir).get(spec, {})
-    for (kind, ext), path in stale.items():  # a previous set of this machine: no leftovers
-        if f"{spec}{kind}.{ext}" not in texts:
-            path.unlink()
-    written = []
-    for fname, text in texts.items():
-        path = out_dir / fname
-        path.write_text(text, encoding="utf-8")
-        written.append(path)
-    return written
+    return texts

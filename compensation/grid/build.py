@@ -1,14 +1,15 @@
-"""Building a correction grid: from a machine model (exact error poses at the nodes, and one
-sensitivity grid per runtime signal) or from measured node poses; the default node counts.
+"""The node data of a correction grid from a machine model (exact error poses at the nodes, and
+one sensitivity grid per runtime signal) or from measured node poses; the default node counts.
 
 Units: positions mm, translations µm, rotation sensitivities µrad per signal unit, quaternions
-(w, x, y, z). ``CorrectionGrid.build`` and ``CorrectionGrid.from_poses`` delegate here.
+(w, x, y, z). ``CorrectionGrid.build`` and ``CorrectionGrid.from_poses`` construct the grid
+from the :class:`.nodes.NodeData` made here.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -16,35 +17,25 @@ from numpy.typing import ArrayLike, NDArray
 from ..thermal.lag import signal_filters
 from . import quaternion as qt
 from .inputs import GridSignal
-
-if TYPE_CHECKING:
-    from .correction_grid import CorrectionGrid
+from .nodes import MAX_NODES, MAX_STEPS_PER_AXIS, MIN_STEPS_PER_AXIS, NodeData, check_steps
 
 __all__ = [
     "DEFAULT_STEPS",
     "MAX_DEFAULT_STEPS",
-    "MAX_NODES",
-    "MAX_STEPS_PER_AXIS",
-    "MIN_STEPS_PER_AXIS",
     "NODES_PER_WAVELENGTH",
     "TABLE_SPACING_FACTOR",
     "MachineLike",
-    "build_from_machine",
-    "check_steps",
     "default_steps",
     "effect_steps",
-    "grid_from_poses",
+    "nodes_from_machine",
+    "nodes_from_poses",
     "unresolved_effects",
 ]
 
 FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[float, str], None]
-G = TypeVar("G", bound="CorrectionGrid")
 
 DEFAULT_STEPS = (20, 20, 10)
-MIN_STEPS_PER_AXIS = 4  # the not-a-knot cubic spline needs 4 nodes per axis
-MAX_STEPS_PER_AXIS = 1000
-MAX_NODES = 2_000_000  # ~0.5 GB with 4 signals; beyond this is not a sensible grid
 
 
 #: Node spacing relative to the finest error-table spacing of an axis (measured: 20×20×20 meets
@@ -155,47 +146,22 @@ class MachineLike(Protocol):
     def identity_sha256(self) -> str: ...
 
 
-def check_steps(steps: Sequence[int]) -> tuple[int, int, int]:
-    """``steps`` as three node counts per axis; ValueError when out of range or too many."""
-    vals = tuple(int(s) for s in steps)
-    if len(vals) != 3 or any(s != t for s, t in zip(vals, steps, strict=False)):
-        raise ValueError(f"steps must be three integers (nodes per axis), got {tuple(steps)!r}")
-    for axis, s in zip("xyz", vals, strict=True):
-        if not MIN_STEPS_PER_AXIS <= s <= MAX_STEPS_PER_AXIS:
-            raise ValueError(
-                f"steps along {axis} = {s}: allowed {MIN_STEPS_PER_AXIS}…{MAX_STEPS_PER_AXIS} "
-                "nodes per axis (the cubic spline needs at least 4)"
-            )
-    total = vals[0] * vals[1] * vals[2]
-    if total > MAX_NODES:
-        raise ValueError(
-            f"steps {vals} give {total} nodes; at most {MAX_NODES} are allowed "
-            "(a grid this size would not fit in memory; use fewer steps)"
-        )
-    return vals  # type: ignore[return-value]
-
-
-def build_from_machine(
-    cls: type[G],
+def nodes_from_machine(
     machine: MachineLike,
     steps: Sequence[int] | None = None,
     progress: ProgressFn | None = None,
-    outside: str = "refuse",
-) -> G:
+) -> NodeData:
     """Evaluate ``machine`` exactly at every node of its working volume.
 
     ``steps`` = nodes per axis (default: :func:`default_steps`: the machine's ``volume.steps``
     or :data:`DEFAULT_STEPS`, refined so nodes are no further apart than 0.6× the finest
     tabulated error spacing along each axis — a coarser grid cannot follow the tables).
     For every runtime signal the sensitivity per unit is the central difference of the
-    pose at reference ± 1 unit; ``metadata["nonlinearity"]`` records, per signal, the
-    largest second difference (µm, µrad) over the nodes, i.e. how far from linear it is.
-    ``progress(fraction, message)`` is called as the work proceeds.
+    pose at reference ± 1 unit (:func:`_sensitivities`). ``progress(fraction, message)`` is
+    called as the work proceeds.
     """
     vol = machine.volume
-    if steps is None:
-        steps = default_steps(machine)
-    steps_ok = check_steps(steps)
+    steps_ok = check_steps(default_steps(machine) if steps is None else steps)
     lo = np.asarray(vol.lower_mm, dtype=np.float64)
     hi = np.asarray(vol.upper_mm, dtype=np.float64)
     axes = [np.linspace(lo[k], hi[k], steps_ok[k]) for k in range(3)]
@@ -215,24 +181,7 @@ def build_from_machine(
         return np.asarray(pose.rotation, float), np.asarray(pose.translation_um, float)
 
     r0, t0 = evaluate(refs)
-    q0 = qt.quaternion_from_matrix(r0)
-    sens_t, sens_r, signals, nonlin = [], [], [], {}
-    for name, ref in refs.items():
-        rp, tp = evaluate({**refs, name: ref + 1.0})
-        rm, tm = evaluate({**refs, name: ref - 1.0})
-        # rotation vectors of R(ref ± 1)·R0ᵀ (left, in the workpiece frame), µrad
-        wp = qt.rotvec_from_quaternion(qt.quaternion_from_matrix(rp @ np.swapaxes(r0, 1, 2)))
-        wm = qt.rotvec_from_quaternion(qt.quaternion_from_matrix(rm @ np.swapaxes(r0, 1, 2)))
-        dt = 0.5 * (tp - tm)
-        dw = 0.5e6 * (wp - wm)
-        nonlin[name] = {
-            "translation_um": float(np.abs(tp - 2 * t0 + tm).max()),
-            "rotation_urad": float(1e6 * np.abs(wp + wm).max()),
-        }
-        needed = bool(np.abs(dt).max() > 1e-12 or np.abs(dw).max() > 1e-12)
-        signals.append(GridSignal(name, ref, needed))
-        sens_t.append(dt.reshape(*steps_ok, 3))
-        sens_r.append(dw.reshape(*steps_ok, 3))
+    signals, sens_t, sens_r, nonlin = _sensitivities(evaluate, refs, r0, t0, steps_ok)
     meta = {
         "machine": {
             "name": str(machine.name),
@@ -248,21 +197,51 @@ def build_from_machine(
         "signal_filters": [f.to_header() for f in signal_filters(getattr(machine, "effects", []))],
         "unresolved_effects": unresolved_effects(machine, steps_ok),
     }
-    return cls(
-        lo,
-        hi,
-        q0.reshape(*steps_ok, 4),
-        t0.reshape(*steps_ok, 3),
-        signals,
-        np.array(sens_t).reshape(len(signals), *steps_ok, 3),
-        np.array(sens_r).reshape(len(signals), *steps_ok, 3),
-        meta,
-        outside,
+    q0 = qt.quaternion_from_matrix(r0)
+    return NodeData(
+        lo, hi, q0.reshape(*steps_ok, 4), t0.reshape(*steps_ok, 3), signals, sens_t, sens_r, meta
     )
 
 
-def grid_from_poses(
-    cls: type[G],
+def _sensitivities(
+    evaluate: Callable[[dict[str, float]], tuple[FloatArray, FloatArray]],
+    refs: dict[str, float],
+    r0: FloatArray,
+    t0: FloatArray,
+    steps: tuple[int, int, int],
+) -> tuple[list[GridSignal], FloatArray, FloatArray, dict[str, dict[str, float]]]:
+    """Per runtime signal (``refs``: name → reference value) the central difference of the
+    pose at reference ± 1 unit about the reference pose ``r0`` (N, 3, 3), ``t0`` (N, 3) µm:
+    the signals (needed when they move anything), the sensitivity grids (S, nx, ny, nz, 3) µm
+    and µrad per unit, and per signal the largest second difference (µm, µrad) over the nodes,
+    i.e. how far from linear it is (the grid's ``nonlinearity`` metadata)."""
+    sens_t, sens_r, signals, nonlin = [], [], [], {}
+    for name, ref in refs.items():
+        rp, tp = evaluate({**refs, name: ref + 1.0})
+        rm, tm = evaluate({**refs, name: ref - 1.0})
+        # rotation vectors of R(ref ± 1)·R0ᵀ (left, in the workpiece frame), µrad
+        wp = qt.rotvec_from_quaternion(qt.quaternion_from_matrix(rp @ np.swapaxes(r0, 1, 2)))
+        wm = qt.rotvec_from_quaternion(qt.quaternion_from_matrix(rm @ np.swapaxes(r0, 1, 2)))
+        dt = 0.5 * (tp - tm)
+        dw = 0.5e6 * (wp - wm)
+        nonlin[name] = {
+            "translation_um": float(np.abs(tp - 2 * t0 + tm).max()),
+            "rotation_urad": float(1e6 * np.abs(wp + wm).max()),
+        }
+        needed = bool(np.abs(dt).max() > 1e-12 or np.abs(dw).max() > 1e-12)
+        signals.append(GridSignal(name, ref, needed))
+        sens_t.append(dt.reshape(*steps, 3))
+        sens_r.append(dw.reshape(*steps, 3))
+    n_sig = len(signals)
+    return (
+        signals,
+        np.array(sens_t).reshape(n_sig, *steps, 3),
+        np.array(sens_r).reshape(n_sig, *steps, 3),
+        nonlin,
+    )
+
+
+def nodes_from_poses(
     axes_mm: Sequence[ArrayLike],
     q_work_stylus: ArrayLike,
     translation_um: ArrayLike,
@@ -273,9 +252,8 @@ def grid_from_poses(
     signals: Sequence[GridSignal] = (),
     sensitivity_translation_um: ArrayLike | None = None,
     sensitivity_rotation_urad: ArrayLike | None = None,
-    outside: str = "refuse",
-) -> G:
-    """Grid from node poses, e.g. captured with the 6-DOF scheme (:mod:`compensation.reports.sixdof`).
+) -> NodeData:
+    """Node data from node poses, e.g. captured with the 6-DOF scheme (:mod:`compensation.reports.sixdof`).
 
     ``axes_mm``: three increasing, equally spaced node coordinate arrays (mm);
     ``q_work_stylus`` (nx, ny, nz, 4) unit quaternions (w, x, y, z) of the error rotation;
@@ -295,7 +273,7 @@ def grid_from_poses(
         "machine": {"name": machine_name, "model": machine_model, "sha256": source_sha256},
         "source": "poses",
     }
-    return cls(
+    return NodeData(
         [a[0] for a in ax],
         [a[-1] for a in ax],
         q_work_stylus,
@@ -304,5 +282,4 @@ def grid_from_poses(
         sensitivity_translation_um,
         sensitivity_rotation_urad,
         meta,
-        outside,
     )

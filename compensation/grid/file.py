@@ -17,8 +17,9 @@ Layout: a NumPy ``.npz`` (zip) archive, read with ``allow_pickle=False``, holdin
   so signing never changes a grid's identity.
 
 Any problem on reading raises a single :class:`GridFileError` naming the file and the problem.
-:func:`grid_header`, :func:`save_grid` and :func:`load_grid` convert between a
-:class:`CorrectionGrid` and this file (``CorrectionGrid.header/save/load`` delegate here).
+:func:`grid_header` and :func:`save_grid` write what a grid holds (anything shaped like
+:class:`GridRecord`), :func:`read_grid` reads it back as :class:`.nodes.NodeData` for
+``CorrectionGrid.load``.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import zipfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,11 +40,10 @@ from numpy.typing import NDArray
 from ..errors import GridFileError
 from ..formats.atomic import atomic_output
 from .inputs import GridSignal
+from .nodes import NodeData
 
-if TYPE_CHECKING:
-    from .correction_grid import CorrectionGrid
-
-G = TypeVar("G", bound="CorrectionGrid")
+if TYPE_CHECKING:  # imported where a file carries U: numba stays out of `grid sign` and the like
+    from .uncertainty import GridUncertainty
 
 __all__ = [
     "FORMAT_NAME",
@@ -56,9 +56,11 @@ __all__ = [
     "UNCERTAINTY_MEMBER",
     "GridContents",
     "GridFileError",
+    "GridRecord",
+    "StoredGrid",
     "grid_header",
-    "load_grid",
     "payload_sha256",
+    "read_grid",
     "read_grid_contents",
     "read_grid_file",
     "save_grid",
@@ -82,6 +84,44 @@ PAYLOAD_ARRAYS = (
     "sensitivity_rotation_urad",  # (S, nx, ny, nz, 3) rotation vector, µrad per unit of signal
 )
 SIGNATURE_MEMBER = "signature"
+#: Header keys a loaded grid keeps in its metadata (written back unchanged on a save).
+METADATA_KEYS = (
+    "machine",
+    "source",
+    "reference_mm",
+    "probe_offset_mm",
+    "signal_filters",
+    "nonlinearity",
+    "unresolved_effects",
+    "built_utc",
+    "library_version",
+)
+
+
+class GridRecord(Protocol):
+    """What the file holds of a grid (:class:`~.correction_grid.CorrectionGrid` is one)."""
+
+    lower_mm: NDArray[np.float64]
+    upper_mm: NDArray[np.float64]
+    steps: tuple[int, int, int]
+    q_work_stylus: NDArray[np.float64]
+    translation_um: NDArray[np.float64]
+    signals: tuple[GridSignal, ...]
+    sensitivity_translation_um: NDArray[np.float64]
+    sensitivity_rotation_urad: NDArray[np.float64]
+    metadata: dict[str, Any]
+    outside: str
+    uncertainty: GridUncertainty | None
+
+
+class StoredGrid(NamedTuple):
+    """A grid file read and checked (:func:`read_grid`): the node data, the outside policy and
+    the uncertainty it was saved with, and its SHA-256."""
+
+    nodes: NodeData
+    outside: str
+    uncertainty: GridUncertainty | None
+    sha256: str
 
 
 @dataclass(frozen=True)
@@ -232,7 +272,7 @@ def _library_version() -> str:
         return "unknown"
 
 
-def grid_header(grid: CorrectionGrid) -> dict[str, Any]:
+def grid_header(grid: GridRecord) -> dict[str, Any]:
     """The self-describing file header of ``grid`` (JSON-serialisable)."""
     meta = dict(grid.metadata)
     machine = meta.pop("machine", {"name": "", "model": "", "sha256": ""})
@@ -276,8 +316,9 @@ def grid_header(grid: CorrectionGrid) -> dict[str, Any]:
     }
 
 
-def save_grid(grid: CorrectionGrid, path: str | Path) -> str:
-    """Write ``grid`` to ``path`` atomically; return the file's SHA-256 (also set on the grid)."""
+def save_grid(grid: GridRecord, path: str | Path) -> str:
+    """Write ``grid`` to ``path`` atomically; return the file's SHA-256. The build time and
+    library version the header gets are kept in ``grid.metadata`` (a later save repeats them)."""
     header = grid_header(grid)
     grid.metadata.setdefault("built_utc", header["built_utc"])
     grid.metadata.setdefault("library_version", header["library_version"])
@@ -289,28 +330,26 @@ def save_grid(grid: CorrectionGrid, path: str | Path) -> str:
     }
     if grid.uncertainty is not None:
         arrays[UNCERTAINTY_MEMBER] = grid.uncertainty.covariance
-    grid.sha256 = write_grid_file(path, header, arrays)
-    return grid.sha256
+    return write_grid_file(path, header, arrays)
 
 
-def load_grid(
-    cls: type[G],
+def read_grid(
     path: str | Path,
     expect_machine: Any = None,
-    outside: str | None = None,
     verify: Callable[[GridContents], None] | None = None,
-) -> G:
+) -> StoredGrid:
     """Read a grid file; :class:`GridFileError` (a ``ValueError``) names file and problem.
 
     ``expect_machine``: a machine (anything with ``identity_sha256()``) or a sha256 hex
     string; the file must have been built from that machine description. ``verify``: called
-    with the checked file contents before the grid is built (e.g. a signature check, which
-    raises :class:`GridFileError`); it sees exactly the bytes the grid is built from.
+    with the checked file contents before anything is taken from them (e.g. a signature check,
+    which raises :class:`GridFileError`); it sees exactly the bytes the grid is built from.
+    The node values themselves are checked when the grid is constructed.
     """
     contents = read_grid_contents(path)
     if verify is not None:
         verify(contents)
-    header, arrays, sha = contents.header, contents.arrays, contents.sha256
+    header, arrays = contents.header, contents.arrays
     try:
         uncertainty = None
         if UNCERTAINTY_MEMBER in arrays:
@@ -319,12 +358,11 @@ def load_grid(
             uncertainty = GridUncertainty.from_header(
                 header["uncertainty"], arrays[UNCERTAINTY_MEMBER]
             )
-        machine = header["machine"]
         sigs = [
             GridSignal(str(s["name"]), float(s["reference"]), bool(s["needed"]))
             for s in header["signals"]
         ]
-        grid = cls(
+        nodes = NodeData(
             header["volume"]["lower_mm"],
             header["volume"]["upper_mm"],
             arrays["q_work_stylus"],
@@ -332,37 +370,26 @@ def load_grid(
             sigs,
             arrays["sensitivity_translation_um"],
             arrays["sensitivity_rotation_urad"],
-            {
-                k: v
-                for k, v in header.items()
-                if k
-                in (
-                    "machine",
-                    "source",
-                    "reference_mm",
-                    "probe_offset_mm",
-                    "signal_filters",
-                    "nonlinearity",
-                    "built_utc",
-                    "library_version",
-                )
-            },
-            outside or header.get("outside_policy", "refuse"),
-            uncertainty,
+            {k: v for k, v in header.items() if k in METADATA_KEYS},
         )
-        if list(grid.steps) != list(header["steps"]):
-            raise ValueError(f"header steps {header['steps']} do not match the arrays {grid.steps}")
+        steps = arrays["q_work_stylus"].shape[:3]
+        if list(steps) != list(header["steps"]):
+            raise ValueError(f"header steps {header['steps']} do not match the arrays {steps}")
+        machine = header["machine"]
     except (KeyError, TypeError, ValueError) as exc:
         raise GridFileError(f"{path}: invalid grid content ({exc})") from None
-    if expect_machine is not None:
-        want = (
-            expect_machine if isinstance(expect_machine, str) else expect_machine.identity_sha256()
+    _check_machine(path, machine, expect_machine)
+    return StoredGrid(nodes, header.get("outside_policy", "refuse"), uncertainty, contents.sha256)
+
+
+def _check_machine(path: str | Path, machine: Mapping[str, Any], expect_machine: Any) -> None:
+    """GridFileError unless the grid was built for ``expect_machine`` (None: any machine)."""
+    if expect_machine is None:
+        return
+    want = expect_machine if isinstance(expect_machine, str) else expect_machine.identity_sha256()
+    if machine.get("sha256") != want:
+        raise GridFileError(
+            f"{path}: grid was built for machine {machine.get('name')!r} "
+            f"(description sha256 {str(machine.get('sha256'))[:12]}…), "
+            f"not for the expected one (sha256 {want[:12]}…); rebuild the grid"
         )
-        if machine.get("sha256") != want:
-            raise GridFileError(
-                f"{path}: grid was built for machine {machine.get('name')!r} "
-                f"(description sha256 {str(machine.get('sha256'))[:12]}…), "
-                f"not for the expected one (sha256 {want[:12]}…); rebuild the grid"
-            )
-    grid.sha256 = sha
-    return grid

@@ -9,17 +9,17 @@ these tables; :class:`.correction_grid.CorrectionGrid` computes them once when c
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import make_interp_spline
 
-from . import kernels as kern
 from . import quaternion as qt
+from .kernels import KernelTables, SplineTables
+from .quaternion_kernels import SERIES_LIMIT2
 from .squad import squad_control_points
 
-__all__ = ["InterpolationTables", "interpolation_tables", "make_grid_continuous"]
+__all__ = ["interpolation_tables", "make_grid_continuous"]
 
 FloatArray = NDArray[np.float64]
 
@@ -57,31 +57,16 @@ def knots_and_spans(nodes: FloatArray) -> tuple[FloatArray, NDArray[np.int64]]:
     return knots, spans
 
 
-@dataclass(frozen=True)
-class InterpolationTables:
-    """What the kernels read: node quaternions ``q`` and Squad control points ``sx`` (nx, ny, nz,
-    4); ``wq``/``ws`` the logs of neighbour ratios along x (nx, ny, nz, 3); ``coef`` the spline
-    coefficients (nx, ny, nz, 3 + 6·S); per-axis knot vectors and cell spans; ``small``: every
-    x-stage relative rotation is within the kernels' series branch."""
-
-    q: FloatArray
-    sx: FloatArray
-    wq: FloatArray
-    ws: FloatArray
-    coef: FloatArray
-    knots: tuple[FloatArray, ...]
-    spans: tuple[NDArray[np.int64], ...]
-    small: bool
-
-
 def interpolation_tables(
     q: FloatArray,
     translation_um: FloatArray,
     sensitivity_translation_um: FloatArray,
     sensitivity_rotation_urad: FloatArray,
     axes: Sequence[FloatArray],
-) -> InterpolationTables:
-    """Squad control data along x and the tensor spline coefficients of a grid's node data."""
+) -> KernelTables:
+    """What the kernels read of a grid's node data (sign-continuous unit quaternions ``q``,
+    the translations and sensitivity grids) on node ``axes`` (mm): the Squad control data along
+    x and the tensor spline coefficients (:class:`.kernels.KernelTables`)."""
     steps = q.shape[:3]
     sx = squad_control_points(q, axis=0, boundary="quadratic")
     wq = np.zeros((*steps, 3))
@@ -99,6 +84,21 @@ def interpolation_tables(
     # half-angle bound of every x-stage relative rotation (see kernels, "small")
     d_qs = np.linalg.norm(qt.log(qt.multiply(qt.conjugate(q), sx)), axis=-1).max()
     bound = np.linalg.norm(wq, axis=-1).max() + d_qs + np.linalg.norm(ws, axis=-1).max()
-    return InterpolationTables(
-        q, sx, wq, ws, coef, tuple(knots), tuple(spans), bool(bound * bound < kern.SERIES_LIMIT2)
+    lo = np.array([a[0] for a in axes])
+    spline = SplineTables(
+        lo,
+        np.array([(steps[k] - 1) / (axes[k][-1] - lo[k]) for k in range(3)]),
+        np.array(steps, dtype=np.int64),
+        *knots,
+        *spans,
+    )
+    return KernelTables(
+        spline,
+        np.ascontiguousarray(coef),
+        np.ascontiguousarray(q),
+        np.ascontiguousarray(sx),
+        wq,
+        ws,
+        np.ascontiguousarray(np.concatenate([q, sx, wq, ws], axis=-1)),
+        bool(bound * bound < SERIES_LIMIT2),
     )

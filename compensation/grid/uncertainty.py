@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import make_interp_spline
 
 from ..jit import njit_cached
-from .kernels import _basis3, _locate
+from .kernels import basis3, locate
 
 __all__ = [
     "COVARIANCE_COMPONENTS",
@@ -292,22 +292,18 @@ def variance_from_covariance(cov: FloatArray, stylus_mm: FloatArray) -> FloatArr
 
 
 @njit_cached(parallel=True)
-def eval_spline(points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
+def eval_spline(points, spline, coef, out):  # type: ignore[no-untyped-def]
     """Tricubic B-spline values (N, C) of ``coef`` (nx, ny, nz, C) at clamped ``points`` (N, 3)
-    mm (same knots and cell spans as the grid's translation spline)."""
+    mm; ``spline``: the grid's :class:`.kernels.SplineTables` (as a plain tuple)."""
+    lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz = spline  # a parallel loop takes arrays
     for n in prange(points.shape[0]):
-        _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out)
+        tab = (lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz)
+        _spline_row(n, points, tab, coef, out)
 
 
 @njit_cached()
-def eval_spline_serial(points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
-    """:func:`eval_spline` without threads (one reading: no thread-pool wake-up)."""
-    for n in range(points.shape[0]):
-        _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out)
-
-
-@njit_cached()
-def _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
+def _spline_row(n, points, spline, coef, out):  # type: ignore[no-untyped-def]
+    lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz = spline
     nx, ny, nz = shape[0], shape[1], shape[2]
     ncomp = coef.shape[3]
     bx = np.empty(4)
@@ -316,13 +312,13 @@ def _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, co
     left = np.empty(4)
     right = np.empty(4)
     px, py, pz = points[n, 0], points[n, 1], points[n, 2]
-    i, _ = _locate(px, lo[0], inv_d[0], nx)
-    j, _ = _locate(py, lo[1], inv_d[1], ny)
-    k, _ = _locate(pz, lo[2], inv_d[2], nz)
+    i, _ = locate(px, lo[0], inv_d[0], nx)
+    j, _ = locate(py, lo[1], inv_d[1], ny)
+    k, _ = locate(pz, lo[2], inv_d[2], nz)
     sxn, syn, szn = spanx[i], spany[j], spanz[k]
-    _basis3(tx, sxn, px, bx, left, right)
-    _basis3(ty, syn, py, by, left, right)
-    _basis3(tz, szn, pz, bz, left, right)
+    basis3(tx, sxn, px, bx, left, right)
+    basis3(ty, syn, py, by, left, right)
+    basis3(tz, szn, pz, bz, left, right)
     for c in range(ncomp):
         out[n, c] = 0.0
     for a in range(4):
@@ -340,7 +336,7 @@ def _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, co
 def expanded_uncertainty_um(
     gu: GridUncertainty,
     coef: FloatArray,
-    tables: tuple[Any, ...],
+    spline: tuple[Any, ...],
     points_mm: FloatArray,
     stylus_mm: FloatArray,
     temps_C: Mapping[str, Any] | None,
@@ -348,8 +344,8 @@ def expanded_uncertainty_um(
 ) -> FloatArray:
     """U (N, 3) µm, k = ``gu.coverage_factor``, of points whose status is ok (NaN elsewhere).
 
-    ``coef`` the spline coefficients (:meth:`GridUncertainty.coefficients`), ``tables`` the
-    grid's ``(lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz)``; ``stylus_mm`` (1 or N, 3);
+    ``coef`` the spline coefficients (:meth:`GridUncertainty.coefficients`), ``spline`` the
+    grid's :class:`.kernels.SplineTables` (as a plain tuple); ``stylus_mm`` (1 or N, 3);
     ``temps_C`` temperatures by role (scalars or (N,) arrays; only the roles U depends on,
     :attr:`GridUncertainty.active_roles`, are read). One compiled pass, parallel from
     :data:`PARALLEL_MIN` points (a small batch, e.g. a daemon's wake-up, is not worth waking
@@ -360,7 +356,6 @@ def expanded_uncertainty_um(
     idx = np.flatnonzero(ok)
     if idx.size == 0:
         return out
-    lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
     pts = np.ascontiguousarray(points_mm[idx])
     sty = np.ascontiguousarray(stylus_mm if stylus_mm.shape[0] == 1 else stylus_mm[idx])
     ref_c = float(gu.thermal_vector[0])
@@ -381,7 +376,7 @@ def expanded_uncertainty_um(
         d_t[:, k] = col
     u = np.empty((idx.size, 3))
     rows_fn = _u_rows if idx.size >= PARALLEL_MIN else _u_rows_serial
-    rows_fn(pts, sty, d_t, lo, inv_d, shape, tx, ty, tz, sx, sy, sz, coef, gu.thermal_vector, u)
+    rows_fn(pts, sty, d_t, spline, coef, gu.thermal_vector, u)
     out[idx] = u
     return out
 
@@ -392,30 +387,21 @@ class PointUncertainty:
     compiled call plus the few temperatures U depends on. Not thread-safe: the grid calls it
     under its lock. Same mathematics as :func:`expanded_uncertainty_um` (equal bit for bit)."""
 
-    def __init__(self, gu: GridUncertainty, coef: FloatArray, tables: tuple[Any, ...]) -> None:
+    def __init__(self, gu: GridUncertainty, coef: FloatArray, spline: tuple[Any, ...]) -> None:
         self._flat = np.zeros(10)  # point (3), stylus (3), ΔT of T_x, T_y, T_z, T_wp
         self._out = np.zeros((1, 3))
         self._roles = tuple((k, name, float(gu.thermal_vector[0])) for k, name in gu.active_roles)
-        lo, inv_d, shape, tx, ty, tz, sx, sy, sz = tables
         f = self._flat
-        self._args = (
+        self._args = (  # views of one buffer: one assignment fills them
             f[0:3].reshape(1, 3),
             f[3:6].reshape(1, 3),
             f[6:10].reshape(1, 4),
-            lo,
-            inv_d,
-            shape,
-            tx,
-            ty,
-            tz,
-            sx,
-            sy,
-            sz,
+            spline,
             coef,
             gu.thermal_vector,
             np.zeros((1, coef.shape[3])),
             self._out,
-        )  # fmt: skip (views of one buffer: one assignment fills them)
+        )
 
     def __call__(
         self,
@@ -441,13 +427,11 @@ class PointUncertainty:
 
 
 @njit_cached()
-def _u_row(
-    n, points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
-):  # type: ignore[no-untyped-def]
+def _u_row(n, points, stylus, d_t, spline, coef, th, cov, out):  # type: ignore[no-untyped-def]
     """U of point n: spline of the covariance entries into ``cov[n]``, the stylus rule, the
     thermal terms (``th`` = :attr:`GridUncertainty.thermal_vector`; ``d_t`` rows of
     ΔT_x, ΔT_y, ΔT_z, ΔT_wp, one row or one per point), probing σ², coverage factor."""
-    _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, cov)
+    _spline_row(n, points, spline, coef, cov)
     c = cov[n]
     row = np.int64(n)  # a prange index is unsigned: int64 | uint64 would unify to float64
     zero = np.int64(0)
@@ -483,47 +467,23 @@ def _u_row(
 
 
 @njit_cached(parallel=True)
-def _u_rows(points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, out):  # type: ignore[no-untyped-def]
+def _u_rows(points, stylus, d_t, spline, coef, th, out):  # type: ignore[no-untyped-def]
+    """U of every point (arguments as :func:`_u_row`), on the thread pool."""
     cov = np.empty((points.shape[0], coef.shape[3]))
+    lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz = spline  # a parallel loop takes arrays
     for n in prange(points.shape[0]):
-        _u_row(
-            n,
-            points,
-            stylus,
-            d_t,
-            lo,
-            inv_d,
-            shape,
-            tx,
-            ty,
-            tz,
-            spanx,
-            spany,
-            spanz,
-            coef,
-            th,
-            cov,
-            out,
-        )
+        tab = (lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz)
+        _u_row(n, points, stylus, d_t, tab, coef, th, cov, out)
 
 
 @njit_cached()
-def _u_rows_serial(
-    points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, out
-):  # type: ignore[no-untyped-def]
+def _u_rows_serial(points, stylus, d_t, spline, coef, th, out):  # type: ignore[no-untyped-def]
     """:func:`_u_rows` without threads (a small batch: no thread-pool wake-up)."""
     cov = np.empty((points.shape[0], coef.shape[3]))
     for n in range(points.shape[0]):
-        _u_row(
-            n, points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th,
-            cov, out,
-        )  # fmt: skip
+        _u_row(n, points, stylus, d_t, spline, coef, th, cov, out)
 
 
 @njit_cached()
-def _point_kernel(
-    point, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
-):  # type: ignore[no-untyped-def]
-    _u_row(
-        0, point, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
-    )
+def _point_kernel(point, stylus, d_t, spline, coef, th, cov, out):  # type: ignore[no-untyped-def]
+    _u_row(0, point, stylus, d_t, spline, coef, th, cov, out)

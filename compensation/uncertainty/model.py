@@ -273,8 +273,43 @@ def resolve_uncertainty(
     sec = section or UncertaintySection()
     defaulted: list[str] = []
     notes: list[str] = []
+    out_tables = _table_uncertainties(sec, tables, lower_mm, upper_mm, reference_mm, defaulted)
+    missing = [c for c in TABLE_COMPONENTS if c not in out_tables]
+    if missing:
+        notes.append(
+            f"no table and no uncertainty for {', '.join(missing)}: taken as exactly zero "
+            "(give [uncertainty.errors.<name>] u = … to account for an unmeasured error)"
+        )
+    squareness = _squareness(sec, defaulted)
+    u_temp, u_exp = _scales(sec, expansion, defaulted, notes)
+    wp_temp, wp_exp = _workpiece(sec, workpiece_expansion, defaulted, notes)
+    probe = _probe(sec, probe_random_um, defaulted, notes)
+    return UncertaintyModel(
+        tables=out_tables,
+        squareness_urad=squareness,
+        scale_temperature_C=u_temp,
+        expansion=u_exp,
+        workpiece_temperature_C=wp_temp,
+        workpiece_expansion=wp_exp,
+        probe_um=probe,
+        defaulted=tuple(defaulted),
+        notes=tuple(notes),
+        given=dict(given or {}),
+        zero=tuple(missing),
+    )
 
-    # ---- per-table calibration uncertainty
+
+def _table_uncertainties(
+    sec: UncertaintySection,
+    tables: Mapping[str, Any],
+    lower_mm: FloatArray,
+    upper_mm: FloatArray,
+    reference_mm: FloatArray,
+    defaulted: list[str],
+) -> dict[str, TableUncertainty]:
+    """The calibration uncertainty of every table present or named in ``[uncertainty.errors]``:
+    its own values, else its class's, else the defaults (appended to ``defaulted``); an
+    unmeasured error named only in the file takes 0 for what the file leaves out."""
     explicit = {str(canonical_name(k)): v for k, v in sec.errors.items()}
     out_tables: dict[str, TableUncertainty] = {}
     for comp in TABLE_COMPONENTS:
@@ -310,14 +345,11 @@ def resolve_uncertainty(
             reference_mm=float(reference_mm[k]),
             **values,
         )
-    missing = [c for c in TABLE_COMPONENTS if c not in out_tables]
-    if missing:
-        notes.append(
-            f"no table and no uncertainty for {', '.join(missing)}: taken as exactly zero "
-            "(give [uncertainty.errors.<name>] u = … to account for an unmeasured error)"
-        )
+    return out_tables
 
-    # ---- squareness
+
+def _squareness(sec: UncertaintySection, defaulted: list[str]) -> FloatArray:
+    """u of the three squareness errors, µrad (defaults appended to ``defaulted``)."""
     squareness = np.zeros(3)
     for j, name in enumerate(SQUARENESS):
         value = getattr(sec.squareness, name) if sec.squareness is not None else None
@@ -325,8 +357,14 @@ def resolve_uncertainty(
             value = SQUARENESS_DEFAULT_URAD
             defaulted.append(f"uncertainty.squareness.{name}")
         squareness[j] = value
+    return squareness
 
-    # ---- thermal: scales (only axes with a thermal term need defaults)
+
+def _scales(
+    sec: UncertaintySection, expansion: FloatArray, defaulted: list[str], notes: list[str]
+) -> tuple[FloatArray, FloatArray]:
+    """u of the scale temperatures (°C) and of the scales' expansion coefficients (1/K) per
+    axis; only axes with a thermal term get defaults."""
     u_temp, u_exp = np.zeros(3), np.zeros(3)
     for k, axis in enumerate(AXES):
         has_term = float(expansion[k]) != 0.0
@@ -347,8 +385,17 @@ def resolve_uncertainty(
     )
     if not np.any(np.asarray(expansion) != 0.0) and not exp_given:
         notes.append("the machine has no scale expansion terms: scale temperatures not used")
+    return u_temp, u_exp
 
-    # ---- thermal: workpiece
+
+def _workpiece(
+    sec: UncertaintySection,
+    workpiece_expansion: float | None,
+    defaulted: list[str],
+    notes: list[str],
+) -> tuple[float, float]:
+    """u of the workpiece temperature (°C) and of its expansion coefficient (1/K); defaults
+    only when the machine has a workpiece expansion term."""
     wp_temp = wp_exp = 0.0
     has_wp = bool(workpiece_expansion)
     if sec.workpiece_temperature_C is not None:
@@ -366,8 +413,14 @@ def resolve_uncertainty(
             "the machine has no workpiece expansion term: the workpiece's expansion is not "
             "corrected and not part of the uncertainty"
         )
+    return wp_temp, wp_exp
 
-    # ---- probing
+
+def _probe(
+    sec: UncertaintySection, probe_random_um: float, defaulted: list[str], notes: list[str]
+) -> float:
+    """u of probing, µm: the file's, else half of [probe] random_um (a 2σ value), else the
+    default."""
     if sec.probe_um is not None:
         probe = sec.probe_um
     elif probe_random_um > 0:
@@ -380,19 +433,7 @@ def resolve_uncertainty(
         "the random parts of the tables ([errors.*] random, random_band: 2σ bands) are "
         "independent at every probing"
     )
-    return UncertaintyModel(
-        tables=out_tables,
-        squareness_urad=squareness,
-        scale_temperature_C=u_temp,
-        expansion=u_exp,
-        workpiece_temperature_C=wp_temp,
-        workpiece_expansion=wp_exp,
-        probe_um=probe,
-        defaulted=tuple(defaulted),
-        notes=tuple(notes),
-        given=dict(given or {}),
-        zero=tuple(missing),
-    )
+    return probe
 
 
 def _default_correlation_mm(table: Any, span: tuple[float, float]) -> float:

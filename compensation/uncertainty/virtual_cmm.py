@@ -118,6 +118,32 @@ class VirtualCMM:
             raise ValueError("the stylus offset must be finite")
         ctx = m.context(q, self.temps_C, self.inputs)
         r0, t0 = exact_pose_compiled(self._axes, ctx.u_mm, ctx.errors, ctx.squareness_urad)
+        calibration, source, target = self._calibration(q)
+        random_sigma, random_target = self._random_parts(q)
+        scale, workpiece = self._thermal(q, ctx.signals)
+        return Prepared(
+            q_mm=q,
+            stylus_mm=p,
+            errors=ctx.errors,
+            squareness_urad=ctx.squareness_urad,
+            u_mm=ctx.u_mm,
+            rotation0=r0,
+            translation0_um=t0,
+            calibration=calibration,
+            source=source,
+            target=target,
+            random_sigma=random_sigma,
+            random_target=random_target,
+            scale=scale,
+            workpiece=workpiece,
+        )
+
+    def _calibration(self, q: FloatArray) -> tuple[FloatArray, NDArray[np.intp], NDArray[np.intp]]:
+        """The calibration uncertainty of every table at the points ``q`` (N, 3) mm: the block
+        diagonal factor (one block per table: tables are independent), and for each of its
+        columns' values the source column and the target slot (point·18 + axis·6 + slot)."""
+        m = self.machine
+        n = q.shape[0]
         blocks: list[FloatArray] = []  # per table: (D_c, Q_c)
         source, target = [], []
         columns = 0
@@ -148,8 +174,17 @@ class VirtualCMM:
         for b in blocks:  # block diagonal: tables are independent
             calibration[r0_ : r0_ + b.shape[0], c0_ : c0_ + b.shape[1]] = b
             r0_, c0_ = r0_ + b.shape[0], c0_ + b.shape[1]
+        return (
+            calibration,
+            np.concatenate(source) if source else np.zeros(0, np.intp),
+            np.concatenate(target) if target else np.zeros(0, np.intp),
+        )
+
+    def _random_parts(self, q: FloatArray) -> tuple[FloatArray, NDArray[np.intp]]:
+        """σ of the tables' random parts at the points ``q`` (the non-zero ones) and their
+        target slots (point·18 + axis·6 + slot)."""
         sig, sig_target = [], []
-        for table in m.tables.values():
+        for table in self.machine.tables.values():
             if not table.has_random:
                 continue
             c = table.component
@@ -158,14 +193,29 @@ class VirtualCMM:
             nz = np.flatnonzero(sigma > 0)
             sig.append(sigma[nz])
             sig_target.append(nz * 18 + k * 6 + c.slot)
+        return (
+            np.concatenate(sig) if sig else np.zeros(0),
+            np.concatenate(sig_target) if sig_target else np.zeros(0, np.intp),
+        )
+
+    def _thermal(
+        self, q: FloatArray, signals: Mapping[str, Any]
+    ) -> tuple[
+        tuple[tuple[int, float, FloatArray, float, float], ...],
+        tuple[float, FloatArray, FloatArray, float, float] | None,
+    ]:
+        """The scale terms (axis, α, ΔT, u_α, u_T) of the axes whose expansion is uncertain and
+        the workpiece term (α, ΔT, lever mm, u_α, u_T) or None; ValueError for a temperature
+        that is not finite."""
+        m = self.machine
         ref_c = m.thermal.reference_C
-        scale = []
+        scale: list[tuple[int, float, FloatArray, float, float]] = []
         for k, axis in enumerate("xyz"):
             alpha = float(m.thermal.expansion[k])
             u_a, u_t = float(self.model.expansion[k]), float(self.model.scale_temperature_C[k])
             if (alpha == 0.0 or u_t == 0.0) and u_a == 0.0:
                 continue
-            d_t = ctx.signals[scale_role(axis)] - ref_c
+            d_t = signals[scale_role(axis)] - ref_c
             scale.append((k, alpha, np.asarray(d_t, float), u_a, u_t))
         workpiece = None
         alpha_wp = float(m.thermal.workpiece_expansion or 0.0)
@@ -176,28 +226,13 @@ class VirtualCMM:
                 if m.thermal.workpiece_fixture_mm is not None
                 else m.volume.reference_mm
             )
-            d_tw = np.asarray(ctx.signals[WORKPIECE] - ref_c, float)
+            d_tw = np.asarray(signals[WORKPIECE] - ref_c, float)
             workpiece = (alpha_wp, d_tw, q - np.asarray(fixture, float), u_aw, u_tw)
         if not all(np.all(np.isfinite(s[2])) for s in scale) or (
             workpiece is not None and not np.all(np.isfinite(workpiece[1]))
         ):
             raise ValueError("temperatures must be finite")
-        return Prepared(
-            q_mm=q,
-            stylus_mm=p,
-            errors=ctx.errors,
-            squareness_urad=ctx.squareness_urad,
-            u_mm=ctx.u_mm,
-            rotation0=r0,
-            translation0_um=t0,
-            calibration=calibration,
-            source=np.concatenate(source) if source else np.zeros(0, np.intp),
-            target=np.concatenate(target) if target else np.zeros(0, np.intp),
-            random_sigma=np.concatenate(sig) if sig else np.zeros(0),
-            random_target=np.concatenate(sig_target) if sig_target else np.zeros(0, np.intp),
-            scale=tuple(scale),
-            workpiece=workpiece,
-        )
+        return tuple(scale), workpiece
 
     # ------------------------------------------------------------------ drawing
     def chunk_trials(self, prep: Prepared) -> int:

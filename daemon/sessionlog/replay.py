@@ -192,8 +192,8 @@ def replay_offline(source: str | Path, grid_path: str | Path | None = None) -> R
         col = travel[:, k]
         if np.any(col != 0):
             inputs[key] = np.where(col != 0, col, np.nan)
-    corrected, status, u_replayed = grid.correct(
-        pts, stylus, temps_C or None, inputs or None, with_uncertainty=True
+    corrected, status, u_replayed = grid.correct_with_uncertainty(
+        pts, stylus, temps_C or None, inputs or None
     )
     sent_pos = np.array([[s["x_mm"], s["y_mm"], s["z_mm"]] for s in sent], dtype=float)
     sent_status = np.array([s["status"] for s in sent])
