@@ -95,14 +95,13 @@ def per_reading_us(
     grid: Path,
     tmp: Path,
     mcap: str,
-    writer: str = "process",
     batch: int = 1,
     send_uncertainty: bool = False,
 ) -> float:
     """µs per reading; ``batch`` readings' frames are handled per wake-up (1: the low-rate
     case, frame by frame; 32: a drained burst, corrected and answered together)."""
     temps, frames = controller_frames(N)
-    cfg = config(grid, "virtual", "stub", mcap, writer=writer)
+    cfg = config(grid, "stub", mcap)
     cfg.can.send_uncertainty = send_uncertainty
     with DaemonService(cfg, events_stream=None, bus_factory=lambda c, i: StubBus()) as d:
         ep = d.can
@@ -157,7 +156,7 @@ def bench_uncertainty(machine: Machine, grid: Path, tmp: Path, rounds: int) -> d
         for name, with_u, mcap, batch in order:
             path = str(tmp / f"{name}-{k}.mcap") if mcap else ""
             g = ugrid if with_u else grid
-            runs[name].append(per_reading_us(g, tmp, path, "process", batch, with_u))
+            runs[name].append(per_reading_us(g, tmp, path, batch, with_u))
     med = {name: float(np.median(v)) for name, v in runs.items()}
     out: dict[str, Any] = {"rounds": rounds, "readings_per_run": N, "runs_us": runs}
     out["median_us"] = med
@@ -216,12 +215,11 @@ def main() -> int:
         grid = tmp / "npl.grid"
         CorrectionGrid.build(machine, steps=machine.volume.steps).save(grid)
         off = per_reading_us(grid, tmp, "")
-        on = per_reading_us(grid, tmp, str(tmp / "p.mcap"), "process")
-        thread = per_reading_us(grid, tmp, str(tmp / "t.mcap"), "thread")
+        on = per_reading_us(grid, tmp, str(tmp / "p.mcap"))
         off_32 = per_reading_us(grid, tmp, "", batch=32)
-        on_32 = per_reading_us(grid, tmp, str(tmp / "p32.mcap"), "process", batch=32)
+        on_32 = per_reading_us(grid, tmp, str(tmp / "p32.mcap"), batch=32)
         u = bench_uncertainty(machine, grid, tmp, args.rounds)
-        cfg = config(grid, "virtual", "stub", "")
+        cfg = config(grid, "stub", "")
         with DaemonService(cfg, events_stream=None, bus_factory=lambda c, i: StubBus()) as d:
             temps, _ = controller_frames(1)
             assert d.can is not None and d.engine is not None
@@ -239,7 +237,6 @@ def main() -> int:
         "engine_correct_us": correct_us,
         "reading_mcap_off_us": off,
         "reading_mcap_process_us": on,
-        "reading_mcap_thread_us": thread,
         "reading_mcap_off_burst32_us": off_32,
         "reading_mcap_process_burst32_us": on_32,
     }
@@ -251,7 +248,6 @@ def main() -> int:
         ("CorrectionEngine.correct, one reading", correct_us),
         ("reply path + bookkeeping per reading, MCAP off", off),
         ("… MCAP on, process writer (default)", on),
-        ("… MCAP on, thread writer (writer shares the GIL)", thread),
         ("… bursts of 32 readings per wake-up, MCAP off", off_32),
         ("… bursts of 32 readings per wake-up, MCAP on", on_32),
     ]

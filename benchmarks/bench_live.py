@@ -10,14 +10,13 @@ paced by sleeping (ECOSYSTEM.md: a spinning client steals a core): per reading o
 in one process, with the daemon's 0.5 ms GIL switch interval:
 
 * ``off`` - a logger that does nothing (the daemon with ``[live]`` off and no MCAP);
-* ``on, no client`` - ``LiveFanOut(None, LiveSink)``, nobody connected;
-* ``on, subscribed`` - the same with a Foxglove WebSocket client **in another process**
+* ``on, no client`` - ``LiveFanOut(None, LiveProcessSink)``, nobody connected;
+* ``on, subscribed`` - another one with a Foxglove WebSocket client **in another process**
   (like the Foxglove app) subscribed to every channel, ``/cmm/scene`` included.
 
 Per reading it records the time spent in the three calls (what the reply path pays) and the
 feeder's wake-up lateness after each sleep (how long a thread that wakes for the next frame
-waits, e.g. for the GIL held by the sender thread), plus the process CPU time per reading
-(sender thread and the SDK's server threads included). Figures are p50/p99 over all rounds and
+waits), plus the process CPU time per reading. Figures are p50/p99 over all rounds and
 differences against ``off`` of the same run.
 
 ``--daemon``: the daemon's reply latency, as ``benchmarks/bench_daemon.py`` measures it (a
@@ -26,16 +25,16 @@ status frame, MCAP on with the default writer), with ``[live]`` off, off again (
 the noise floor), on with the default process sender and no client, on with a client
 subscribed to every channel in another process (at the defaults; with the view at the old
 30 Hz defaults; with the client at ``SCHED_IDLE``, so that only the daemon's and the view's
-own cost remains) and, with ``--with-thread``, the sender thread: interleaved rounds, the
+own cost remains): interleaved rounds, the
 order rotated each round, a new daemon per case and round; per round p50/p99, the ratio to
 ``live off`` of the same round (median and range over the rounds) and the difference to the
 mean of the two ``off`` cases of the same round (median, its 95 % bootstrap interval, rounds
 higher).
 ``--daemon-only`` runs only this part (``benchmarks/results/live_daemon.json``).
 
-The feeder cases above use :class:`LiveSink` (the sender thread) and
-:class:`LiveProcessSink` directly: they show what each costs the thread that feeds it (with
-this machine's cold caches after each 1 ms sleep, a call costs several times its hot cost).
+The feeder cases above use :class:`LiveProcessSink` directly: they show what it costs the
+thread that feeds it (with this machine's cold caches after each 1 ms sleep, a call costs
+several times its hot cost).
 """
 
 from __future__ import annotations
@@ -160,9 +159,6 @@ def main(argv: list[str]) -> int:
         "--daemon-only", action="store_true", help="only the daemon's reply latency"
     )
     parser.add_argument(
-        "--with-thread", action="store_true", help="also the sender thread in the daemon"
-    )
-    parser.add_argument(
         "--out", type=Path, help="--daemon-only: the JSON file (default results/live_daemon.json)"
     )
     parser.add_argument(
@@ -176,13 +172,11 @@ def main(argv: list[str]) -> int:
         client_main(args.client, args.client_priority)
         return 0
 
-    from cmm_comp.daemon.live import LiveFanOut, LiveProcessSink, LiveSection, LiveSink
+    from cmm_comp.daemon.live import LiveFanOut, LiveProcessSink, LiveSection
 
     sys.setswitchinterval(0.0005)  # as `cmm-comp daemon` does
     if args.daemon_only:
-        daemon = bench_live_daemon(
-            args.daemon_n, args.rounds, args.rate_hz, args.with_thread, args.browser
-        )
+        daemon = bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.browser)
         out_path = args.out or ROOT / "benchmarks" / "results" / "live_daemon.json"
         out_path.write_text(
             json.dumps({"benchmark": "bench_live --daemon-only", **(daemon or {})}, indent=2) + "\n"
@@ -190,24 +184,18 @@ def main(argv: list[str]) -> int:
         print(f"wrote {out_path}")
         return 0
     n = int(args.seconds_per_case * args.rate_hz)
-    idle = LiveSink(LiveSection(enabled=True, port=0)).start()
-    busy = LiveSink(LiveSection(enabled=True, port=0)).start()
+    idle = LiveProcessSink(LiveSection(enabled=True, port=0)).start()
     proc = LiveProcessSink(LiveSection(enabled=True, port=0)).start()
-    client = start_client(busy.url)
     pclient = start_client(proc.url)
     try:
         deadline = time.monotonic() + 5.0
-        while busy.stats().subscriptions < 7 and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert busy.stats().subscriptions == 7, busy.stats()
         while proc.stats().subscriptions < 7 and time.monotonic() < deadline:
             time.sleep(0.01)
         assert proc.stats().subscriptions == 7, proc.stats()
         cases = {
             "off": NullLogger(),
-            "on (thread), no client": LiveFanOut(None, idle),
-            "on (thread), subscribed": LiveFanOut(None, busy),
-            "on (process), subscribed": LiveFanOut(None, proc),
+            "on, no client": LiveFanOut(None, idle),
+            "on, subscribed": LiveFanOut(None, proc),
         }
         feed(cases["off"], 200, args.rate_hz, 0)  # warm-up
         data: dict[str, dict[str, list[np.ndarray]]] = {
@@ -223,12 +211,10 @@ def main(argv: list[str]) -> int:
             print(f"round {r + 1}/{args.rounds} done", file=sys.stderr, flush=True)
         time.sleep(0.2)  # let the sender and the client finish
     finally:
-        counts = stop_client(client)
         pcounts = stop_client(pclient)
-        idle_stats, busy_stats, proc_stats = idle.stats(), busy.stats(), proc.stats()
         idle.stop()
-        busy.stop()
         proc.stop()
+        idle_stats, proc_stats = idle.stats(), proc.stats()
 
     rows = {}
     base: dict[str, float] = {}
@@ -269,15 +255,14 @@ def main(argv: list[str]) -> int:
             f"{r['wake_late_p99_us']:.0f} | {r['wake_late_p99_minus_off_us']:+.0f} | "
             f"{r['cpu_per_reading_us']:.1f} | {r['cpu_minus_off_us']:+.1f} |"
         )
-    print(f"client received (thread sink): {counts}; (process sink): {pcounts}")
+    print(f"client received: {pcounts}")
     print(
-        f"subscribed thread sink: sent {busy_stats.sent}, decimated {busy_stats.decimated}, "
-        f"dropped {busy_stats.dropped}, scene updates {busy_stats.scene_updates}; process sink: "
-        f"sent {proc_stats.sent}, decimated {proc_stats.decimated}, dropped "
-        f"{proc_stats.dropped}; idle sink: not encoded {idle_stats.not_encoded}"
+        f"subscribed sink: sent {proc_stats.sent}, decimated {proc_stats.decimated}, dropped "
+        f"{proc_stats.dropped}, scene updates {proc_stats.scene_updates}; idle sink: not "
+        f"encoded {idle_stats.not_encoded}"
     )
     daemon = (
-        bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.with_thread, args.browser)
+        bench_live_daemon(args.daemon_n, args.rounds, args.rate_hz, args.browser)
         if args.daemon
         else None
     )
@@ -289,15 +274,14 @@ def main(argv: list[str]) -> int:
         "rounds": args.rounds,
         "readings_per_case_round": n,
         "cases": rows,
-        "client_received": counts,
-        "client_received_process_sink": pcounts,
+        "client_received": pcounts,
         "subscribed_sink": {
-            "sent": busy_stats.sent,
-            "dropped": busy_stats.dropped,
-            "decimated": busy_stats.decimated,
-            "not_encoded": busy_stats.not_encoded,
-            "scene_updates": busy_stats.scene_updates,
-            "scene_points": busy_stats.scene_points,
+            "sent": proc_stats.sent,
+            "dropped": proc_stats.dropped,
+            "decimated": proc_stats.decimated,
+            "not_encoded": proc_stats.not_encoded,
+            "scene_updates": proc_stats.scene_updates,
+            "scene_points": proc_stats.scene_points,
         },
         "idle_sink": {"not_encoded": idle_stats.not_encoded, "sent": idle_stats.sent},
         "daemon_reply_latency_us": daemon,
@@ -310,14 +294,13 @@ def main(argv: list[str]) -> int:
 
 @dataclass(frozen=True)
 class DaemonCase:
-    """One case of the daemon part: ``[live]`` on or off, its sender, the client (None: no
+    """One case of the daemon part: ``[live]`` on or off, the client (None: no
     client; ``normal``: at normal CPU priority, like a Foxglove app or a browser started by
     hand; ``idle``: the same client at Linux ``SCHED_IDLE``, so its own CPU never competes with
     the daemon and what remains is what the daemon and its view's process cost), and
     ``[live]`` keys changed from their defaults."""
 
     enabled: bool
-    sender: str = "process"
     client: str | None = None
     live: tuple[tuple[str, float], ...] = ()
 
@@ -342,8 +325,6 @@ BROWSER_CASES = {
     "live on, Chromium at idle priority": DaemonCase(True, client="browser-idle"),
 }
 """With ``--browser PATH``: a browser as the client (the page subscribes to the 6 JSON topics)."""
-THREAD_CASE = ("live on (thread), subscribed", DaemonCase(True, "thread", "normal"))
-"""With ``--with-thread``: the sender thread in the daemon (shares the reply path's GIL)."""
 BASELINES = ("live off", "live off again")
 """A case's paired difference is taken against the mean of these two, round by round."""
 
@@ -415,7 +396,7 @@ def _spread(values: list[float], digits: int = 3) -> str:
 
 
 def bench_live_daemon(
-    n: int, rounds: int, rate_hz: float, with_thread: bool = False, browser: str | None = None
+    n: int, rounds: int, rate_hz: float, browser: str | None = None
 ) -> dict[str, Any] | None:
     """The daemon's reply latency with the live view off / on idle / on with a client
     subscribed to every channel: interleaved rounds (the order rotated each round), a new
@@ -442,8 +423,6 @@ def bench_live_daemon(
     from cmm_comp.sim_controller.controller import CanController
 
     cases = dict(DAEMON_CASES)
-    if with_thread:
-        cases[THREAD_CASE[0]] = THREAD_CASE[1]
     if browser:
         cases.update(BROWSER_CASES)
     names = list(cases)
@@ -464,9 +443,8 @@ def bench_live_daemon(
         def one_round(name: str) -> tuple[list[float], int]:
             case = cases[name]
             ch = f"bench-live-{uuid.uuid4().hex[:8]}"
-            cfg = config(grid, "virtual", ch, str(tmp / f"{ch}.mcap"))
+            cfg = config(grid, ch, str(tmp / f"{ch}.mcap"))
             cfg.live.enabled = case.enabled
-            cfg.live.sender = case.sender
             cfg.live.port = 0
             for key, value in case.live:
                 setattr(cfg.live, key, value)

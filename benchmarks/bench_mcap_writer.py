@@ -96,17 +96,14 @@ def records(frame_fields: int, n_readings: int) -> list[tuple[str, tuple[Any, ..
 
 
 def encoded(mix: list[tuple[str, tuple[Any, ...]]]) -> list[tuple[str, int, bytes]]:
-    """The mix as (topic, log time, JSON bytes), encoded by this tree's fast path."""
-    from cmm_comp.daemon.sessionlog.fastjson import FAST_JSON
+    """The mix as (topic, log time, JSON bytes), encoded as this tree's writer does."""
+    from cmm_comp.daemon.sessionlog.encoding import encode_message
 
     t0 = 1_750_000_000_000_000_000
-    out = []
-    for k, (topic, rec) in enumerate(mix):
-        t = t0 + k * 111_111
-        data = FAST_JSON[topic](rec, t)
-        assert data is not None, (topic, rec)
-        out.append((topic, t, data))
-    return out
+    return [
+        (topic, t0 + k * 111_111, encode_message(topic, rec, t0 + k * 111_111))
+        for k, (topic, rec) in enumerate(mix)
+    ]
 
 
 def _open(path: Path) -> Any:
@@ -217,7 +214,12 @@ def logger_run(cls: Any, path: Path, mix: list[tuple[str, tuple[Any, ...]]]) -> 
 
 
 def _frame_fields(records_mod: ModuleType) -> int:
+    """Fields of a frame record in a revision (with ``direction``: 10)."""
     return len(typing.get_args(records_mod.FrameRecord))
+
+
+FRAME_FIELDS_NOW = 10
+"""This tree's frame record: ``can_endpoint.frame_record`` (with its direction)."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -227,7 +229,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=90_000, help="messages per run (9 per reading)")
     ap.add_argument("--foxglove", action="store_true", help="also foxglove-sdk's MCAP writer")
     args = ap.parse_args(argv)
-    from cmm_comp.daemon.sessionlog import records as new_records
     from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
 
     n_readings = max(1, args.n // 9)
@@ -237,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         base_logger = importlib.import_module(f"{BASE_NAME}.sessionlog.thread_writer").McapLogger
         base_fields = _frame_fields(importlib.import_module(f"{BASE_NAME}.sessionlog.records"))
         base_mix = records(base_fields, n_readings)
-        new_mix = records(_frame_fields(new_records), n_readings)
+        new_mix = records(FRAME_FIELDS_NOW, n_readings)
         msgs = encoded(new_mix)
         n = len(msgs)
         rows: dict[str, list[float]] = {

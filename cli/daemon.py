@@ -217,7 +217,8 @@ def check_daemon(args: argparse.Namespace) -> int:
             fail(line)
         return 2
     checked = preflight(config, config_ok=not problems)
-    return print_check(config, problems + checked.problems, checked.warnings, checked.loaded)
+    warnings = config.notes + checked.warnings
+    return print_check(config, problems + checked.problems, warnings, checked.loaded)
 
 
 def cmd_daemon(args: argparse.Namespace) -> int:

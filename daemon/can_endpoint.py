@@ -68,7 +68,6 @@ from .events import EventLog
 from .metrics import Metrics
 from .osthread import name_os_thread
 from .sessionlog.logger import SessionLogger
-from .sessionlog.records import FrameRecord
 from .state import StateBoard
 
 BusFactory = Callable[[CanSection, CanIds], can.BusABC]
@@ -108,9 +107,9 @@ def can_open_error(cfg: CanSection, exc: BaseException) -> str:
     )
 
 
-def frame_record(msg: can.Message, channel: str, direction: str) -> FrameRecord:
+def frame_record(msg: can.Message, channel: str, direction: str) -> tuple[object, ...]:
     """The compact ``/cmm/can_rx`` / ``/cmm/can_tx`` record of one frame (the MCAP writer
-    builds the JSON payload from it: :func:`daemon.sessionlog.records.frame_payload`);
+    turns it into a :class:`.sessionlog.schemas.CanFrame`: ``schemas.frame_fields``);
     ``direction``: ``rx``, ``tx`` or ``tx_echo`` (:data:`.sessionlog.schemas.FRAME_DIRECTIONS`)."""
     return (
         msg.arbitration_id,

@@ -41,9 +41,14 @@ from cmm_comp.protocol.can_ids import NODE_STRIDE, STANDARD_ID_MAX
 
 from .live.settings import LiveSection
 
-MCAP_WRITERS = ("thread", "process")
-MCAP_WRITER_PRIORITIES = ("idle", "normal")
 MCAP_COMPRESSIONS = ("zstd", "lz4", "none")
+REMOVED_KEYS: dict[str, tuple[str, str]] = {
+    "mcap.writer": ("process", "the session log is always written in a child process"),
+    "mcap.writer_priority": ("idle", "the session log's writer always runs at SCHED_IDLE"),
+    "live.sender": ("process", "the live view always runs in a child process"),
+}
+"""Keys of earlier versions: ``key → (the only behaviour left, why)``. A file giving that value
+loads with a note to delete the line; any other value is an error."""
 
 
 class ConfigError(CmmCompError, ValueError):
@@ -239,14 +244,6 @@ class McapSection(Table):
     """Roll files at this age, s (directories only; 0 = never)."""
     flush_s: Annotated[float, Num(0.0, 3600.0, "s", lo_open=True)] = 1.0
     """Cut a chunk at least this often: the most a crash loses, s."""
-    writer: Annotated[str, Choice(MCAP_WRITERS)] = "process"
-    """Where JSON + MCAP writing runs: ``process`` (a child process, off the reply path's GIL
-    and CPU; also finishes the file if the daemon is killed) or ``thread`` (a thread of the
-    daemon process: shares the GIL with the reply path, adds to its p99). See docs/mcap.md."""
-    writer_priority: Annotated[str, Choice(MCAP_WRITER_PRIORITIES)] = "idle"
-    """CPU priority of the ``process`` writer: ``idle`` (Linux ``SCHED_IDLE``: runs only on CPU
-    time nothing else wants, so it never delays a reply; under sustained 100 % CPU load the
-    queue fills and messages are dropped and counted) or ``normal``."""
     compression: Annotated[str, Choice(MCAP_COMPRESSIONS)] = "zstd"
     """Chunk compression: ``zstd`` (smallest files), ``lz4`` (faster, less CPU and cache per
     chunk) or ``none``."""
@@ -285,7 +282,7 @@ class LogSection(Table):
 class DaemonConfig(Table):
     """The whole daemon configuration."""
 
-    NOT_IN_FILE: ClassVar[frozenset[str]] = frozenset({"source"})
+    NOT_IN_FILE: ClassVar[frozenset[str]] = frozenset({"source", "notes"})
 
     grid: GridSection = field(default_factory=GridSection)
     can: CanSection = field(default_factory=CanSection)
@@ -298,6 +295,8 @@ class DaemonConfig(Table):
     live: LiveSection = field(default_factory=LiveSection)
     source: str = "<defaults>"
     """The file the configuration was read from (not a key of the file)."""
+    notes: list[str] = field(default_factory=list)
+    """Warnings about the file that do not stop it loading (a removed key, :data:`REMOVED_KEYS`)."""
 
     @classmethod
     def unknown_key(cls, key: str, value: Any) -> str:
@@ -355,13 +354,14 @@ def config_and_problems(
     """The config built from parsed TOML and every problem found (one line each), without
     raising: what ``--check`` needs to go on checking the files the config names. A key with a
     problem keeps its default; the others are as given."""
+    data, notes, removed = _without_removed_keys(data, source)
     try:
         cfg: DaemonConfig = validate(DaemonConfig, data, source)
     except SchemaError as exc:
-        problems = exc.lines
+        problems = removed + exc.lines
     else:
-        cfg.source = source
-        return cfg, []
+        cfg.source, cfg.notes = source, notes
+        return cfg, removed
     usable = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}
     for _ in range(3):  # drop what is bad, then what the rules skipped still finds bad
         try:
@@ -374,9 +374,34 @@ def config_and_problems(
                 else:
                     usable.pop(loc[0], None)  # type: ignore[call-overload]
             continue
-        cfg.source = source
+        cfg.source, cfg.notes = source, notes
         return cfg, problems
-    return DaemonConfig(source=source), problems
+    return DaemonConfig(source=source, notes=notes), problems
+
+
+def _without_removed_keys(
+    data: dict[str, Any], source: str
+) -> tuple[dict[str, Any], list[str], list[str]]:
+    """``data`` without the keys of :data:`REMOVED_KEYS`, the notes (a removed key giving the
+    behaviour left) and the errors (one giving another value)."""
+    notes: list[str] = []
+    errors: list[str] = []
+    out = dict(data)
+    for name, (kept, why) in REMOVED_KEYS.items():
+        section, key = name.split(".")
+        table = out.get(section)
+        if not isinstance(table, dict) or key not in table:
+            continue
+        table = out[section] = dict(table)
+        value = table.pop(key)
+        if value == kept:
+            notes.append(f"{source}: {name} is no longer a setting ({why}): delete the line")
+        else:
+            errors.append(
+                f"{source}: {name} = {shown(value)} was removed ({why}; {kept!r} was the "
+                "default): delete the line"
+            )
+    return out, notes, errors
 
 
 def add_override_flags(parser: argparse.ArgumentParser) -> None:

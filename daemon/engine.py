@@ -395,7 +395,7 @@ class CorrectionEngine:
             )
 
     def _raw_record(self, reading: Reading) -> tuple[object, ...]:
-        """The compact ``/cmm/raw`` record (sessionlog.records.RawRecord)."""
+        """The compact ``/cmm/raw`` record (``sessionlog.schemas.raw_fields``)."""
         return (
             reading.seq,
             *reading.position_mm,
@@ -411,7 +411,7 @@ class CorrectionEngine:
     def _corrected_record(
         self, reading: Reading, answer: Answer, latency_us: float
     ) -> tuple[object, ...]:
-        """The compact ``/cmm/corrected`` record (sessionlog.records.CorrectedRecord): U
+        """The compact ``/cmm/corrected`` record (``sessionlog.schemas.corrected_fields``): U
         appended when the answer's grid carries U (None = unknown: logged as nulls)."""
         rec = (
             answer.seq,
@@ -435,7 +435,7 @@ class CorrectionEngine:
         log = self.logger
         if log is None:
             return
-        # compact records: the MCAP writer builds the JSON (sessionlog.records)
+        # compact records: the MCAP writer builds the JSON (sessionlog.schemas.RECORD_FIELDS)
         log.log("/cmm/raw", self._raw_record(reading))
         log.log("/cmm/corrected", self._corrected_record(reading, answer, latency_us))
 

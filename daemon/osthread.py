@@ -17,12 +17,13 @@ import functools
 import os
 import sys
 import threading
+from collections.abc import Callable
 
 _PR_SET_NAME = 15
 
 
 @functools.cache
-def _prctl() -> ctypes._CFuncPtr | None:  # type: ignore[name-defined]
+def _prctl() -> Callable[..., int] | None:
     if not sys.platform.startswith("linux"):
         return None
     try:

@@ -34,13 +34,13 @@ from .events import EventLog
 from .grid_slot import GridLoadError, GridReloader, GridSlot, LoadedGrid, load_grid
 from .grid_trust import GridTrust
 from .grid_worker import ProcessGridLoader
-from .live import LiveDownError, LiveFanOut, LiveSink, LiveStartError, live_sink
+from .live import LiveDownError, LiveFanOut, LiveProcessSink, LiveStartError
 from .memory import DAEMON_MMAP_THRESHOLD_BYTES, fix_mmap_threshold
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
 from .osthread import name_os_thread
 from .preflight import KERNEL_CACHE_OFF, stylus_note
-from .sessionlog import McapLogger, McapProcessLogger, SessionLogger
+from .sessionlog import McapProcessLogger, SessionLogger
 from .state import StateBoard
 from .temperatures import TemperatureTable
 
@@ -81,7 +81,7 @@ class DaemonService:
         )
         self.metrics = Metrics()
         self.logger: SessionLogger | None = None
-        self.live: LiveSink | None = None
+        self.live: LiveProcessSink | None = None
         self.grids = GridSlot()
         self.grid_trust = GridTrust.from_section(config.grid)
         self._grid_loader = grid_loader or load_grid
@@ -109,13 +109,7 @@ class DaemonService:
         try:
             if cfg.mcap.path:
                 directory = not cfg.mcap.path.endswith(".mcap")
-                extra: dict[str, Any] = (
-                    {"priority": cfg.mcap.writer_priority} if cfg.mcap.writer == "process" else {}
-                )
-                logger_cls: type[McapLogger] | type[McapProcessLogger] = (
-                    McapProcessLogger if cfg.mcap.writer == "process" else McapLogger
-                )
-                self.logger = logger_cls(
+                self.logger = McapProcessLogger(
                     cfg.mcap.path,
                     roll_bytes=int(cfg.mcap.roll_mb * 1e6)
                     if directory and cfg.mcap.roll_mb
@@ -125,7 +119,6 @@ class DaemonService:
                     metadata={"config": cfg.source},
                     on_error=self._on_mcap_error,
                     compression=_COMPRESSION[cfg.mcap.compression],
-                    **extra,
                 )
                 if cfg.mcap.path.endswith(".mcap"):
                     first = self.logger.files[0] if self.logger.files else None
@@ -139,6 +132,8 @@ class DaemonService:
                 cfg, self.grids, self.temperatures, self.metrics, self.events, self.logger
             )
             self.events.emit("starting", config=cfg.source)
+            for note in cfg.notes:  # a removed key left in the file (config.REMOVED_KEYS)
+                self.events.emit("config_note", "warning", detail=note)
             self._status_log(DaemonState.STARTING, "starting")
             self._report_kernel_cache()
             if live_error is not None:
@@ -258,7 +253,7 @@ class DaemonService:
         """Start the live view (docs/live.md) and put it beside the MCAP log; returns why it
         could not start (the daemon runs on without it), or None."""
         try:
-            live = live_sink(self.config.live, on_error=self._on_live_error).start()
+            live = LiveProcessSink(self.config.live, on_error=self._on_live_error).start()
         except LiveStartError as exc:
             self.metrics.count("live_errors")
             self.events.emit("live_error", "error", error=str(exc))

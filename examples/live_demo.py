@@ -6,7 +6,7 @@ Then open ``ws://127.0.0.1:8765`` in Foxglove (with ``examples/foxglove-layout.j
 ``examples/live-view.html`` in a browser. What is streamed is what the daemon streams with
 ``[live] enabled = true`` (docs/live.md): ``/cmm/raw``, ``/cmm/corrected``, ``/cmm/temperature``,
 ``/cmm/status``, ``/cmm/counters`` (JSON, the MCAP log's schemas) and ``/cmm/scene``
-(``foxglove.SceneUpdate`` arrows), through the same sink as the daemon (``live_sink``: the
+(``foxglove.SceneUpdate`` arrows), through the same sink as the daemon (``LiveProcessSink``: the
 server in a child process) and the same compact records the daemon's engine logs.
 
 The probe scans a raster of points through the machine's volume (default the NPL-like bridge,
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     if not (math.isfinite(args.rate_hz) and 0 < args.rate_hz <= 5000):
         parser.error(f"--rate-hz {args.rate_hz}: allowed > 0 and <= 5000")
     from cmm_comp.compensation import Machine  # after the arguments: a bad flag answers at once
-    from cmm_comp.daemon.live import LiveSection, live_sink
+    from cmm_comp.daemon.live import LiveProcessSink, LiveSection
 
     machine = Machine.from_toml(args.machine)
     points = raster(machine, 2000)
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     settings = LiveSection(enabled=True, host=args.host, port=args.port, scene_keep_arrows=400)
-    with live_sink(
+    with LiveProcessSink(
         settings, on_error=lambda e: print(f"live: {e}", file=sys.stderr)
     ).start() as sink:
         print(f"streaming on {sink.url} (Ctrl-C stops)", flush=True)

@@ -114,9 +114,9 @@ def daemon_and_controller(
             bus.shutdown()
 
 
-def write_udp_config(tmp: Path, port: int, grid: Path, mcap: Path, writer: str = "process") -> Path:
+def write_udp_config(tmp: Path, port: int, grid: Path, mcap: Path) -> Path:
     """``tmp/daemon.toml``: udp_multicast on the interface-local group at ``port``, heartbeat
-    every 50 ms, MCAP log ``mcap`` (flushed every 0.2 s) by ``writer``, metrics on a free port."""
+    every 50 ms, MCAP log ``mcap`` (flushed every 0.2 s), metrics on a free port."""
     cfg = tmp / "daemon.toml"
     cfg.write_text(
         f"""
@@ -132,7 +132,6 @@ port = {port}
 [mcap]
 path = "{mcap}"
 flush_s = 0.2
-writer = "{writer}"
 [metrics]
 port = 0
 """
@@ -154,7 +153,6 @@ def start_daemon_cli(config: Path, log: Path) -> subprocess.Popen:
 def daemon_subprocess(
     tmp: Path,
     grid: Path,
-    writer: str = "process",
     wrap_bus: Callable[[can.BusABC], Any] = lambda bus: bus,
 ) -> Iterator[tuple[subprocess.Popen, CanController, Path, Path]]:
     """The daemon as a real subprocess (its CLI) on ``udp_multicast`` (a free port) logging to
@@ -163,7 +161,7 @@ def daemon_subprocess(
     once the daemon's heartbeat says ready. The process is killed if still running at exit."""
     port = free_udp_port()
     mcap = tmp / "session.mcap"
-    cfg = write_udp_config(tmp, port, grid, mcap, writer)
+    cfg = write_udp_config(tmp, port, grid, mcap)
     log = tmp / "daemon.log"
     proc = start_daemon_cli(cfg, log)
     bus = can.Bus(interface="udp_multicast", channel=MCAST_GROUP, port=port)

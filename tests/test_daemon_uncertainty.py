@@ -470,7 +470,6 @@ def test_mcap_log_of_a_grid_without_U_has_no_U_keys(tmp_path: Path) -> None:
     cfg = base_config(channel(), npl_grid_path())
     cfg.metrics.enabled = False
     cfg.mcap.path = str(tmp_path / "plain.mcap")
-    cfg.mcap.writer = "thread"
     with daemon_and_controller(cfg) as (_, ctl, _bus):
         send_temps(ctl, TEMP_C)
         assert ctl.exchange(RawReading(1, OK_POINTS_MM[1])).status == "ok"

@@ -11,7 +11,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 from test_daemon_support import (
     STYLUS,
     build_signed_grid,
@@ -89,11 +88,10 @@ def _corrected_seqs(path: Path) -> list[int]:
     return [m.payload["seq"] for m in read_messages(path).messages if m.topic == "/cmm/corrected"]
 
 
-@pytest.mark.parametrize("writer", ["thread", "process"])
-def test_kill_9_mcap_reads_back(tmp_path, writer: str) -> None:
-    """kill -9 of the daemon: with the thread writer the file is cut and reads back up to the
-    last finished chunk; the child-process writer (default) outlives the daemon and finishes it."""
-    with daemon_subprocess(tmp_path, npl_grid_path(), writer) as (proc, ctl, mcap, _log):
+def test_kill_9_mcap_reads_back(tmp_path) -> None:
+    """kill -9 of the daemon: the writer child outlives the daemon and finishes the file (a
+    writer thread in a killed process: tests/test_mcap_recover.py, cut files)."""
+    with daemon_subprocess(tmp_path, npl_grid_path()) as (proc, ctl, mcap, _log):
         ctl.send_temperatures(Environment().samples(0.0))
         time.sleep(0.05)
         for seq in range(300):
@@ -105,10 +103,10 @@ def test_kill_9_mcap_reads_back(tmp_path, writer: str) -> None:
             ctl.exchange(RawReading(seq, (100.0, 500.0, 200.0)))
         proc.kill()  # SIGKILL
         assert proc.wait(10) == -signal.SIGKILL
-    if writer == "process":  # the orphaned child finishes the file (summary and all)
-        # generous: the child runs at SCHED_IDLE, which a saturated CPU serves last
-        assert _wait(lambda: "session_end" in dict(read_messages(mcap).metadata), 120.0)
+    # the orphaned child finishes the file (summary and all); generous: the child runs at
+    # SCHED_IDLE, which a saturated CPU serves last
+    assert _wait(lambda: "session_end" in dict(read_messages(mcap).metadata), 120.0)
     res = read_messages(mcap)
-    assert res.truncated == (writer == "thread")
+    assert not res.truncated
     seqs = [m.payload["seq"] for m in res.messages if m.topic == "/cmm/corrected"]
     assert seqs[:300] == list(range(300))

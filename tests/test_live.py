@@ -32,7 +32,7 @@ from cmm_comp.daemon.live import (
     LiveStartError,
 )
 from cmm_comp.daemon.live import sink as sink_module
-from cmm_comp.daemon.sessionlog.encoding import encode_message, json_encoder
+from cmm_comp.daemon.sessionlog.encoding import encode_message
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message
 
 T0_NS = 1_700_000_000_123_456_789
@@ -100,20 +100,20 @@ def connect(sink: LiveSink, topics: list[str]) -> FoxgloveClient:
 
 
 def wrap_encoders(monkeypatch: pytest.MonkeyPatch, hook: Callable[[str], None]) -> None:
-    """Call ``hook(name)`` before every encoding the sender does: the record fast path
-    (``FAST_JSON``), the general path (``encode_live``) and building an object (``live_object``)."""
+    """Call ``hook(name)`` before every encoding an update does: building the checked message
+    (``message_struct``) and its JSON (``struct_json``)."""
 
     def wrapped(name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
-        def call(*a: Any) -> Any:
+        def call(*a: Any, **kw: Any) -> Any:
             hook(name)
-            return fn(*a)
+            return fn(*a, **kw)
 
         return call
 
-    monkeypatch.setattr(sink_module, "encode_live", wrapped("encode", sink_module.encode_live))
-    monkeypatch.setattr(sink_module, "live_object", wrapped("object", sink_module.live_object))
-    fast = {t: wrapped("fast", f) for t, f in sink_module.FAST_JSON.items()}
-    monkeypatch.setattr(sink_module, "FAST_JSON", fast)
+    monkeypatch.setattr(sink_module, "struct_json", wrapped("encode", sink_module.struct_json))
+    monkeypatch.setattr(
+        sink_module, "message_struct", wrapped("object", sink_module.message_struct)
+    )
 
 
 def by_topic(msgs: list[Message]) -> dict[str, list[Message]]:
@@ -171,12 +171,11 @@ def test_values_arrive_as_fed(sink: LiveSink, errors: list[BaseException]) -> No
         sink.log("/cmm/status", status, T0_NS + 3)
         sink.log("/cmm/counters", counters, T0_NS + 4)
         sink.log_many("/cmm/can_rx", [(1, False, 0, b"", 0.0, "c", False, False, False)])
-        sink.kick()
+        sink.tick()
         got = by_topic(client.receive(8))
-    dumps = json_encoder()
     for rec, m in zip([*raws, *corrs], [*got["/cmm/raw"], *got["/cmm/corrected"]], strict=True):
         # byte for byte what the MCAP session log writes for the same record and time
-        assert m.payload == encode_message(m.topic, rec, m.log_time_ns, dumps)
+        assert m.payload == encode_message(m.topic, rec, m.log_time_ns)
     for i, m in enumerate(got["/cmm/raw"]):
         assert m.log_time_ns == T0_NS
         assert m.json() == {
@@ -245,7 +244,7 @@ def test_scene_keep_arrows_point_along_the_correction(sink: LiveSink) -> None:
     ]
     with connect(sink, [SCENE_TOPIC]) as client:
         sink.log_many("/cmm/corrected", [corr_rec(*c) for c in cases], T0_NS)
-        sink.kick()
+        sink.tick()
         (msg,) = client.receive(1)
         update = protobuf_class(client.channels[SCENE_TOPIC]).FromString(msg.payload)
     scale = sink.settings.arrow_mm_per_um
@@ -303,10 +302,10 @@ def test_scene_decimates_and_cycles_its_slots() -> None:
             cls = protobuf_class(client.channels[SCENE_TOPIC])
             batch = [corr_rec(i, (1_000_000 * i, 0, 0), "ok", (1.0, 0.0, 0.0)) for i in range(100)]
             sink.log_many("/cmm/corrected", batch, T0_NS)
-            sink.kick()
+            sink.tick()
             first = cls.FromString(client.receive(1)[0].payload)
             sink.log_many("/cmm/corrected", batch[:4], T0_NS + 1)
-            sink.kick()
+            sink.tick()
             second = cls.FromString(client.receive(1)[0].payload)
         s = sink.stats()
 
@@ -339,25 +338,25 @@ def test_nothing_is_encoded_without_a_subscriber(
     sink.log_many("/cmm/corrected", [corr_rec(i, (0, 0, 0), "ok", (1, 1, 1)) for i in range(500)])
     with connect(sink, ["/cmm/temperature"]) as client:  # a client, but not on these topics
         sink.log_many("/cmm/raw", [raw_rec(i, 1.0, 2.0, 3.0) for i in range(1000)], T0_NS)
-        sink.kick()
+        sink.tick()
         assert sink.stats().queue_len == 0
         assert calls == []
         client.subscribe(["/cmm/raw"])
         wait_until(lambda: sink.stats().subscriptions == 2, "raw subscription")
         sink.log("/cmm/raw", raw_rec(7, 1.0, 2.0, 3.0), T0_NS)
-        sink.kick()
+        sink.tick()
         (m,) = client.receive(1)
         assert m.json()["seq"] == 7
     s = sink.stats()
-    assert calls == ["fast"]  # one record, by the session log's fast path
+    assert calls == ["object", "encode"]  # one record, by the session log's encoding
     assert (s.offered, s.not_encoded, s.sent, s.dropped) == (2001, 2000, 1, 0)
 
 
 def test_overload_drops_the_oldest_and_counts_each(
     errors: list[BaseException], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The sender is held inside its first message; 100 more arrive in batches of 7 into a queue
-    of 10: exactly the 90 oldest are dropped and the 10 newest are sent once it goes on."""
+    """An update is held inside its first message; 100 more arrive in batches of 7 into a queue
+    of 10: exactly the 90 oldest are dropped and the 10 newest are sent by the next update."""
     entered, gate = threading.Event(), threading.Event()
 
     def hold(name: str) -> None:
@@ -371,14 +370,16 @@ def test_overload_drops_the_oldest_and_counts_each(
         connect(sink, ["/cmm/raw"]) as client,
     ):
         sink.log("/cmm/raw", raw_rec(0, 0.0, 0.0, 0.0), T0_NS)
-        sink.kick()
+        update = threading.Thread(target=sink.tick)  # the view process's loop, held inside
+        update.start()
         assert entered.wait(5.0)
         recs = [raw_rec(i, 0.0, 0.0, 0.0) for i in range(1, 101)]
         for k in range(0, 100, 7):
             assert sink.log_many("/cmm/raw", recs[k : k + 7], T0_NS + k) == len(recs[k : k + 7])
         held_stats = sink.stats()
         gate.set()
-        sink.kick()
+        update.join(10.0)
+        sink.tick()
         got = [m.json()["seq"] for m in client.receive(11)]
         deadline = time.monotonic() + 5.0
         while not client.statuses and time.monotonic() < deadline:
@@ -420,7 +421,7 @@ def test_bad_values_never_stop_the_sink(sink: LiveSink, errors: list[BaseExcepti
             T0_NS,
         )
         sink.log("/cmm/raw", raw_rec(5, 1.0, 2.0, 3.0), T0_NS)
-        sink.kick()
+        sink.tick()
         got = by_topic(client.receive(6))
     raw = [m.json() for m in got["/cmm/raw"]]
     assert (raw[0]["seq"], raw[0]["x_mm"], raw[0]["y_mm"], raw[0]["z_mm"]) == (1, None, None, None)
@@ -440,7 +441,7 @@ def test_a_bad_log_time_is_counted_not_sent(sink: LiveSink, errors: list[BaseExc
         sink.log_many("/cmm/raw", [raw_rec(1, 0.0, 0.0, 0.0)] * 2, -1)
         sink.log_many("/cmm/raw", [raw_rec(2, 0.0, 0.0, 0.0)], 1.5e18)  # type: ignore[arg-type]
         sink.log("/cmm/raw", raw_rec(3, 0.0, 0.0, 0.0), T0_NS)
-        sink.kick()
+        sink.tick()
         (m,) = client.receive(1)
     assert m.json()["seq"] == 3
     assert (sink.stats().encode_errors, sink.stats().sent) == (3, 1)
@@ -454,7 +455,7 @@ def test_a_failing_error_handler_does_not_stop_the_sink() -> None:
     with LiveSink(settings(), on_error=boom).start() as sink, connect(sink, ["/cmm/raw"]) as c:
         sink.log("/cmm/raw", ("bad",), T0_NS)
         sink.log("/cmm/raw", raw_rec(9, 1.0, 2.0, 3.0), T0_NS)
-        sink.kick()
+        sink.tick()
         assert c.receive(1)[0].json()["seq"] == 9
     assert sink.stats().encode_errors == 1
 
@@ -464,6 +465,7 @@ def test_status_and_grid_greet_a_new_subscriber(sink: LiveSink) -> None:
     sink.log("/cmm/status", {"state": "ready", "detail": "old", "grid_sha256": ""}, T0_NS)
     sink.log("/cmm/status", status, T0_NS + 5)
     with connect(sink, ["/cmm/status"]) as client:
+        sink.tick()  # the next update greets the new subscriber
         (m,) = client.receive(1)
     assert m.log_time_ns == T0_NS + 5
     assert m.json() == {**status, "stamp": stamp(T0_NS + 5)}

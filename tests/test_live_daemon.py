@@ -148,7 +148,7 @@ def test_a_stopped_or_killed_live_process_never_stalls_the_answers(
             deadline = time.monotonic() + 10.0
             # counted at once (the event lines of one kind are rate-limited: 20/s)
             while d.metrics.snapshot()["counters"].get("live_errors", 0) < 2:
-                assert time.monotonic() < deadline, (live_errors(), d.live._proc.poll())
+                assert time.monotonic() < deadline, (live_errors(), d.live.child_pid)
                 statuses += ask(10)
         assert set(statuses) == {"ok"}  # every reading answered, none timed out
         assert d.live.counters()["live_up"] == 0

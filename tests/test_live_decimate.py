@@ -43,7 +43,7 @@ def test_kept_adds_the_newest_answers_not_ok() -> None:
 
 def test_one_update_sends_the_picked_messages_and_counts_the_rest() -> None:
     """100 readings arrive between two updates (10 batches); ``max_per_update = 3``."""
-    with LiveSink(settings(max_per_update=3)).start(thread=False) as sink:
+    with LiveSink(settings(max_per_update=3)).start() as sink:
         with connect(sink, ["/cmm/raw", "/cmm/corrected", "/cmm/temperature"]) as client:
             for b in range(10):
                 seqs = range(10 * b, 10 * b + 10)

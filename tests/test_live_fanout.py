@@ -12,7 +12,7 @@ from foxglove_ws_client import FoxgloveClient, protobuf_class
 from test_daemon_support import base_config, channel
 
 from cmm_comp.daemon.engine import CorrectionEngine, Reading
-from cmm_comp.daemon.live import SCENE_TOPIC, LiveFanOut, LiveSection, LiveSink
+from cmm_comp.daemon.live import SCENE_TOPIC, LiveFanOut, LiveProcessSink, LiveSection
 from cmm_comp.daemon.service import DaemonService
 from cmm_comp.daemon.sessionlog.reader import read_messages
 from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
@@ -44,7 +44,7 @@ def test_live_equals_the_engine_and_the_mcap_log(engine: CorrectionEngine, tmp_p
     answers = engine.correct_many(readings, NOW_S)
     assert {a.status.label for a in answers} == {"ok", "outside_volume"}
     path = tmp_path / "s.mcap"
-    live = LiveSink(
+    live = LiveProcessSink(
         LiveSection(enabled=True, port=0, scene_max_new_arrows=64, max_per_update=100_000)
     ).start()
     fan = LiveFanOut(McapLogger(path), live)
@@ -91,7 +91,7 @@ def test_live_equals_the_engine_and_the_mcap_log(engine: CorrectionEngine, tmp_p
 
 
 def test_fanout_without_an_mcap_log() -> None:
-    live = LiveSink(LiveSection(enabled=True, port=0)).start()
+    live = LiveProcessSink(LiveSection(enabled=True, port=0)).start()
     fan = LiveFanOut(None, live)
     with fan:
         assert fan.log("/cmm/status", {"state": "ready", "detail": "", "grid_sha256": ""})

@@ -22,22 +22,13 @@ from cmm_comp.daemon.live import (
     LiveChildError,
     LiveProcessSink,
     LiveSection,
-    LiveSink,
     LiveStartError,
-    live_section_from_table,
-    live_sink,
 )
 
 
 def settings(**kw: Any) -> LiveSection:
     base = {"enabled": True, "port": 0, "scene_rate_hz": 1000.0, "max_per_update": 100_000}
     return LiveSection(**{**base, **kw})
-
-
-def test_the_setting_picks_the_sink() -> None:
-    assert live_section_from_table({}).sender == "process"
-    assert type(live_sink(settings())) is LiveProcessSink
-    assert type(live_sink(settings(sender="thread"))) is LiveSink
 
 
 def test_messages_and_scene_arrive_through_the_child() -> None:
@@ -183,10 +174,20 @@ def test_a_busy_port_is_one_clear_error_from_the_child() -> None:
         busy.listen()
         port = busy.getsockname()[1]
         sink = LiveProcessSink(settings(port=port))
+        before = set(_children())
         with pytest.raises(LiveStartError, match=rf"cannot listen on 127\.0\.0\.1:{port}") as err:
             sink.start()
         assert "\n" not in str(err.value)
-        assert sink._proc is not None and sink._proc.poll() is not None  # reaped
+        assert sink.child_pid is None and set(_children()) <= before  # reaped
+
+
+def _children() -> list[int]:
+    """Process ids of this process's children (/proc/self/task/*/children)."""
+    out: list[int] = []
+    for task in os.listdir("/proc/self/task"):
+        with open(f"/proc/self/task/{task}/children") as f:
+            out += [int(p) for p in f.read().split()]
+    return out
 
 
 def test_unpicklable_payloads_are_counted_not_sent() -> None:

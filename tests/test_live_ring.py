@@ -13,7 +13,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from cmm_comp.daemon.live.ring import (
+from cmm_comp.daemon.ring import (
     CORRUPT_POLLS,
     HEADER_BYTES,
     STATUS_MAX,

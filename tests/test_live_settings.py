@@ -67,7 +67,6 @@ def test_a_table_from_toml() -> None:
         ("scene_rate_hz", True, r"live\.scene_rate_hz: True must be a number"),
         ("scene_rate_hz", 10**400, r"live\.scene_rate_hz: .* is too large"),
         ("host", 127, r"live\.host: 127 must be a string"),
-        ("sender", "fork", r"live\.sender = 'fork'; allowed: process, thread"),
         ("colour", "red", r"unknown key live\.colour; allowed: allow_remote, arrow_mm_per_um"),
     ],
 )

@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 import can
-import pytest
 from mcap.reader import make_reader
 from test_daemon_support import CENTRE_MM, base_config, channel, send_temps
 
@@ -61,14 +60,12 @@ def test_histogram_statistics_stay_finite() -> None:
     assert "inf" not in m.prometheus().lower().replace("+inf", "")
 
 
-@pytest.mark.parametrize("writer", ["thread", "process"])
-def test_a_reading_that_never_completes_does_not_stop_the_log(tmp_path: Path, writer: str) -> None:
+def test_a_reading_that_never_completes_does_not_stop_the_log(tmp_path: Path) -> None:
     cfg = base_config(channel())
     cfg.metrics.enabled = False
     cfg.metrics.period_s = 1.0  # ok answers and the expired one share a period
     cfg.can.triplet_timeout_s = 0.15  # the expiry answer comes > 100 ms (top edge) later
     cfg.mcap.path = str(tmp_path / "session.mcap")
-    cfg.mcap.writer = writer
     cfg.check()
     ids = CanIds(node_id=cfg.can.node_id)
     n = 30
@@ -124,9 +121,8 @@ def test_a_reading_that_never_completes_does_not_stop_the_log(tmp_path: Path, wr
             assert key not in c or math.isfinite(c[key])
 
 
-@pytest.mark.parametrize("writer", ["thread", "process"])
 def test_an_existing_explicit_log_path_is_rotated_never_refused_or_overwritten(
-    tmp_path: Path, writer: str
+    tmp_path: Path,
 ) -> None:
     """A crash-restart loop with ``[mcap] path = "session.mcap"`` keeps starting: each start
     writes the first free ``session.N.mcap``; earlier files stay as they were."""
@@ -136,7 +132,6 @@ def test_an_existing_explicit_log_path_is_rotated_never_refused_or_overwritten(
     cfg = base_config(channel())
     cfg.metrics.enabled = False
     cfg.mcap.path = str(first)
-    cfg.mcap.writer = writer
     cfg.check()
     for run in range(2):
         with DaemonService(cfg, events_stream=None) as d:
@@ -176,7 +171,6 @@ def test_log_drops_reach_the_status_page_exactly(tmp_path: Path) -> None:
     cfg.metrics.enabled = True
     cfg.metrics.port = 0
     cfg.mcap.path = str(tmp_path / "s.mcap")
-    cfg.mcap.writer = "thread"
     cfg.check()
     record = {"op": "read", "address": 0, "count": 1, "values": [1]}
     with DaemonService(cfg, events_stream=None) as d:

@@ -1,7 +1,7 @@
 """McapProcessLogger: the MCAP writer in a child process. Round trip of every topic, counters,
 complete files after stop(), errors from the child reaching the parent, drops when the queue is
-full, the file finished by the child when the parent is SIGKILLed, and the daemon's
-``[mcap] writer = "process"`` setting. Real processes and files throughout."""
+full, the file finished by the child when the parent is SIGKILLed, and the daemon's session
+log (the removed ``[mcap] writer`` keys). Real processes and files throughout."""
 
 from __future__ import annotations
 
@@ -265,29 +265,33 @@ def test_child_finishes_the_file_when_the_parent_is_sigkilled(tmp_path: Path) ->
     assert meta["session"]["pid"] == str(proc.pid) and meta["session_end"]["dropped"] == "0"
 
 
-def test_config_writer_key_and_flag() -> None:
+def test_removed_writer_keys_load_with_a_note_or_fail_naming_the_key() -> None:
+    """``[mcap] writer`` and ``writer_priority`` were removed (the writer always runs in a child
+    process at SCHED_IDLE): a file giving the old default loads and says to delete the line,
+    any other value is an error naming the key; the flags are gone."""
     default = config_from_dict({}).mcap
-    assert (default.writer, default.writer_priority) == ("process", "idle")
-    assert config_from_dict({"mcap": {"writer": "thread"}}).mcap.writer == "thread"
-    with pytest.raises(ConfigError, match=r"mcap\.writer = 'fork'; allowed: thread, process"):
-        config_from_dict({"mcap": {"writer": "fork"}}, "x.toml")
-    with pytest.raises(ConfigError, match=r"mcap\.writer_priority = 'rt'; allowed: idle, normal"):
-        config_from_dict({"mcap": {"writer_priority": "rt"}}, "x.toml")
+    assert not hasattr(default, "writer") and not hasattr(default, "writer_priority")
+    cfg = config_from_dict({"mcap": {"writer": "process", "writer_priority": "idle"}}, "x.toml")
+    assert len(cfg.notes) == 2 and all("delete the line" in n for n in cfg.notes)
+    assert cfg.notes[0].startswith("x.toml: mcap.writer is no longer a setting")
+    with pytest.raises(ConfigError, match=r"x\.toml: mcap\.writer = 'thread' was removed"):
+        config_from_dict({"mcap": {"writer": "thread"}}, "x.toml")
+    with pytest.raises(ConfigError, match=r"mcap\.writer_priority = 'normal' was removed"):
+        config_from_dict({"mcap": {"writer_priority": "normal"}}, "x.toml")
     assert default.compression == "zstd"
     with pytest.raises(ConfigError, match=r"mcap\.compression = 'gzip'; allowed: zstd, lz4, none"):
         config_from_dict({"mcap": {"compression": "gzip"}}, "x.toml")
     ap = argparse.ArgumentParser()
     add_override_flags(ap)
-    args = ap.parse_args(["--mcap-writer", "thread", "--mcap-writer-priority", "normal"])
-    cfg = load_config(None, args).mcap
-    assert (cfg.writer, cfg.writer_priority) == ("thread", "normal")
+    with pytest.raises(SystemExit):
+        ap.parse_args(["--mcap-writer", "thread"])
+    assert load_config(None, ap.parse_args(["--mcap-compression", "lz4"])).mcap.compression == "lz4"
 
 
 def test_daemon_with_the_process_writer_logs_the_session(tmp_path: Path) -> None:
     cfg = base_config(channel())
     cfg.metrics.enabled = False
     cfg.mcap.path = str(tmp_path / "session.mcap")
-    cfg.mcap.writer = "process"
     cfg.check()
     n = 20
     with DaemonService(cfg, events_stream=None) as d:
@@ -354,7 +358,7 @@ def test_the_writer_child_tunes_malloc_to_give_memory_back() -> None:
     a fresh interpreter so this test process keeps its own malloc settings."""
     code = (
         "import platform\n"
-        "from cmm_comp.daemon.sessionlog.writer_child import tune_malloc\n"
+        "from cmm_comp.daemon.sessionlog.process_writer import tune_malloc\n"
         "print(tune_malloc(), platform.libc_ver()[0])"
     )
     out = subprocess.run(

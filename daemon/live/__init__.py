@@ -2,16 +2,14 @@
 over the Foxglove WebSocket protocol (``foxglove-sdk``, optional extra ``live``; docs/live.md).
 
 * :mod:`.settings` - the ``[live]`` configuration section and its checks;
-* :mod:`.payloads` - one logged message to the JSON the view sends (non-finite as ``null``);
 * :mod:`.scene` - the correction vectors as ``foxglove.SceneUpdate`` arrows;
 * :mod:`.server` - the ``foxglove-sdk`` side: its own context, the channels, the server;
 * :mod:`.decimate` - which messages of an update are sent (the high-rate topics decimated);
-* :mod:`.sink` - :class:`LiveSink`: bounded queue, updates (``tick``), sender thread,
-  WebSocket server;
-* :mod:`.ring` - the shared memory between the daemon and the view's process;
-* :mod:`.process` - :class:`LiveProcessSink`, the daemon's default: the daemon copies the
-  watched records into the ring (no thread, no system call), a child process
-  (:mod:`.child`) runs the rest; :func:`live_sink` picks by setting;
+* :mod:`.sink` - :class:`LiveSink`: bounded queue, updates (``tick``), WebSocket server: what
+  runs in the view's process;
+* :mod:`.process` - :class:`LiveProcessSink`, the daemon's live view: the daemon copies the
+  watched records into shared memory (:mod:`..childproc`: no thread, no system call), a child
+  process (:mod:`.child`) runs the rest;
 * :mod:`.fanout` - :class:`LiveFanOut`: the MCAP logger and the sink behind one
   ``SessionLogger``.
 

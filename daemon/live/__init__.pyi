@@ -1,10 +1,9 @@
 """Public API of ``live`` (read by lazy_loader: names load on first use)."""
 
 from .fanout import LiveFanOut
-from .process import LiveChildError, LiveDownError, LiveProcessSink, live_sink
+from .process import LiveChildError, LiveDownError, LiveProcessSink
 from .server import SUBPROTOCOL, LiveServer, LiveStartError, open_live_server
 from .settings import (
-    SENDERS,
     LiveConfigError,
     LiveSection,
     host_problem,
@@ -21,7 +20,6 @@ from .sink import (
 __all__ = [
     "LATCHED_TOPICS",
     "SCENE_TOPIC",
-    "SENDERS",
     "STREAMED_TOPICS",
     "SUBPROTOCOL",
     "LiveChildError",
@@ -36,6 +34,5 @@ __all__ = [
     "LiveStats",
     "host_problem",
     "live_section_from_table",
-    "live_sink",
     "open_live_server",
 ]

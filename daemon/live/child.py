@@ -1,41 +1,29 @@
-"""The child process of :class:`.process.LiveProcessSink`: the WebSocket server, the JSON
-encoding, the decimation and the scene of the live view, in an interpreter of their own.
+"""The live view's child process (:class:`.process.LiveProcessSink`, started by
+:mod:`..childproc`): the WebSocket server, the JSON encoding, the decimation and the scene, in
+an interpreter of its own at ``SCHED_IDLE`` (set before anything starts, so the SDK's server
+threads inherit it: they run only on CPU time nothing else wants).
 
-Started as ``python -c`` (a fresh interpreter, never ``fork``: the daemon has threads) with one
-end of a duplex pipe and the shared memory of :mod:`.ring`:
-
-* pipe, parent → child: first ``(LiveSection, server name, priority)``, last :data:`STOP`;
-  child → parent: ``("ready", port)`` or ``("start_error", text)`` once, ``("stopped",
-  status)`` last. Nothing passes on the pipe while the view runs;
-* shared memory: the daemon's records (ring), and from the child the topics some client
-  watches, a heartbeat each loop, and every :data:`STATUS_PERIOD_S` its status
-  ``(LiveStats, errors so far, the newest error texts)``.
-
-The child lowers its CPU priority (``SCHED_IDLE``, else nice 19) before it starts anything, so
-its loop and the SDK's server threads run only on CPU time nothing else wants. Its loop runs
-``update_rate_hz`` times a second: read the ring, hand the records to an ordinary
-:class:`LiveSink` (no thread of its own), :meth:`LiveSink.tick` (decimate, encode, send, scene).
-It ignores SIGINT/SIGTERM (the daemon stops it through the pipe) and ends when the pipe closes
-(the daemon died).
+Its loop runs ``update_rate_hz`` times a second (:data:`IDLE_PERIOD_S` while no client watches):
+a heartbeat and the watched topics into the shared memory, the daemon's records from the ring
+into an ordinary :class:`LiveSink`, :meth:`LiveSink.tick` (decimate, encode, send, scene), and
+every :data:`STATUS_PERIOD_S` its status ``(LiveStats, errors so far, the newest error
+texts)``. It ends when the daemon asks, or when the daemon is gone.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import pickle
-import signal
 import sys
 import time
 from dataclasses import replace
-from multiprocessing.connection import Connection
 from typing import Any
 
+from ..childproc import ChildEnd
 from ..osthread import lower_priority, name_os_thread
-from .process import STOP, TOPIC_BITS
-from .ring import SharedRing
+from ..ring import SharedRing
 from .server import LiveStartError
-from .sink import LiveSink
+from .sink import TOPIC_BITS, LiveSink
 
 STATUS_PERIOD_S = 0.1
 """The child publishes its status this often, s."""
@@ -87,32 +75,6 @@ def limit_sdk_log(per_s: float = SDK_LOG_LINES_PER_S) -> None:
     logger.propagate = False
 
 
-def child_entry(fd: int, shm_fd: int, capacity: int) -> None:
-    """Child process entry (``python -c``): ``fd`` is its end of the pipe, ``shm_fd`` the
-    shared memory (:mod:`.ring`, ``capacity`` ring bytes)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    name_os_thread("live-child")
-    conn = Connection(fd)
-    ring = SharedRing(shm_fd, capacity)
-    os.close(shm_fd)
-    try:
-        settings, name, priority = pickle.loads(conn.recv_bytes())
-    except (EOFError, OSError):
-        conn.close()
-        return
-    lower_priority(priority)  # before any thread: the SDK's threads inherit it
-    limit_sdk_log()
-    try:
-        child_main(conn, ring, settings, name)
-    finally:
-        conn.close()
-
-
-def _send(conn: Connection, kind: str, body: Any) -> None:
-    conn.send_bytes(pickle.dumps((kind, body), protocol=pickle.HIGHEST_PROTOCOL))
-
-
 class _Feed:
     """The child's side of the ring: records into the sink, its status out."""
 
@@ -144,10 +106,10 @@ class _Feed:
         st = replace(st, offered=self.taken, encode_errors=st.encode_errors + self.bad)
         return st, self.errors, list(self.texts)
 
-    def publish(self) -> None:
+    def publish(self, end: ChildEnd) -> None:
         status = self.status()
-        if not self.ring.set_status(pickle.dumps(status, protocol=pickle.HIGHEST_PROTOCOL)):
-            self.ring.set_status(pickle.dumps((status[0], status[1], [])))
+        if not end.publish(status):
+            end.publish((status[0], status[1], []))
 
     def wanted(self) -> None:
         mask = 0
@@ -156,42 +118,42 @@ class _Feed:
         self.ring.set_wanted(mask)
 
 
-def child_main(conn: Connection, ring: SharedRing, settings: Any, name: str) -> None:
-    """Run a :class:`LiveSink` fed from the ring until :data:`STOP` or the pipe closes."""
+def child_main(end: ChildEnd) -> None:
+    """Run a :class:`LiveSink` fed from the ring until the daemon asks to stop or is gone."""
+    name_os_thread("live-child")
+    if end.settings is None:
+        return
+    settings, name = end.settings
+    lower_priority("idle")  # before any thread: the SDK's threads inherit it
+    limit_sdk_log()
     feed: _Feed
     try:
         sink = LiveSink(settings, on_error=lambda exc: feed.error(exc), name=name)
-        feed = _Feed(ring, sink)
-        sink.start(thread=False)
+        feed = _Feed(end.ring, sink)
+        sink.start()
     except LiveStartError as exc:
-        _send(conn, "start_error", str(exc))
+        end.send("start_error", exc)
         return
     period_s = 1.0 / settings.update_rate_hz
     next_status = 0.0
-    ring.beat(time.monotonic_ns())
-    _send(conn, "ready", sink.port)
-    parent_gone = False
-    try:
-        while True:
-            t0 = time.monotonic()
-            ring.beat(time.monotonic_ns())
-            feed.wanted()
-            feed.read()
-            sink.tick()
-            if t0 >= next_status:
-                next_status = t0 + STATUS_PERIOD_S
-                feed.publish()
-            if conn.poll(0) and conn.recv_bytes() == STOP:
-                break
-            wait_s = period_s if sink.wanted_topics else max(period_s, IDLE_PERIOD_S)
-            left = wait_s - (time.monotonic() - t0)
-            if left > 0:
-                time.sleep(left)
-    except (EOFError, OSError):
-        parent_gone = True  # the daemon is gone: nobody to report to
-    finally:
-        if not parent_gone:
-            feed.read()  # what the daemon wrote before it asked to stop
-        sink.stop(5.0)
-    feed.publish()
-    _send(conn, "stopped", feed.status())
+    end.ring.beat(time.monotonic_ns())
+    end.send("ready", sink.port)
+    while True:
+        t0 = time.monotonic()
+        end.ring.beat(time.monotonic_ns())
+        feed.wanted()
+        feed.read()
+        sink.tick()
+        if t0 >= next_status:
+            next_status = t0 + STATUS_PERIOD_S
+            feed.publish(end)
+        wait_s = period_s if sink.wanted_topics else max(period_s, IDLE_PERIOD_S)
+        stop, _ = end.stop_requested(max(0.0, wait_s - (time.monotonic() - t0)))
+        if stop:
+            break
+    if end.parent_alive:
+        feed.read()  # what the daemon wrote before it asked to stop
+    sink.stop(5.0)
+    feed.publish(end)
+    end.send("stopped", feed.status())
+    end.close()

@@ -1,35 +1,25 @@
-""":class:`LiveProcessSink`: the live view with its server, encoding and scene in a child process,
-fed through shared memory: the daemon pays a copy, never a thread, a lock with another thread's
-long work, a system call or a wake-up.
-
-Measured with the daemon (``benchmarks/bench_live.py --daemon``, docs/live.md). The first
-process sender had a forwarder thread in the daemon that took the queue every 10 ms, pickled it
-and wrote it to a pipe: that thread competed with the reply thread for the GIL (and, preempted
-by the kernel while holding it, made the reply thread wait), woke 100 times a second with a
-client or without, and the child it fed sent every one of 2000 messages a second to the
-client (Foxglove on the same two cores). Now:
+""":class:`LiveProcessSink`: the daemon's live view. Its server, encoding and scene run in a
+child process (:mod:`..childproc`, :mod:`.child`), fed through shared memory: the daemon pays a
+copy, never a thread of its own doing the work, a lock with long work, a system call or a
+wake-up (docs/live.md).
 
 * the producers' side (:meth:`LiveProcessSink.log_many`, called in the daemon's bookkeeping
   after the replies are sent) drops a topic nobody watches at once (one byte of shared memory
-  read: the process publishes which topics some client watches), else pickles the batch and
-  copies it into a shared-memory ring (:mod:`.ring`) under a lock only the producers take;
-  a full ring (the process stopped or starved) drops the batch, counted exactly;
-* the process (:mod:`.child`, a fresh interpreter at ``SCHED_IDLE``) polls the ring at
-  ``update_rate_hz`` on its own, decimates (:mod:`.decimate`), encodes and serves; it writes
-  its counters, its errors and a heartbeat into the same shared memory;
-* whoever asks for statistics (the daemon's housekeeping, once per ``metrics.period_s``)
-  reads them there and finds out whether the process died or stalled (no loop for
-  :data:`STALL_S`): reported once through ``on_error``, ``live_up`` 0 in the counters, and
-  nothing more is pickled or copied until it runs again. No answer of the daemon waits for it.
+  read: the process publishes which topics some client watches), drops a batch of a decimated
+  topic the process could not send anyway (:meth:`LiveProcessSink._gate`), else pickles the
+  batch and copies it into the ring; a full ring (the process stopped or starved) drops the
+  batch, counted exactly;
+* the process polls the ring at ``update_rate_hz`` at ``SCHED_IDLE``, decimates, encodes and
+  serves; it publishes its counters, its newest errors and a heartbeat in the shared memory;
+* whoever asks for statistics (the daemon's housekeeping, every ``metrics.period_s``) reads
+  them there and finds out whether the process stalled (no loop for :data:`STALL_S`); its
+  death is seen at once (the pipe closes). Either is reported once through ``on_error``,
+  ``live_up`` turns 0 and nothing more is pickled or copied until it runs again.
 """
 
 from __future__ import annotations
 
-import multiprocessing
-import os
 import pickle
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -38,27 +28,20 @@ from typing import Any, Self
 
 from cmm_comp.compensation.errors import CmmCompError
 
+from ..childproc import ChildProcess, ChildProcessError
+from ..ring import ring_bytes
 from .decimate import DECIMATED_TOPICS, is_not_ok
-from .ring import HEADER_BYTES, SharedRing, ring_bytes, shared_file
 from .server import LiveStartError
 from .settings import LiveSection
-from .sink import CORRECTED, LATCHED_TOPICS, STREAMED_TOPICS, LiveSink, LiveStats
+from .sink import CORRECTED, LATCHED_TOPICS, STREAMED_TOPICS, TOPIC_BITS, LiveSink, LiveStats
 
 START_TIMEOUT_S = 20.0
 """How long :meth:`LiveProcessSink.start` waits for the child's server, s."""
 STALL_S = 3.0
 """A child that has not looped for this long is reported as stalled (stopped, or starved of
 CPU: it runs at ``SCHED_IDLE``), s."""
-STOP = b"stop"
-"""The parent's last message on the pipe."""
-TOPIC_BITS: dict[str, int] = {topic: 1 << i for i, topic in enumerate(STREAMED_TOPICS)}
-"""The bit of each streamed topic in the shared ``wanted`` mask."""
 _LATCHED_BITS = sum(TOPIC_BITS[t] for t in LATCHED_TOPICS)
 _DECIMATED_BITS = sum(TOPIC_BITS[t] for t in DECIMATED_TOPICS)
-_CHILD_CODE = (
-    "import sys\nfrom cmm_comp.daemon.live.child import child_entry\n"
-    "child_entry(int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]))"
-)
 _EMPTY = LiveStats(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
 
 
@@ -77,25 +60,17 @@ def topics_of(mask: int) -> frozenset[str]:
 
 
 class LiveProcessSink(LiveSink):
-    """:class:`LiveSink`'s interface; the server and the encoding run in a child process.
-
-    :param priority: the child's CPU priority, ``"idle"`` (``SCHED_IDLE``) or ``"normal"``.
-    """
+    """:class:`LiveSink`'s interface for the daemon; the server and the encoding run in a child
+    process at ``SCHED_IDLE``."""
 
     def __init__(
         self,
         settings: LiveSection,
         on_error: Callable[[BaseException], None] | None = None,
         name: str = "cmm-comp",
-        priority: str = "idle",
     ) -> None:
         super().__init__(settings, on_error, name)
-        if priority not in ("idle", "normal"):
-            raise ValueError(f"priority = {priority!r}; allowed: idle, normal")
-        self._priority = priority
-        self._proc: subprocess.Popen[bytes] | None = None
-        self._conn: Any = None
-        self._ring: SharedRing | None = None
+        self._proc: ChildProcess | None = None
         self._port = 0
         self._child: LiveStats = _EMPTY
         self._forwarded = 0
@@ -110,76 +85,29 @@ class LiveProcessSink(LiveSink):
         self._check_lock = threading.Lock()
 
     # ------------------------------------------------------------------ lifecycle
-    def start(self, thread: bool = True) -> Self:
+    def start(self) -> Self:
         """Start the child and wait for its server; :class:`LiveStartError` (one line) when
-        it cannot listen or does not start. Nothing is left running then. (``thread`` is
-        :class:`LiveSink`'s; no thread runs in the daemon here.)"""
-        capacity = ring_bytes(self.settings.queue)
+        it cannot listen or does not start. Nothing is left running then."""
         try:
-            shm_fd = shared_file(HEADER_BYTES + capacity)
-        except OSError as exc:
-            raise LiveStartError(f"live view: no shared memory ({exc})") from None
-        self._conn, child_conn = multiprocessing.Pipe(duplex=True)
-        fd = child_conn.fileno()
-        try:
-            self._ring = SharedRing(shm_fd, capacity, populate=True)
-            self._proc = subprocess.Popen(
-                [sys.executable, "-c", _CHILD_CODE, str(fd), str(shm_fd), str(capacity)],
-                pass_fds=(fd, shm_fd),
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
+            self._proc = ChildProcess(
+                "cmm_comp.daemon.live.child:child_main",
+                (self.settings, self._name),
+                ring_bytes(self.settings.queue),
+                self._on_event,
+                "live view",
+                START_TIMEOUT_S,
             )
-        except OSError as exc:
-            self._conn.close()
-            if self._ring is not None:
-                self._ring.close()
-                self._ring = None
-            raise LiveStartError(f"live view: cannot start its process ({exc})") from None
-        finally:
-            child_conn.close()
-            os.close(shm_fd)  # both mappings stay valid
-        try:
-            self._conn.send_bytes(pickle.dumps((self.settings, self._name, self._priority)))
-            kind, body = self._first_reply()
-        except BaseException:
-            self._abort()
+        except LiveStartError:
+            self._stopped = True
             raise
-        if kind != "ready":
-            self._abort()
-            raise LiveStartError(str(body))
-        self._port = int(body)
+        except (ChildProcessError, OSError) as exc:
+            self._stopped = True
+            raise LiveStartError(
+                f"{exc}; is foxglove-sdk installed (pip install 'cmm-comp[live]')?"
+            ) from None
+        self._port = int(self._proc.info)
         self._topics = frozenset(STREAMED_TOPICS)
         return self
-
-    def _first_reply(self) -> tuple[str, Any]:
-        if not self._conn.poll(START_TIMEOUT_S):
-            raise LiveStartError(f"live view: its process did not start in {START_TIMEOUT_S} s")
-        try:
-            return pickle.loads(self._conn.recv_bytes())  # type: ignore[no-any-return]
-        except (EOFError, OSError):
-            code = self._reap(5.0)
-            raise LiveStartError(
-                f"live view: its process exited at start (exit code {code}); is foxglove-sdk "
-                "installed (pip install 'cmm-comp[live]')?"
-            ) from None
-
-    def _abort(self) -> None:
-        self._conn.close()
-        self._reap(5.0)
-        self._stopped = True
-        if self._ring is not None:
-            self._ring.close()
-            self._ring = None
-
-    def _reap(self, timeout_s: float) -> int | None:
-        proc = self._proc
-        if proc is None:
-            return None
-        try:
-            return proc.wait(max(0.0, timeout_s))
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            return proc.wait()
 
     @property
     def port(self) -> int:
@@ -194,10 +122,9 @@ class LiveProcessSink(LiveSink):
     @property
     def wanted_topics(self) -> frozenset[str]:
         """The topics some client watches, as the child last published them."""
-        ring = self._ring
-        if ring is None or self._stopped:
+        if self._proc is None or self._stopped:
             return frozenset()
-        return topics_of(ring.wanted())
+        return topics_of(self._proc.ring.wanted())
 
     def stop(self, timeout_s: float = 2.0) -> bool:
         """Let the child send what it holds and stop its server; reap it (killed if it has
@@ -206,49 +133,35 @@ class LiveProcessSink(LiveSink):
             if self._stopped:
                 return True
             self._stopped = True  # no producer writes into the ring from now on
-        deadline = time.monotonic() + timeout_s
-        ok = True
-        final: Any = None
-        if self._proc is not None and self._proc.poll() is None:
-            try:
-                self._conn.send_bytes(STOP)
-                while final is None and self._conn.poll(max(0.0, deadline - time.monotonic())):
-                    kind, body = pickle.loads(self._conn.recv_bytes())
-                    if kind == "stopped":
-                        final = body
-            except (EOFError, OSError):
-                pass
-            ok = final is not None
-        code = self._reap(max(0.0, deadline - time.monotonic()) if ok else 0.0)
+        if self._proc is None:
+            return True
+        final = self._proc.stop(timeout_s)
         with self._check_lock:
             if final is not None:
                 self._take_status(final)
             elif not self._dead:
-                self._went_down(f"live view: its process did not stop in time (exit {code})")
+                self._went_down("live view: its process did not stop in time")
             self._dead = True
             self._lose_in_flight()
-        if self._conn is not None:
-            self._conn.close()
-        if self._ring is not None:
-            self._ring.close()
-            self._ring = None
-        return ok
+        self._proc.close_ring()
+        return final is not None
 
     # ------------------------------------------------------------------ producers
     def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
         """Offer ``payloads`` of ``topic`` (as :meth:`LiveSink.log_many`). A topic no client
         watches is counted and dropped at once. A batch of ``/cmm/raw`` or ``/cmm/corrected``
         less than ``1 / (update_rate_hz × max_per_update)`` after the last one taken (by log
-        time) is counted as decimated and dropped (an answer not ``ok`` has a gate of its
-        own, :meth:`_gate`): the child could not send more. Else the batch is pickled and copied into the shared ring
-        (a full ring drops it, counted). Never blocks on the child."""
+        time) is counted as decimated and dropped (an answer not ``ok`` has a gate of its own,
+        :meth:`_gate`): the child could not send more. Else the batch is pickled and copied
+        into the shared ring (a full ring drops it, counted). Never blocks on the child."""
         n = len(payloads)
         bit = TOPIC_BITS.get(topic)
-        if bit is None or not n or self._ring is None:
-            return n if bit is None or self._ring is None else 0
+        proc = self._proc
+        if bit is None or not n or proc is None:
+            return n if bit is None or proc is None else 0
         if self._stopped:
             return 0
-        if self._down is not None or not (bit & (_LATCHED_BITS | self._ring.wanted())):
+        if self._down is not None or not (bit & (_LATCHED_BITS | proc.ring.wanted())):
             with self._lock:
                 self._offered += n
                 self._idle += n
@@ -268,9 +181,9 @@ class LiveProcessSink(LiveSink):
         with self._lock:
             self._offered += n
             self._parent_errors += bad
-            if self._stopped or self._ring is None:
+            if self._stopped:
                 self._idle += n - bad
-            elif self._ring.write(data, n - bad):
+            elif proc.write(data, n - bad):
                 self._forwarded += n - bad
             else:
                 self._dropped += n - bad
@@ -305,14 +218,11 @@ class LiveProcessSink(LiveSink):
         data = pickle.dumps((topic, keep, t_ns), protocol=pickle.HIGHEST_PROTOCOL)
         return data, len(payloads) - len(keep)
 
-    def kick(self) -> None:
-        """Nothing to wake: the child polls the ring at its own rate."""
-
     # ------------------------------------------------------------------ statistics, health
     def stats(self) -> LiveStats:
         """The daemon's counters merged with the child's (which lag ≤ 0.1 s while it runs;
         exact after :meth:`stop`). ``queue_len`` includes the ring. Also checks the child:
-        a death or a stall is reported once (``on_error``) and ``up`` turns False."""
+        a stall is reported once (``on_error``) and ``up`` turns False."""
         self.check()
         with self._lock:
             offered, idle, dropped = self._offered, self._idle, self._dropped
@@ -330,27 +240,20 @@ class LiveProcessSink(LiveSink):
             encode_errors=errors + c.encode_errors,
             queue_len=max(0, forwarded - c.offered) + c.queue_len,
             dropped_by_topic=by_topic,
-            up=self._down is None and self._ring is not None,
+            up=self._down is None and not self._dead,
         )
 
     def check(self) -> None:
-        """Read the child's status from shared memory and see whether it lives and loops."""
-        ring = self._ring
-        if ring is None or self._dead or not self._check_lock.acquire(blocking=False):
+        """Read the child's status from shared memory and see whether it loops."""
+        proc = self._proc
+        if proc is None or self._dead or not self._check_lock.acquire(blocking=False):
             return
         try:
-            status = ring.status()
+            status = proc.status()
             if status is not None:
                 self._take_status(status)
-            code = self._proc.poll() if self._proc is not None else None
-            if code is not None:
-                self._dead = True
-                self._down = None  # a stall seen before is superseded: report the death
-                self._went_down(f"live view: its process ended (exit code {code})")
-                self._lose_in_flight()
-                return
-            age_s = (time.monotonic_ns() - ring.heartbeat_ns()) / 1e9
-            if age_s > STALL_S:
+            age_s = proc.stalled(STALL_S)
+            if age_s is not None:
                 self._went_down(
                     f"live view: its process has not run for {age_s:.1f} s (stopped, or "
                     "starved of CPU at idle priority); nothing is sent to it meanwhile"
@@ -360,6 +263,19 @@ class LiveProcessSink(LiveSink):
                 self._report(LiveDownError("live view: its process runs again"))
         finally:
             self._check_lock.release()
+
+    def _on_event(self, kind: str, body: Any) -> None:
+        """The watch thread: the child's death (``lost``) as soon as its pipe closes."""
+        if kind != "lost":
+            self._report(LiveChildError(str(body)))
+            return
+        with self._check_lock:
+            if self._dead:
+                return
+            self._dead = True
+            self._down = None  # a stall seen before is superseded: report the death
+            self._went_down(str(body))
+            self._lose_in_flight()
 
     def _take_status(self, status: tuple[LiveStats, int, list[str]]) -> None:
         stats, n_errors, texts = status
@@ -385,15 +301,3 @@ class LiveProcessSink(LiveSink):
             lost = max(0, self._forwarded - self._child.offered)
             self._forwarded -= lost
             self._dropped += lost
-
-
-def live_sink(
-    settings: LiveSection,
-    on_error: Callable[[BaseException], None] | None = None,
-    name: str = "cmm-comp",
-) -> LiveSink:
-    """The sink ``settings.sender`` asks for, not started: :class:`LiveProcessSink`
-    (``"process"``) or :class:`LiveSink` (``"thread"``)."""
-    if settings.sender == "process":
-        return LiveProcessSink(settings, on_error, name)
-    return LiveSink(settings, on_error, name)

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 from foxglove.messages import (
     ArrowPrimitive,
@@ -36,9 +35,11 @@ from foxglove.messages import (
     Timestamp,
     Vector3,
 )
+from msgspec import UNSET
 
-from cmm_comp.protocol.codes import Status, mm3_from_nm
+from cmm_comp.protocol.codes import Status
 
+from ..sessionlog.schemas import Corrected
 from .decimate import pick_evenly as pick_evenly
 
 FRAME_ID = "cmm"
@@ -77,46 +78,20 @@ class ScenePoint:
         return self.status in APPLIED_STATUSES
 
 
-def _number(value: Any) -> float:
-    """``value`` as a float: ints and floats (numpy ones too), never a bool or a string."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise TypeError(f"{value!r:.40} is not a number")
-    return float(value)
-
-
-def point_from_corrected(obj: dict[str, Any], t_ns: int) -> ScenePoint | None:
-    """A :class:`ScenePoint` from a ``/cmm/corrected`` JSON object, or None when a position or
-    correction is missing, not a number or not finite (nothing sensible to draw). The indicated
-    position is corrected − d / 1000 for an applied correction, the answered position otherwise."""
-    try:
-        pos = (_number(obj["x_mm"]), _number(obj["y_mm"]), _number(obj["z_mm"]))
-        d = tuple(_number(obj.get(k, 0.0)) for k in ("dx_um", "dy_um", "dz_um"))
-        status, seq = obj["status"], obj["seq"]
-    except (KeyError, TypeError, OverflowError):
+def point_from_corrected(obj: Corrected, t_ns: int) -> ScenePoint | None:
+    """A :class:`ScenePoint` from a checked ``/cmm/corrected`` message, or None when a position
+    or correction is not finite (nothing sensible to draw). The indicated position is
+    corrected − d / 1000 for an applied correction, the answered position otherwise; ``t_ns``:
+    its log time."""
+    d = tuple(0.0 if v is UNSET else v for v in (obj.dx_um, obj.dy_um, obj.dz_um))
+    pos = (obj.x_mm, obj.y_mm, obj.z_mm)
+    if not all(math.isfinite(v) for v in (*pos, *d)):  # type: ignore[arg-type]
         return None
-    if type(status) is not str or isinstance(seq, bool) or not isinstance(seq, int):
-        return None
-    if not all(math.isfinite(v) for v in (*pos, *d)):
-        return None
-    if status not in APPLIED_STATUSES:
+    if obj.status not in APPLIED_STATUSES:
         d = (0.0, 0.0, 0.0)
-    indicated = (pos[0] - d[0] / 1000.0, pos[1] - d[1] / 1000.0, pos[2] - d[2] / 1000.0)
-    return ScenePoint(seq, indicated, (d[0], d[1], d[2]), status, t_ns)
-
-
-def point_from_record(rec: tuple[Any, ...], t_ns: int) -> ScenePoint | None:
-    """:func:`point_from_corrected` of a compact ``/cmm/corrected`` record (``sessionlog.records
-    .CorrectedRecord``: positions in nm) without building its JSON object; None when malformed."""
-    try:
-        seq, x_nm, y_nm, z_nm, status, corr = rec[:6]
-        if not all(type(v) is int for v in (x_nm, y_nm, z_nm)):
-            return None
-        x_mm, y_mm, z_mm = mm3_from_nm((x_nm, y_nm, z_nm))
-        dx, dy, dz = corr
-    except (TypeError, ValueError):
-        return None
-    obj = {"seq": seq, "x_mm": x_mm, "y_mm": y_mm, "z_mm": z_mm, "status": status}
-    return point_from_corrected({**obj, "dx_um": dx, "dy_um": dy, "dz_um": dz}, t_ns)
+    dx, dy, dz = d  # type: ignore[misc]
+    indicated = (pos[0] - dx / 1000.0, pos[1] - dy / 1000.0, pos[2] - dz / 1000.0)
+    return ScenePoint(obj.seq, indicated, (dx, dy, dz), obj.status, t_ns)
 
 
 def quaternion_from_x_to(

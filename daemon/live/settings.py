@@ -19,7 +19,6 @@ from typing import Annotated, Any
 
 from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.toml_schema import (
-    Choice,
     Num,
     Problem,
     Rule,
@@ -28,9 +27,6 @@ from cmm_comp.compensation.toml_schema import (
     usable,
     validate,
 )
-
-SENDERS = ("process", "thread")
-"""Allowed values of ``live.sender``."""
 
 
 class LiveConfigError(CmmCompError, ValueError):
@@ -65,10 +61,9 @@ class LiveSection(Table):
     """Allow a non-loopback ``host`` (the protocol has no authentication: anyone who reaches the
     port sees every reading)."""
     queue: Annotated[int, Num(1, 1_000_000, "messages")] = 4096
-    """Messages the live view holds between two updates (the sender's queue: when full the
-    oldest are dropped; with ``sender = "process"`` also the size of the shared-memory ring
-    between the daemon and the process, 256 bytes a message: when full the newest are
-    dropped); every drop is counted."""
+    """Messages the live view holds between two updates (its process's queue: when full the
+    oldest are dropped; also the size of the shared-memory ring between the daemon and the
+    process, 256 bytes a message: when full the newest are dropped); every drop is counted."""
     update_rate_hz: Annotated[float, _RATE_HZ] = 10.0
     """Updates sent to clients per second, at most (what arrived in between goes out
     together, the high-rate topics decimated). 10 by default: a viewer on the daemon's host
@@ -87,11 +82,6 @@ class LiveSection(Table):
     newest always included): bounds the scene's cost at high reading rates."""
     arrow_mm_per_um: Annotated[float, Num(0.0, 1e6, "mm/µm", lo_open=True)] = 5.0
     """Magnification of the correction arrows: drawn length, mm, per µm of correction."""
-    sender: Annotated[str, Choice(SENDERS)] = "process"
-    """Where the JSON encoding, the scene and the WebSocket server run: ``process`` (a child
-    process at ``SCHED_IDLE``: its own GIL, only spare CPU; the daemon only copies the records
-    of watched topics into shared memory, no thread, no system call) or ``thread`` (a thread
-    of the daemon: shares the reply path's GIL and costs it measurably; docs/live.md)."""
 
     def rules(self, context: Mapping[str, Any]) -> Iterable[Problem]:
         why = host_problem(self.host, self.allow_remote)

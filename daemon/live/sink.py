@@ -10,21 +10,17 @@ each call to the MCAP logger and to the sink. On the calling (reply) thread the 
   ``queue`` messages the **oldest** are dropped (a live view wants the newest), counted exactly
   per topic.
 
-A sender thread (``live-sender``) takes the queue at most ``update_rate_hz`` times a second,
-decimates the high-rate topics (:mod:`.decimate`: at most ``max_per_update`` messages of
-``/cmm/raw`` and of ``/cmm/corrected`` per update, counted ``decimated``), builds each JSON object (the same payload as
-the MCAP log, ``stamp = {sec, nsec}``, non-finite numbers as ``null``, counted), and hands it to
-the SDK's server (``foxglove-sdk``: a Rust WebSocket server on its own threads) with the log time
-as the message time; it also builds ``/cmm/scene`` (:mod:`.scene`) at most ``scene_rate_hz``
-times a second. It runs at normal priority: it shares the GIL with the reply path, and a thread
-of lower OS priority could be preempted while holding the GIL (priority inversion). Its work is
-sliced (the GIL is offered back every few messages); it wakes once per update, or at once when
-a producer's ``kick`` finds the queue half full or a client subscribes. In the live view's
-process (:mod:`.child`) the same sink runs without its thread: the process's loop calls
-:meth:`LiveSink.tick`.
+Each update (:meth:`LiveSink.tick`, called by the live view's process at most
+``update_rate_hz`` times a second: :mod:`.child`) takes the queue, decimates the high-rate
+topics (:mod:`.decimate`: at most ``max_per_update`` messages of ``/cmm/raw`` and of
+``/cmm/corrected`` per update, counted ``decimated``), encodes each message as the session log
+does (``sessionlog.encoding``: the topic's Struct, ``stamp = {sec, nsec}``; a non-finite
+number as ``null``, counted) and hands it to the SDK's server (``foxglove-sdk``: a Rust
+WebSocket server on its own threads) with the log time as the message time; it also builds
+``/cmm/scene`` (:mod:`.scene`) at most ``scene_rate_hz`` times a second.
 
 Errors never stop the daemon: a message that cannot be encoded is counted and passed to
-``on_error``, an unexpected error in the sender loop is reported and the loop goes on. A server
+``on_error``, an unexpected error in an update is reported and the next one goes on. A server
 that cannot listen raises :class:`LiveStartError` (one line) from :meth:`LiveSink.start`.
 """
 
@@ -38,10 +34,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Self
 
-from ..osthread import name_os_thread
-from ..sessionlog.fastjson import FAST_JSON
+from ..sessionlog.encoding import message_struct, struct_json
 from .decimate import kept
-from .payloads import encode_live, live_object
 from .server import LiveServer, LiveStartError, open_live_server
 from .settings import LiveSection, host_problem
 
@@ -57,13 +51,13 @@ STREAMED_TOPICS: tuple[str, ...] = (
 )
 """Session-log topics the live view streams, with the MCAP log's schema names and payloads
 (the CAN/Modbus frame topics and ``/cmm/log_error`` are for the file only)."""
+TOPIC_BITS: dict[str, int] = {topic: 1 << i for i, topic in enumerate(STREAMED_TOPICS)}
+"""The bit of each streamed topic in the ``wanted`` mask the view's process shares."""
 LATCHED_TOPICS: frozenset[str] = frozenset({"/cmm/status", "/cmm/grid"})
 """Rare topics whose newest message is sent again to each new subscriber."""
 SCENE_TOPIC = "/cmm/scene"
 """The derived ``foxglove.SceneUpdate`` channel (protobuf) of the correction vectors."""
 CORRECTED = "/cmm/corrected"
-YIELD_EVERY = 16
-"""The sender offers the GIL back after this many messages."""
 STATUS_PERIOD_S = 1.0
 """Drops are reported to clients (a protocol ``status`` message) at most this often, s."""
 _TIME_NS_MAX = 2**64 - 1
@@ -78,9 +72,8 @@ class LiveStats:
     encoded), ``decimated`` (left out of an update, :mod:`.decimate`), ``dropped`` (a queue
     was full), ``sent`` (encoded and handed to the server) or ``encode_errors`` (could not be
     built or encoded), or still waits (``queue_len``); so ``offered = not_encoded + decimated +
-    dropped + sent + encode_errors + queue_len``. ``up``: the view runs (with
-    ``sender = "process"``: its process is alive and has looped within
-    :data:`.process.STALL_S`).
+    dropped + sent + encode_errors + queue_len``. ``up``: the view runs (its process is alive
+    and has looped within :data:`.process.STALL_S`).
     ``nulled``: non-finite numbers sent as ``null``. ``replayed``: latched messages sent again
     to new subscribers. Scene: ``scene_updates`` sent, ``scene_points`` drawn, ``scene_decimated``
     left out by the per-update limit, ``scene_skipped`` not drawable (a missing or non-finite
@@ -123,12 +116,13 @@ class LiveStats:
 class LiveSink:
     """Stream the session-log topics and ``/cmm/scene`` to Foxglove WebSocket clients.
 
-    ``with LiveSink(settings).start() as live: live.log_many(topic, records)``; or
-    :meth:`start` then :meth:`stop`. Thread-safe producers; never blocks them.
+    ``with LiveSink(settings).start() as live: live.log_many(topic, records); live.tick()``;
+    or :meth:`start`, :meth:`tick` at the update rate, then :meth:`stop`. Thread-safe
+    producers; never blocks them.
 
     :param settings: the ``[live]`` section (checked again here: a bad host is refused).
     :param on_error: called with each problem (a message that could not be encoded, a failure in
-        the sender loop), in the sender thread; its own failure is logged, never raised.
+        an update), in the thread calling :meth:`tick`; its own failure is logged, never raised.
     :param name: server name shown by clients.
     """
 
@@ -148,7 +142,6 @@ class LiveSink:
         self._batches: collections.deque[tuple[str, Sequence[Any], int]] = collections.deque()
         self._queued = 0
         self._limit = int(settings.queue)
-        self._kick_min = max(1, self._limit // 2)
         self._wanted: frozenset[str] = frozenset()
         self._latest: dict[str, tuple[Any, int]] = {}
         self._replay: set[str] = set()
@@ -160,7 +153,7 @@ class LiveSink:
         self._idle = 0
         self._dropped = 0
         self._dropped_by: dict[str, int] = {}
-        # counters (sender thread only)
+        # counters (the thread calling tick)
         self._unsent = 0
         self._decimated = 0
         self._sent = 0
@@ -180,9 +173,6 @@ class LiveSink:
         self.upstream_dropped = 0
         """Messages dropped before they reached this sink (the daemon's queue, when this sink
         runs in the child of :class:`.process.LiveProcessSink`): told to clients with ours."""
-        self._wake = threading.Event()
-        self._stopping = threading.Event()
-        self._thread: threading.Thread | None = None
         self._server: LiveServer | None = None
         self._channels: dict[str, Any] = {}
         self._topics: frozenset[str] = frozenset()  # taken by log_many once started
@@ -191,11 +181,10 @@ class LiveSink:
         self._stopped = False
 
     # ------------------------------------------------------------------ lifecycle
-    def start(self, thread: bool = True) -> Self:
-        """Create the channels and the server, start the sender thread (``thread=False``: the
-        caller calls :meth:`tick` instead). Raises :class:`LiveStartError` (one line) when
-        ``foxglove-sdk`` is missing or the address cannot be bound; nothing is left running
-        then."""
+    def start(self) -> Self:
+        """Create the channels and the server (the owner calls :meth:`tick` from then on).
+        Raises :class:`LiveStartError` (one line) when ``foxglove-sdk`` is missing or the
+        address cannot be bound; nothing is left running then."""
         try:
             from . import scene
         except ImportError as exc:
@@ -215,9 +204,6 @@ class LiveSink:
         self._scene_channel = self._server.scene
         self._channels = self._server.channels
         self._topics = frozenset(STREAMED_TOPICS)  # producers start taking messages now
-        if thread:
-            self._thread = threading.Thread(target=self._run, name="live-sender", daemon=True)
-            self._thread.start()
         return self
 
     @property
@@ -233,27 +219,20 @@ class LiveSink:
         return f"ws://{host}:{self.port}"
 
     def stop(self, timeout_s: float = 2.0) -> bool:
-        """Send what is queued, stop the sender thread and the server (connections closed).
-        True when done within ``timeout_s`` (s). Idempotent."""
+        """Send what is queued, stop the server (connections closed). True when done.
+        Idempotent. (``timeout_s``: the interface's; nothing here waits.)"""
         if self._stopped:
             return True
         self._stopped = True
-        deadline = time.monotonic() + timeout_s
-        self._stopping.set()
-        self._wake.set()
-        ok = True
-        if self._thread is not None:
-            self._thread.join(max(0.0, deadline - time.monotonic()))
-            ok = not self._thread.is_alive()
-        elif self._server is not None:
-            self.tick(final=True)  # no thread: send what waits now
-        if self._server is not None:
-            try:
-                self._server.stop()
-            except Exception as exc:  # reported, the daemon's stop goes on
-                self._report(exc)
-                ok = False
-        return ok
+        if self._server is None:
+            return True
+        self.tick(final=True)
+        try:
+            self._server.stop()
+        except Exception as exc:  # reported, the daemon's stop goes on
+            self._report(exc)
+            return False
+        return True
 
     def close(self) -> None:
         """Stop with the default timeout."""
@@ -322,12 +301,7 @@ class LiveSink:
             self._dropped_by[topic] = self._dropped_by.get(topic, 0) + cut
 
     def kick(self) -> None:
-        """The producer is idle: wake the sender only when the queue is half full. Otherwise
-        the sender's own 10 ms poll takes the batch: waking a thread per reading (an
-        ``Event.set``, a context switch and a GIL hand-off each) cost the feeding thread ~3×
-        and the process ~2× the CPU in ``benchmarks/bench_live.py`` (docs/live.md)."""
-        if self._queued >= self._kick_min:
-            self._wake.set()
+        """Nothing to wake: updates run at their own rate (the :class:`SessionLogger` call)."""
 
     # ------------------------------------------------------------------ subscriptions
     def _subscribed(self, client_id: int, channel_id: int, on: bool) -> None:
@@ -348,7 +322,6 @@ class LiveSink:
                     t = self._topic_of[cid]
                     wanted.add(CORRECTED if t == SCENE_TOPIC else t)
             self._wanted = frozenset(wanted)
-        self._wake.set()
 
     @property
     def wanted_topics(self) -> frozenset[str]:
@@ -390,18 +363,7 @@ class LiveSink:
         """``stats().counters()``."""
         return self.stats().counters()
 
-    # ------------------------------------------------------------------ sender thread
-    def _run(self) -> None:
-        name_os_thread()
-        period_s = 1.0 / self.settings.update_rate_hz
-        while True:
-            self._wake.wait(period_s)
-            self._wake.clear()
-            stopping = self._stopping.is_set()
-            self.tick(final=stopping)
-            if stopping:
-                return
-
+    # ------------------------------------------------------------------ updates
     def tick(self, final: bool = False) -> None:
         """One update: send what waits (decimated), greet new subscribers, the scene (forced
         when ``final``), the drop warning. Never raises (a bug is reported)."""
@@ -421,7 +383,6 @@ class LiveSink:
             self._queued = 0
         keep = self._decimation(batches)
         index: dict[str, int] = dict.fromkeys(keep, 0)  # running index per decimated topic
-        done = 0
         for topic, payloads, t_ns in batches:
             channel = self._channels[topic]
             live = channel.has_sinks()
@@ -435,7 +396,6 @@ class LiveSink:
                     ValueError(f"live view: {topic}: log time {t_ns!r:.40} is not integer ns")
                 )
                 continue
-            fast = FAST_JSON.get(topic) if live else None
             chosen = keep.get(topic)
             for payload in payloads:
                 send = live
@@ -446,10 +406,7 @@ class LiveSink:
                         self._decimated += 1
                         if not scene:
                             continue
-                self._one(topic, channel, payload, t_ns, send, scene, fast, counted=live)
-                done += 1
-                if done % YIELD_EVERY == 0:
-                    time.sleep(0)  # offer the GIL to the reply path
+                self._one(topic, channel, payload, t_ns, send, scene, counted=live)
 
     def _decimation(
         self, batches: collections.deque[tuple[str, Sequence[Any], int]]
@@ -474,41 +431,31 @@ class LiveSink:
         t_ns: int,
         live: bool,
         scene: bool,
-        fast: Callable[[tuple[Any, ...], int], bytes | None] | None,
         counted: bool = False,
     ) -> None:
         """Send one message (``live``: its channel has a subscriber and it was not decimated)
-        and/or add it to the scene. ``counted``: its fate is already counted (decimated). A
-        record takes the session log's fast path (``sessionlog.fastjson``: the same bytes)
-        unless a field is not plain and finite; then the general path (NaN → null)."""
-        obj = None
+        and/or add it to the scene. ``counted``: its fate is already counted (decimated)."""
         try:
+            obj = message_struct(topic, payload, t_ns)
             if live:
-                data = fast(payload, t_ns) if fast is not None and type(payload) is tuple else None
-                if data is None:
-                    data, obj, nulled = encode_live(topic, payload, t_ns)
-                    self._nulled += nulled
+                data, nulled = struct_json(topic, obj, nonfinite_as_null=True)
                 channel.log(data, log_time=t_ns)
+                self._nulled += nulled
                 self._sent += 1
             elif not counted:
                 self._unsent += 1
         except Exception as exc:  # malformed record, not JSON: counted, never fatal
+            if not live:  # only the scene wanted it: nothing to draw
+                self._scene_skipped += 1
+                return
             self._errors += 1
             self._report(ValueError(f"live view: {topic} message not sent: {exc}"))
             return
         if scene:
-            self._add_to_scene(payload, obj, t_ns)
+            self._add_to_scene(obj, t_ns)
 
-    def _add_to_scene(self, payload: Any, obj: dict[str, Any] | None, t_ns: int) -> None:
-        scene = self._scene_mod
-        if type(payload) is tuple:
-            point = scene.point_from_record(payload, t_ns)
-        else:
-            try:
-                obj = obj if obj is not None else live_object(CORRECTED, payload, t_ns)
-                point = scene.point_from_corrected(obj, t_ns)
-            except Exception:  # not a corrected object: nothing to draw
-                point = None
+    def _add_to_scene(self, obj: Any, t_ns: int) -> None:
+        point = self._scene_mod.point_from_corrected(obj, t_ns)
         if point is None:
             self._scene_skipped += 1
             return
@@ -529,7 +476,8 @@ class LiveSink:
                 continue
             payload, t_ns = latest
             try:
-                data, _, _ = encode_live(topic, payload, t_ns)
+                obj = message_struct(topic, payload, t_ns)
+                data, _ = struct_json(topic, obj, nonfinite_as_null=True)
                 self._channels[topic].log(data, log_time=t_ns)
                 self._replayed += 1
             except Exception as exc:

@@ -1,17 +1,17 @@
 """The daemon's session log: every message of a session in MCAP (JSON messages), and replay.
 
-* :mod:`.schemas` - the topics' JSON Schemas and the log's time conversions;
-* :mod:`.records` - compact record tuples the hot path logs instead of dicts;
-* :mod:`.logger` - :class:`SessionLogger`, the protocol both writers implement, their shared
-  :class:`LogSettings`, :class:`LoggerStats` and never-blocking queue;
-* :mod:`.encoding` - one message to strict JSON, or the error record that replaces it;
+* :mod:`.schemas` - every topic as one ``msgspec`` Struct: its keys, its JSON Schema, the
+  compact record tuples the hot path logs, the log's time conversions;
+* :mod:`.encoding` - one message to the JSON of its Struct, or the error record that replaces it;
+* :mod:`.logger` - :class:`SessionLogger`, the protocol the daemon types against,
+  :class:`LogSettings`, :class:`LoggerStats` and what the writers share;
 * :mod:`.writer` - one session file: naming (and rotating an existing name), opening, finishing;
 * :mod:`.mcapfile` - :class:`McapFileWriter`, a chunked MCAP file with every index, written from
   the format's specification (:mod:`.mcapwire`: the records as bytes; :mod:`.summary`: the chunk
   index spooled to disk, the summary section);
-* :mod:`.thread_writer` - :class:`McapLogger`, a writer thread in the daemon's process;
-* :mod:`.process_writer` - :class:`McapProcessLogger`, the writing in a child process
-  (:mod:`.writer_child` is that child's side);
+* :mod:`.thread_writer` - :class:`McapLogger`, a queue and a writer thread: what writes the file;
+* :mod:`.process_writer` - :class:`McapProcessLogger`, the daemon's log: a :class:`McapLogger` in
+  a child process (:mod:`..childproc`), fed through shared memory;
 * :mod:`.reader` - read sessions back (rolled sets, files cut by a crash);
 * :mod:`.recover` - rewrite a file cut by a crash as a complete, indexed file;
 * :mod:`.replay` - re-correct a session offline, or re-send what the controller sent to a bus.

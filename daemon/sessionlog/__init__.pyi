@@ -5,11 +5,12 @@ from .logger import LOW_PRIORITY_TOPICS, LoggerStats, LogSettings, SessionLogger
 from .mcapfile import McapFileWriter
 from .process_writer import McapProcessLogger, McapWriterProcessError
 from .reader import LoggedMessage, Session, load_session, read_messages, session_files
-from .records import CorrectedRecord, FrameRecord, RawRecord
 from .recover import RecoverReport, recover
 from .replay import BusReplayReport, ReplayError, ReplayReport, replay_offline, replay_to_bus
 from .schemas import (
+    RECORD_FIELDS,
     TOPIC_SCHEMAS,
+    TOPIC_TYPES,
     TopicSchema,
     check_message,
     ns_from_can_timestamp,
@@ -21,10 +22,10 @@ from .thread_writer import McapLogger
 __all__ = [
     "ERROR_TOPIC",
     "LOW_PRIORITY_TOPICS",
+    "RECORD_FIELDS",
     "TOPIC_SCHEMAS",
+    "TOPIC_TYPES",
     "BusReplayReport",
-    "CorrectedRecord",
-    "FrameRecord",
     "LogSettings",
     "LoggedMessage",
     "LoggerStats",
@@ -32,7 +33,6 @@ __all__ = [
     "McapLogger",
     "McapProcessLogger",
     "McapWriterProcessError",
-    "RawRecord",
     "RecoverReport",
     "ReplayError",
     "ReplayReport",

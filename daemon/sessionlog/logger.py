@@ -1,18 +1,17 @@
-"""What both session-log writers share: the :class:`SessionLogger` protocol the daemon types
+"""What the session log's writers share: the :class:`SessionLogger` protocol the daemon types
 against, the :class:`LogSettings` of a log (one definition, validated once), the
-:class:`LoggerStats` snapshot and :class:`HotPathQueue`, the never-blocking front half.
+:class:`LoggerStats` snapshot, and :class:`LoggerBase`: the topic checks, the drop counts per
+topic, the error reporting and the lifecycle.
 
-Two writers implement the protocol: :class:`~cmm_comp.daemon.sessionlog.thread_writer.McapLogger`
-(a writer thread in the daemon's process) and
-:class:`~cmm_comp.daemon.sessionlog.process_writer.McapProcessLogger` (a child process).
+:class:`~cmm_comp.daemon.sessionlog.process_writer.McapProcessLogger` is the daemon's log (the
+writing in a child process); :class:`~cmm_comp.daemon.sessionlog.thread_writer.McapLogger`
+writes the file, with a writer thread (in that child, or in any program that logs).
 """
 
 from __future__ import annotations
 
-import collections
 import logging
 import threading
-import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,13 +19,12 @@ from typing import Any, Protocol, Self
 
 from mcap.writer import CompressionType
 
-from .records import RECORD_BUILDERS
-from .schemas import TOPIC_SCHEMAS, TopicSchema
+from .schemas import RECORD_FIELDS, TOPIC_SCHEMAS
 
 _log = logging.getLogger(__name__)
 
 Payload = dict[str, Any] | tuple[Any, ...]
-"""A logged payload: the JSON object, or a compact record tuple (see ``records``)."""
+"""A logged payload: the JSON object, or a compact record tuple (``schemas.RECORD_FIELDS``)."""
 QueuedMessage = tuple[str, Payload, int]
 """``(topic, payload, log_time_ns)`` as it waits in a queue."""
 
@@ -140,7 +138,6 @@ class LogSettings:
     :param compression: chunk compression (zstd by default).
     :param fsync: also ``os.fsync`` on every flush (power-loss safety, costs latency).
     :param metadata: extra key/values for the ``session`` metadata record of every file.
-    :param schemas: topic to schema; defaults to :data:`.schemas.TOPIC_SCHEMAS`.
     """
 
     target: Path
@@ -152,13 +149,11 @@ class LogSettings:
     compression: CompressionType = CompressionType.ZSTD
     fsync: bool = False
     metadata: Mapping[str, str] = field(default_factory=dict)
-    schemas: Mapping[str, TopicSchema] = field(default_factory=lambda: dict(TOPIC_SCHEMAS))
 
     def __post_init__(self) -> None:
         target = Path(self.target)
         object.__setattr__(self, "target", target)
         object.__setattr__(self, "metadata", dict(self.metadata))
-        object.__setattr__(self, "schemas", dict(self.schemas))
         if self.single and (self.roll_bytes is not None or self.roll_s is not None):
             raise ValueError(f"{target}: rolling needs a directory target, not a .mcap file")
         if self.flush_period_s <= 0:
@@ -175,133 +170,40 @@ class LogSettings:
         return self.target.suffix == ".mcap"
 
 
-class HotPathQueue:
-    """The never-blocking front half both writers share: :meth:`log` only appends to a bounded
-    deque (or counts a drop); a writer thread (or a forwarder to a child process) drains it.
-    Also the shared error reporting (first error kept, ``on_error`` called) and lifecycle."""
+class LoggerBase:
+    """The part every writer shares: topic checks, drop counts per topic, error reporting (first
+    error kept, ``on_error`` called, never raised into the producer) and the lifecycle."""
 
     def __init__(
-        self,
-        settings: LogSettings,
-        on_error: Callable[[BaseException], None] | None,
-        what: str,
+        self, settings: LogSettings, on_error: Callable[[BaseException], None] | None, what: str
     ) -> None:
         self._settings = settings
-        self._schemas: Mapping[str, TopicSchema] = settings.schemas
-        self._queue: collections.deque[QueuedMessage] = collections.deque()
-        self._queue_size = settings.queue_size
-        self._soft_size = max(1, settings.queue_size // 2)  # LOW_PRIORITY_TOPICS stop here
         self._on_error = on_error
         self._what = what
         self._drop_lock = threading.Lock()
         self._dropped = 0
         self._dropped_by: dict[str, int] = {}
-        self._enqueued = 0  # approximate under concurrency, exact from one thread
+        self._enqueued = 0
         self._error: BaseException | None = None
         self._closed = False
-        self._stopping = threading.Event()
-        self._wake = threading.Event()
 
-    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
-        """Enqueue one message; never blocks. Returns False when it was dropped.
-
-        :param topic: one of the configured topics (KeyError otherwise: a programming error).
-        :param payload: the JSON object, or for the topics of
-            :data:`.records.RECORD_BUILDERS` a compact record tuple that the writer
-            turns into that object (cheaper on the hot path). Ownership passes to the logger
-            (do not mutate it afterwards). ``stamp`` is added from ``log_time_ns`` when absent.
-        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
-        """
-        if topic not in self._schemas:
-            raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(self._schemas)}")
-        if type(payload) is tuple and topic not in RECORD_BUILDERS:
+    @staticmethod
+    def _check(topic: str, payloads: Iterable[Payload]) -> None:
+        """KeyError for a topic that is not logged, or a record tuple on a topic that takes
+        dicts: a programming error of the caller."""
+        if topic not in TOPIC_SCHEMAS:
+            raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(TOPIC_SCHEMAS)}")
+        if topic not in RECORD_FIELDS and any(type(p) is tuple for p in payloads):
             raise KeyError(f"MCAP topic {topic!r} takes a dict payload, not a record tuple")
-        if log_time_ns is None:
-            log_time_ns = time.time_ns()
-        queue = self._queue
-        n = len(queue)
-        if (n >= self._soft_size or self._closed) and (  # overload policy (docs/mcap.md)
-            self._closed or n >= self._queue_size or topic in LOW_PRIORITY_TOPICS
-        ):
-            self._count_drop(topic)
-            return False
-        queue.append((topic, payload, log_time_ns))
-        self._enqueued += 1
-        return True
-
-    def log_many(
-        self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
-    ) -> int:
-        """Enqueue ``payloads`` on ``topic``, all with one log time (now if None), under the
-        same rules as :meth:`log` each (overload policy, drops counted per topic) at one call's
-        cost: what the CAN endpoint uses for the frames and answers of one wake-up. Returns how
-        many were taken; the rest (the last ones) were dropped and counted."""
-        if topic not in self._schemas:
-            raise KeyError(f"unknown MCAP topic {topic!r}; known: {sorted(self._schemas)}")
-        if topic not in RECORD_BUILDERS and any(type(p) is tuple for p in payloads):
-            raise KeyError(f"MCAP topic {topic!r} takes a dict payload, not a record tuple")
-        if not payloads:
-            return 0
-        if log_time_ns is None:
-            log_time_ns = time.time_ns()
-        queue = self._queue
-        limit = self._soft_size if topic in LOW_PRIORITY_TOPICS else self._queue_size
-        room = 0 if self._closed else max(0, limit - len(queue))
-        if len(payloads) <= room:
-            take = len(payloads)
-            queue.extend([(topic, p, log_time_ns) for p in payloads])
-        else:
-            take = room
-            queue.extend([(topic, p, log_time_ns) for p in payloads[:room]])
-            self._count_drop(topic, len(payloads) - room)
-        self._enqueued += take
-        return take
-
-    def enqueue(self, messages: list[QueuedMessage]) -> None:
-        """Take ``(topic, payload, log_time_ns)`` messages already checked by another
-        logger's :meth:`log` (the process writer's child gets them so): one ``extend`` while
-        the queue is below half full, else :meth:`log` each (overload policy, drops
-        counted). A topic without a channel or a bad time becomes an error record."""
-        queue = self._queue
-        if not self._closed and len(queue) + len(messages) < self._soft_size:
-            queue.extend(messages)
-            self._enqueued += len(messages)
-            return
-        for topic, payload, t_ns in messages:
-            try:
-                self.log(topic, payload, t_ns)
-            except KeyError:  # not a topic of this log: never silent, never fatal
-                queue.append((topic, payload, t_ns))
-                self._enqueued += 1
 
     def _count_drop(self, topic: str, n: int = 1) -> None:
         with self._drop_lock:
             self._dropped += n
             self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n
 
-    def _count_drops(self, messages: Iterable[QueuedMessage]) -> None:
-        """Count every message of ``messages`` as dropped, per topic."""
-        for topic, _, _ in messages:
-            self._count_drop(topic)
-
-    def _drop_queue(self) -> None:
-        """Count everything still queued as dropped and empty the queue."""
-        while True:
-            try:
-                topic, _, _ = self._queue.popleft()
-            except IndexError:
-                return
-            self._count_drop(topic)
-
     def _dropped_snapshot(self) -> dict[str, int]:
         with self._drop_lock:
             return dict(self._dropped_by)
-
-    def kick(self) -> None:
-        """Tell the writer (or forwarder) to work now rather than at its next poll: called by a
-        producer when it goes idle (the CAN endpoint after its bookkeeping), so the logging
-        work lands in the gap between readings, not on top of the next one."""
-        self._wake.set()
 
     @property
     def error(self) -> BaseException | None:
@@ -313,23 +215,22 @@ class HotPathQueue:
         if self._error is None:
             self._error = exc
         _log.error("%s: %r", self._what, exc)
-        if self._on_error is not None:
-            try:
-                self._on_error(exc)
-            except Exception:  # the handler's own failure is logged, never raised here
-                _log.exception("MCAP on_error handler raised")
+        self._tell(exc)
 
     def _report_quietly(self, exc: BaseException) -> None:
         """Pass a problem that does not stop the log (a message that could not be encoded)
         to ``on_error`` and the Python log, without making the logger unhealthy."""
         _log.warning("%s: %s", self._what, exc)
+        self._tell(exc)
+
+    def _tell(self, exc: BaseException) -> None:
         if self._on_error is not None:
             try:
                 self._on_error(exc)
             except Exception:  # the handler's own failure is logged, never raised here
                 _log.exception("MCAP on_error handler raised")
 
-    def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - both writers override
+    def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - the writers override
         """Drain, finish the file, end the writer; True if done within ``timeout_s`` (s)."""
         raise NotImplementedError
 

@@ -11,13 +11,15 @@ finishes the file (summary and indexes). Errors in the writer thread reach ``on_
 
 from __future__ import annotations
 
+import collections
+import dataclasses
 import json
 import logging
 import os
 import socket
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO
@@ -25,11 +27,17 @@ from typing import IO
 from mcap.writer import CompressionType
 
 from ..osthread import name_os_thread
-from .encoding import ERROR_TOPIC, encode_message, error_payload, json_encoder, safe_str
-from .fastjson import FAST_JSON
-from .logger import HotPathQueue, LoggerStats, LogSettings
+from .encoding import ERROR_TOPIC, encode_error, encode_message, error_payload, safe_str
+from .logger import (
+    LOW_PRIORITY_TOPICS,
+    LoggerBase,
+    LoggerStats,
+    LogSettings,
+    Payload,
+    QueuedMessage,
+)
 from .mcapfile import McapFileWriter
-from .schemas import TOPIC_SCHEMAS, TopicSchema, stamp_from_ns
+from .schemas import TOPIC_SCHEMAS, stamp_from_ns
 from .writer import (
     finish_session_file,
     free_path,
@@ -48,10 +56,10 @@ _ERROR_REPORTS_PER_S = 10
 _MAX_T_NS = 2**64 - 1
 
 
-class McapLogger(HotPathQueue):
+class McapLogger(LoggerBase):
     """Log JSON messages to MCAP from a hot path without blocking it.
 
-    Arguments: see :class:`~.logger.LogSettings` (``target`` … ``metadata``, ``schemas``), and
+    Arguments: see :class:`~.logger.LogSettings` (``target`` … ``metadata``), and
 
     :param on_error: called from the writer thread with every exception it meets.
     :param opener: creates a file's byte stream (tests use it to inject slow or failing sinks).
@@ -72,45 +80,19 @@ class McapLogger(HotPathQueue):
         fsync: bool = False,
         metadata: Mapping[str, str] | None = None,
         on_error: Callable[[BaseException], None] | None = None,
-        schemas: Mapping[str, TopicSchema] = TOPIC_SCHEMAS,
         opener: Callable[[Path], IO[bytes]] = open_exclusive,
         writer_setup: Callable[[], object] | None = None,
     ) -> None:
         settings = LogSettings(
-            Path(target),
-            roll_bytes,
-            roll_s,
-            flush_period_s,
-            chunk_size,
-            queue_size,
-            compression,
-            fsync,
-            metadata or {},
-            schemas,
-        )
-        self._start(settings, on_error, opener, writer_setup)
-
-    @classmethod
-    def from_settings(
-        cls,
-        settings: LogSettings,
-        on_error: Callable[[BaseException], None] | None = None,
-        opener: Callable[[Path], IO[bytes]] = open_exclusive,
-        writer_setup: Callable[[], object] | None = None,
-    ) -> McapLogger:
-        """A logger for ``settings`` (what the process writer's child runs)."""
-        self = cls.__new__(cls)
-        self._start(settings, on_error, opener, writer_setup)
-        return self
-
-    def _start(
-        self,
-        settings: LogSettings,
-        on_error: Callable[[BaseException], None] | None,
-        opener: Callable[[Path], IO[bytes]],
-        writer_setup: Callable[[], object] | None,
-    ) -> None:
+            Path(target), roll_bytes, roll_s, flush_period_s, chunk_size, queue_size,
+            compression, fsync, metadata or {},
+        )  # fmt: skip
         super().__init__(settings, on_error, "MCAP writer")
+        self._queue: collections.deque[QueuedMessage] = collections.deque()
+        self._queue_size = settings.queue_size
+        self._soft_size = max(1, settings.queue_size // 2)  # LOW_PRIORITY_TOPICS stop here
+        self._stopping = threading.Event()
+        self._wake = threading.Event()
         self._single = settings.single
         self._flush_period_s = float(settings.flush_period_s)
         self._opener = opener
@@ -149,7 +131,101 @@ class McapLogger(HotPathQueue):
         self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
         self._thread.start()
 
-    # ------------------------------------------------------------------ status (log(), error: HotPathQueue)
+    @classmethod
+    def from_settings(
+        cls,
+        settings: LogSettings,
+        on_error: Callable[[BaseException], None] | None = None,
+        writer_setup: Callable[[], object] | None = None,
+    ) -> McapLogger:
+        """A logger for ``settings`` (what the writer child runs)."""
+        fields = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)}
+        return cls(**fields, on_error=on_error, writer_setup=writer_setup)
+
+    # ------------------------------------------------------------------ producers
+
+    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
+        """Enqueue one message; never blocks. Returns False when it was dropped.
+
+        :param topic: one of the configured topics (KeyError otherwise: a programming error).
+        :param payload: the JSON object, or for the topics of
+            :data:`.schemas.RECORD_FIELDS` a compact record tuple that the writer
+            turns into that object (cheaper on the hot path). Ownership passes to the logger
+            (do not mutate it afterwards). ``stamp`` is added from ``log_time_ns`` when absent.
+        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
+        """
+        self._check(topic, (payload,))
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        queue = self._queue
+        n = len(queue)
+        if (n >= self._soft_size or self._closed) and (  # overload policy (docs/mcap.md)
+            self._closed or n >= self._queue_size or topic in LOW_PRIORITY_TOPICS
+        ):
+            self._count_drop(topic)
+            return False
+        queue.append((topic, payload, log_time_ns))
+        self._enqueued += 1
+        return True
+
+    def log_many(
+        self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
+    ) -> int:
+        """Enqueue ``payloads`` on ``topic``, all with one log time (now if None), under the
+        same rules as :meth:`log` each (overload policy, drops counted per topic) at one call's
+        cost: what the CAN endpoint uses for the frames and answers of one wake-up. Returns how
+        many were taken; the rest (the last ones) were dropped and counted."""
+        self._check(topic, payloads)
+        if not payloads:
+            return 0
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        queue = self._queue
+        limit = self._soft_size if topic in LOW_PRIORITY_TOPICS else self._queue_size
+        room = 0 if self._closed else max(0, limit - len(queue))
+        if len(payloads) <= room:
+            take = len(payloads)
+            queue.extend([(topic, p, log_time_ns) for p in payloads])
+        else:
+            take = room
+            queue.extend([(topic, p, log_time_ns) for p in payloads[:room]])
+            self._count_drop(topic, len(payloads) - room)
+        self._enqueued += take
+        return take
+
+    def enqueue(self, messages: list[QueuedMessage]) -> None:
+        """Take ``(topic, payload, log_time_ns)`` messages already checked by another
+        logger's :meth:`log` (the process writer's child gets them so): one ``extend`` while
+        the queue is below half full, else :meth:`log` each (overload policy, drops
+        counted). A topic without a channel or a bad time becomes an error record."""
+        queue = self._queue
+        if not self._closed and len(queue) + len(messages) < self._soft_size:
+            queue.extend(messages)
+            self._enqueued += len(messages)
+            return
+        for topic, payload, t_ns in messages:
+            try:
+                self.log(topic, payload, t_ns)
+            except KeyError:  # not a topic of this log: never silent, never fatal
+                queue.append((topic, payload, t_ns))
+                self._enqueued += 1
+
+    def _drop_queue(self) -> None:
+        """Count everything still queued as dropped and empty the queue."""
+        while True:
+            try:
+                topic, _, _ = self._queue.popleft()
+            except IndexError:
+                return
+            self._count_drop(topic)
+
+    def kick(self) -> None:
+        """Tell the writer (or forwarder) to work now rather than at its next poll: called by a
+        producer when it goes idle (the CAN endpoint after its bookkeeping), so the logging
+        work lands in the gap between readings, not on top of the next one."""
+        self._wake.set()
+
+    # ------------------------------------------------------------------ status
 
     @property
     def healthy(self) -> bool:
@@ -161,11 +237,12 @@ class McapLogger(HotPathQueue):
         """Files written so far, in order."""
         return tuple(self._files)
 
-    def stats(self) -> LoggerStats:
-        """A snapshot of the counters (drops include those reported by
-        :meth:`set_upstream_drops`)."""
+    def stats(self, upstream: bool = True) -> LoggerStats:
+        """A snapshot of the counters; the drops include those reported by
+        :meth:`set_upstream_drops` unless ``upstream`` is False (what the writer child reports
+        to the daemon, which adds its own)."""
         dropped_by = self._dropped_snapshot()
-        for topic, n in self._upstream_dropped.items():
+        for topic, n in self._upstream_dropped.items() if upstream else ():
             dropped_by[topic] = dropped_by.get(topic, 0) + n
         return LoggerStats(
             enqueued=self._enqueued,
@@ -175,22 +252,6 @@ class McapLogger(HotPathQueue):
             files=tuple(self._files),
             queue_len=len(self._queue),
             dropped_by_topic=dropped_by,
-            encode_errors_by_topic=dict(self._encode_errors_by),
-            written_by_topic=dict(self._written_by),
-            flushed=self._flushed,
-        )
-
-    def own_stats(self) -> LoggerStats:
-        """Like :meth:`stats` without the upstream drops (what the process writer's child
-        reports to its parent, which adds its own)."""
-        return LoggerStats(
-            enqueued=self._enqueued,
-            written=self._written,
-            dropped=self._dropped,
-            encode_errors=self._encode_errors,
-            files=tuple(self._files),
-            queue_len=len(self._queue),
-            dropped_by_topic=self._dropped_snapshot(),
             encode_errors_by_topic=dict(self._encode_errors_by),
             written_by_topic=dict(self._written_by),
             flushed=self._flushed,
@@ -270,7 +331,7 @@ class McapLogger(HotPathQueue):
                     self._opener,
                     chunk_size=int(cfg.chunk_size),
                     compression=cfg.compression,
-                    schemas=self._schemas,
+                    schemas=TOPIC_SCHEMAS,
                     metadata=meta,
                 )
                 break
@@ -306,10 +367,7 @@ class McapLogger(HotPathQueue):
         append = self._writer.add_message
         queue = self._queue
         channels = self._channels
-        schemas = self._schemas
         written_by = self._written_by
-        dumps = json_encoder()
-        fast_json = FAST_JSON
         while n < _BATCH:  # short batches (GIL yielded between them); bounds roll overshoot
             try:
                 topic, payload, t_ns = queue.popleft()
@@ -320,14 +378,11 @@ class McapLogger(HotPathQueue):
                 if type(t_ns) is not int or not 0 <= t_ns <= _MAX_T_NS:
                     raise ValueError(f"log_time_ns {t_ns!r:.40} is not an integer ns >= 0")
                 channel = channels[topic]  # KeyError: not a topic of this file
-                fast = fast_json.get(topic) if type(payload) is tuple else None
-                data = fast(payload, t_ns) if fast is not None else None  # type: ignore[arg-type]
-                if data is None:  # dicts, and records the fast path does not take
-                    if topic == "/cmm/counters" and type(payload) is dict:
-                        payload = self._with_log_counters(payload)
-                    data = encode_message(topic, payload, t_ns, dumps, schemas.get(topic))
+                if topic == "/cmm/counters" and type(payload) is dict:
+                    payload = self._with_log_counters(payload)
+                data = encode_message(topic, payload, t_ns)
             except Exception as exc:  # any bad payload: an error record, never a stop
-                self._encode_error(topic, payload, t_ns, exc, dumps)
+                self._encode_error(topic, payload, t_ns, exc)
                 continue
             append(channel, t_ns, data, t_ns)
             self._written += 1
@@ -342,9 +397,7 @@ class McapLogger(HotPathQueue):
             return payload  # refused by the schema check
         return {**payload, "counters": {**counters, **self.stats().counters()}}
 
-    def _encode_error(
-        self, topic: str, payload: object, t_ns: object, exc: Exception, dumps: Callable
-    ) -> None:
+    def _encode_error(self, topic: str, payload: object, t_ns: object, exc: Exception) -> None:
         """Count a message that could not be encoded, write its error record, report it."""
         self._encode_errors += 1
         self._encode_errors_by[topic] = self._encode_errors_by.get(topic, 0) + 1
@@ -354,7 +407,7 @@ class McapLogger(HotPathQueue):
             now_ns = time.time_ns()
             record = {**error_payload(topic, payload, t_ns, exc), "stamp": stamp_from_ns(now_ns)}
             assert self._writer is not None
-            self._writer.add_message(channel, now_ns, dumps(record).encode(), now_ns)
+            self._writer.add_message(channel, now_ns, encode_error(record), now_ns)
             self._written_by[ERROR_TOPIC] = self._written_by.get(ERROR_TOPIC, 0) + 1
         now = time.monotonic()
         recent = [t for t in self._error_reports if now - t < 1.0]

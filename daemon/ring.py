@@ -1,5 +1,6 @@
-"""The shared memory between the daemon and the live view's process: a byte ring of records
-(daemon → process) and a status block (process → daemon). No system call, no wake-up, no lock
+"""The shared memory between the daemon and one of its child processes (:mod:`.childproc`: the
+MCAP writer, the live view): a byte ring of records (daemon → child) and a status block
+(child → daemon). No system call, no wake-up, no lock
 shared between the processes: each side reads and writes plain memory at its own pace.
 
 Layout of one mapping (a ``memfd``, else an unlinked temporary file; the process gets its
@@ -14,7 +15,7 @@ offset    content
 24        ``heartbeat``: u64, ``CLOCK_MONOTONIC`` ns of the process's last loop (system-wide clock)
 64        status block: u64 sequence (odd while being written), u32 length, u32 CRC-32, pickled
           status (the process writes it, the daemon reads it when asked for statistics)
-4096      the ring: records of ``u32 length, u32 CRC-32, u32 messages, u32 0`` + data, each
+65536     the ring: records of ``u32 length, u32 CRC-32, u32 messages, u32 0`` + data, each
           padded to 16 bytes; a length of ``0xFFFFFFFF`` means "continue at the ring's start"
 ========  =====================================================================================
 
@@ -28,13 +29,14 @@ from __future__ import annotations
 
 import mmap
 import os
+import pickle
 import struct
 import tempfile
 import zlib
 from collections.abc import Iterator
 from typing import Any
 
-HEADER_BYTES = 4096
+HEADER_BYTES = 65536
 HEAD_OFF, TAIL_OFF, WANTED_OFF, HEARTBEAT_OFF, STATUS_OFF = 0, 8, 16, 24, 64
 STATUS_MAX = HEADER_BYTES - STATUS_OFF - 16
 """Largest pickled status, bytes."""
@@ -54,7 +56,7 @@ def shared_file(size: int) -> int:
     """A file descriptor of ``size`` zeroed bytes that another process can map: a ``memfd``
     (Linux; no backing store) or else an unlinked temporary file."""
     try:
-        fd = os.memfd_create("cmm-comp-live", 0)
+        fd = os.memfd_create("cmm-comp-child", 0)
     except (AttributeError, OSError):
         shm = "/dev/shm" if os.path.isdir("/dev/shm") else None
         with tempfile.TemporaryFile(dir=shm) as f:
@@ -67,11 +69,11 @@ def shared_file(size: int) -> int:
     return fd
 
 
-def ring_bytes(queue: int) -> int:
-    """Ring capacity for ``queue`` messages: 256 bytes each (a pickled one-record batch is
-    ~150-250), at least 64 KiB, a multiple of 16 (every record starts 16-byte aligned, so a
-    wrap marker always fits)."""
-    return _padded(max(64 * 1024, 256 * int(queue)))
+def ring_bytes(queue: int, message_bytes: int = 256) -> int:
+    """Ring capacity for ``queue`` messages of ``message_bytes`` each (a pickled one-record
+    batch is ~150-250 bytes; a compact record within a batch ~60), at least 64 KiB, a multiple
+    of 16 (every record starts 16-byte aligned, so a wrap marker always fits)."""
+    return _padded(max(64 * 1024, message_bytes * int(queue)))
 
 
 class SharedRing:
@@ -126,6 +128,10 @@ class SharedRing:
         _U64.pack_into(mm, HEAD_OFF, self._head)
         return True
 
+    def used_bytes(self) -> int:
+        """Bytes written and not yet consumed (the writer's view)."""
+        return int(self._head - _U64.unpack_from(self.mm, TAIL_OFF)[0])
+
     def wanted(self) -> int:
         """The process's topic bit mask."""
         return self.mm[WANTED_OFF]
@@ -137,8 +143,6 @@ class SharedRing:
     def status(self) -> Any:
         """The newest complete status the process wrote, or None (none yet, or it is being
         written: ask again later)."""
-        import pickle
-
         mm = self.mm
         seq, n, crc = _STATUS.unpack_from(mm, STATUS_OFF)
         if seq == 0 or seq & 1 or n > STATUS_MAX:
