@@ -32,7 +32,7 @@ _PACKAGES = ("compensation", "protocol", "daemon")
 #: The CLI's own modules that a task runs (the rest of the CLI only orchestrates).
 _CLI_FILES = ("common.py", "diagnosis.py", "fleet/tasks.py")
 #: Libraries whose version can change the numbers.
-_LIBRARIES = ("numpy", "scipy", "numba", "mcap", "pydantic")
+_LIBRARIES = ("numpy", "scipy", "numba", "mcap", "pydantic", "msgspec")
 
 
 @functools.cache
