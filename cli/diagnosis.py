@@ -8,37 +8,56 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from .common import load_machine, write_json_atomic
 
 
-def _load(args: argparse.Namespace) -> tuple[Any, Any]:
+def run_diagnosis(
+    machine_path: str | Path,
+    measurements_path: str | Path,
+    *,
+    warn: Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> Any:
+    """Load ``machine_path`` and ``measurements_path`` and diagnose: what ``cmm-comp diagnose``
+    runs, and each task of ``cmm-comp fleet diagnose``. ``warn`` receives the machine's load
+    warnings (default: printed to stderr). Raises :class:`CmmCompError`/``OSError`` for a file
+    that cannot be read and ``ValueError`` (prefixed by the measurements file) for data the
+    diagnosis refuses."""
+    from cmm_comp.compensation import Machine
+    from cmm_comp.compensation.diagnosis import diagnose
     from cmm_comp.compensation.formats.measurements import read_measurements
 
-    machine = load_machine(args.machine)
-    data = read_measurements(args.measurements)
-    return machine, data
+    if warn is None:
+        machine = load_machine(machine_path)
+    else:
+        machine = Machine.from_toml(machine_path)
+        for warning in machine.warnings:
+            warn(warning)
+    data = read_measurements(measurements_path)
+    try:
+        return diagnose(machine, data, progress=progress)
+    except ValueError as exc:
+        raise _RefusedData(f"{measurements_path}: {exc}") from None
+
+
+class _RefusedData(ValueError):
+    """The diagnosis refused the data (message names the measurements file)."""
 
 
 def _run(args: argparse.Namespace, action: Any) -> int:
     from cmm_comp.compensation import CmmCompError
-    from cmm_comp.compensation.diagnosis import diagnose
-
-    try:
-        machine, data = _load(args)
-    except (CmmCompError, OSError) as exc:
-        print(f"cmm-comp {args.command}: {exc}", file=sys.stderr)
-        return 2
 
     def progress(line: str) -> None:
         print(f"cmm-comp {args.command}: {line}", file=sys.stderr, flush=True)
 
     try:
-        diagnosis = diagnose(machine, data, progress=progress)
-    except ValueError as exc:
-        print(f"cmm-comp {args.command}: {args.measurements}: {exc}", file=sys.stderr)
+        diagnosis = run_diagnosis(args.machine, args.measurements, progress=progress)
+    except (CmmCompError, OSError, _RefusedData) as exc:
+        print(f"cmm-comp {args.command}: {exc}", file=sys.stderr)
         return 2
     return action(diagnosis)
 

@@ -1,0 +1,235 @@
+"""``cmm-comp fleet diagnose``: the trend names exactly the machines and changes that were
+injected, and every session's diagnosis equals ``cmm-comp diagnose`` run on its own.
+
+Oracles: ``ROOT/fleet-truth.json`` (what the generator injected: the machines, causes, dates and
+rates) and the one-by-one ``cmm-comp diagnose`` subprocess (no Dask, no store, no streaming).
+Every command runs as docs/fleet.md prints it, through the installed ``cmm-comp`` entry point.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from datetime import date
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+CMM = str(Path(sys.executable).parent / "cmm-comp")
+ENV = {**os.environ, "PYTHONWARNINGS": "ignore"}
+
+pytestmark = pytest.mark.timeout(900)
+
+
+def cmm(*argv: str, cwd: Path | None = None, check: bool = True) -> subprocess.CompletedProcess:
+    """Run ``cmm-comp ARGV`` as a user would; fail the test with its output on a bad exit."""
+    proc = subprocess.run(
+        [CMM, *argv], capture_output=True, text=True, cwd=cwd, env=ENV, timeout=800
+    )
+    if check and proc.returncode != 0:
+        pytest.fail(f"cmm-comp {' '.join(argv)} → {proc.returncode}\n{proc.stdout}\n{proc.stderr}")
+    return proc
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """4 machines × 12 weekly sessions of 200 points, diagnosed on 2 workers (docs/fleet.md)."""
+    work = tmp_path_factory.mktemp("fleet")
+    cmm("fleet", "generate", "plant", "--machines", "4", "--dates", "12", "--points", "200",
+        cwd=work)  # fmt: skip
+    proc = cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--report", "report",
+               "--workers", "2", cwd=work)  # fmt: skip
+    out = json.loads((work / "fleet.json").read_text())
+    truth = json.loads((work / "plant" / "fleet-truth.json").read_text())
+    return {"work": work, "out": out, "truth": truth, "stdout": proc.stdout}
+
+
+def _changing(truth: dict[str, Any]) -> list[dict[str, Any]]:
+    """The injected effects that change within the series (a creep, or one that appears after
+    the first date); an effect present unchanged from the first date is no change."""
+    first = truth["dates"][0]
+    return [c for c in truth["changes"] if c["per_day"] or c["start"] > first]
+
+
+def _matches(change: dict[str, Any], injected: dict[str, Any]) -> bool:
+    return change["cause"] == injected["cause"] and all(
+        change["keys"].get(k) == v for k, v in injected["keys"].items()
+    )
+
+
+def test_trend_names_exactly_the_injected_changes(fleet: dict[str, Any]) -> None:
+    _assert_trend_names_exactly(fleet["out"], fleet["truth"])
+
+
+def test_trend_names_exactly_the_injected_changes_other_seed_and_size(tmp_path: Path) -> None:
+    """Another fleet than the worked example's: other noise and points (seed 1), five machines
+    (the reversal on cmm-05, two clean machines), the reversal on another date."""
+    cmm("fleet", "generate", "plant", "--machines", "5", "--dates", "12", "--points", "200",
+        "--seed", "1", "--start", "2026-04-06", cwd=tmp_path)  # fmt: skip
+    cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--workers", "2", "--quiet",
+        cwd=tmp_path)  # fmt: skip
+    out = json.loads((tmp_path / "fleet.json").read_text())
+    truth = json.loads((tmp_path / "plant" / "fleet-truth.json").read_text())
+    assert {c["machine"] for c in _changing(truth)} == {"cmm-02", "cmm-05"}
+    _assert_trend_names_exactly(out, truth)
+    _assert_dated_and_rated(out, truth)
+
+
+def _assert_trend_names_exactly(out: dict[str, Any], truth: dict[str, Any]) -> None:
+    assert sorted(out["machines"]) == sorted(truth["machines"])
+    assert len(out["sessions"]) == len(truth["machines"]) * len(truth["dates"])
+    assert out["failed"] == []
+    injected = _changing(truth)
+    assert len({c["machine"] for c in injected}) == 2  # the generator's two changing machines
+    flagged = {m for m, s in out["machines"].items() if s["changes"]}
+    assert flagged == {c["machine"] for c in injected}, {
+        m: [c["text"] for c in s["changes"]] for m, s in out["machines"].items()
+    }
+    for machine, section in out["machines"].items():
+        mine = [c for c in injected if c["machine"] == machine]
+        for change in section["changes"]:  # every change reported is one injected
+            assert any(_matches(change, c) for c in mine), change["text"]
+        for c in mine:  # every injected change is reported and named for recalibration
+            assert any(_matches(ch, c) for ch in section["changes"]), (machine, c)
+            assert any(
+                section["trend"][name]["cause"] == c["cause"] for name in section["recalibrate"]
+            )
+        if not mine:
+            assert section["recalibrate"] == []
+            assert "nothing to recalibrate" in section["summary"]
+
+
+def test_appearance_is_dated_and_creep_rate_matches(fleet: dict[str, Any]) -> None:
+    _assert_dated_and_rated(fleet["out"], fleet["truth"])
+
+
+def _assert_dated_and_rated(out: dict[str, Any], truth: dict[str, Any]) -> None:
+    for injected in _changing(truth):
+        section = out["machines"][injected["machine"]]
+        found = [c for c in section["changes"] if _matches(c, injected)]
+        if injected["per_day"]:  # squareness creep: the rate of the injected coefficient
+            (creep,) = [c for c in found if c["kind"] == "creep"]
+            rate = injected["per_day"]["coefficients"][0]  # µrad/day, legendre_0 is the value
+            assert abs(creep["rate_per_day"] - rate) < max(4 * creep["u_rate_per_day"], 0.1 * rate)
+        else:  # appeared between the last session before the injected date and that date
+            (appeared,) = [c for c in found if c["kind"] == "appeared"]
+            before, after = (date.fromisoformat(d) for d in appeared["between"])
+            assert before < date.fromisoformat(injected["start"]) <= after
+            assert f"appeared between {appeared['between'][0]} and" in section["summary"]
+
+
+def test_constant_effect_is_persistent_not_a_change(fleet: dict[str, Any]) -> None:
+    out, truth = fleet["out"], fleet["truth"]
+    constant = [c for c in truth["changes"] if c not in _changing(truth)]
+    assert constant  # the generator's cmm-03 carries one
+    for c in constant:
+        section = out["machines"][c["machine"]]
+        assert section["changes"] == []
+        names = [n for n, e in section["trend"].items() if e["cause"] == c["cause"]]
+        assert names and all(n in section["summary"] for n in names)
+        assert "extend the model once" in section["summary"]
+
+
+def _strip(diagnosis: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in diagnosis.items() if k != "elapsed_s"}
+
+
+def test_sessions_equal_diagnose_run_one_by_one(fleet: dict[str, Any]) -> None:
+    work, out = fleet["work"], fleet["out"]
+    by_path = {s["path"]: s for s in out["sessions"]}
+    # one session of each machine with an effect, and a clean one
+    picks = [
+        next(p for p in by_path if p.startswith(m) and (by_path[p]["diagnosis"]["effects"] or m == "cmm-01"))
+        for m in ("cmm-01", "cmm-02", "cmm-03", "cmm-04")
+    ]  # fmt: skip
+    for path in picks:
+        session = work / "plant" / path
+        cmm("diagnose", str(session / "machine.toml"), str(session / "measurements.csv"),
+            "--json", str(work / "one.json"))  # fmt: skip
+        alone = json.loads((work / "one.json").read_text())
+        assert by_path[path]["machine"] == path.split("/")[0]
+        assert _strip(by_path[path]["diagnosis"]) == _strip(alone), path
+
+
+def test_report_and_rerun_skips_finished_sessions(fleet: dict[str, Any]) -> None:
+    work = fleet["work"]
+    report = work / "report"
+    assert (report / "index.html").is_file() and (report / "fleet-trends.png").is_file()
+    assert (report / "fleet-trends.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    run = fleet["out"]["run"]
+    assert run["sessions_run"] == 48 and run["stored_before"] == 0
+    # again: nothing to run; the same sessions and machines
+    again = cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--workers", "2", cwd=work)
+    assert "0 run, 48 stored before, 0 failed" in again.stdout
+    second = json.loads((work / "fleet.json").read_text())
+    assert second["sessions"] == fleet["out"]["sessions"]
+    assert second["machines"] == fleet["out"]["machines"]
+    # one input changed: exactly that session runs again
+    csv = work / "plant" / "cmm-01" / "2026-01-12" / "measurements.csv"
+    original = csv.read_text()
+    try:
+        csv.write_text(original.replace("line00", "line00a", 1))
+        third = cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--workers", "2",
+                    cwd=work)  # fmt: skip
+        assert "1 run, 47 stored before, 0 failed" in third.stdout
+    finally:
+        csv.write_text(original)
+
+
+def test_bad_session_is_reported_and_the_rest_completes(
+    tmp_path: Path, fleet: dict[str, Any]
+) -> None:
+    plant = tmp_path / "plant"
+    for machine in ("cmm-01", "cmm-04"):  # the first 4 sessions of two machines
+        for session in sorted((fleet["work"] / "plant" / machine).iterdir())[:4]:
+            shutil.copytree(session, plant / machine / session.name)
+    bad = plant / "cmm-04" / "2026-01-19" / "measurements.csv"
+    lines = bad.read_text().splitlines()
+    lines[5] = lines[5].replace(",", ",abc,", 1)
+    bad.write_text("\n".join(lines) + "\n")
+    (plant / "cmm-01" / "notes").mkdir()  # no session files: not a session
+    (plant / "cmm-01" / "2026-13-01").mkdir()
+    (plant / "cmm-01" / "2026-13-01" / "machine.toml").write_text("")
+    proc = cmm("fleet", "diagnose", str(plant), "--json", str(tmp_path / "out.json"),
+               "--workers", "2", check=False)  # fmt: skip
+    assert proc.returncode == 1, proc.stderr
+    out = json.loads((tmp_path / "out.json").read_text())
+    failed = {f["path"]: f["error"] for f in out["failed"]}
+    assert set(failed) == {"cmm-04/2026-01-19", "cmm-01/2026-13-01"}
+    assert "measurements.csv missing" in failed["cmm-01/2026-13-01"]
+    # the same one-line message as the one-by-one command
+    alone = cmm("diagnose", str(bad.parent / "machine.toml"), str(bad), "--json",
+                str(tmp_path / "x.json"), check=False)  # fmt: skip
+    assert alone.returncode == 2
+    assert failed["cmm-04/2026-01-19"] in alone.stderr
+    assert "cmm-04/2026-01-19" in proc.stderr and "line " in failed["cmm-04/2026-01-19"]
+    assert len(out["sessions"]) == 4 + 3  # the rest completed
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_dask_missing_says_how_to_install(tmp_path: Path) -> None:
+    code = (
+        "import sys; sys.modules['distributed'] = None\n"
+        "from cmm_comp.cli import main\n"
+        f"sys.exit(main(['fleet', 'diagnose', {str(tmp_path)!r}, '--json', 'o.json']))"
+    )
+    (tmp_path / "m" / "2026-01-01").mkdir(parents=True)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120
+    )
+    assert proc.returncode == 2
+    assert "pip install 'cmm-comp[fleet]'" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_bad_root_and_flags(tmp_path: Path) -> None:
+    proc = cmm("fleet", "diagnose", str(tmp_path / "nope"), "--json", "o.json", check=False)
+    assert proc.returncode == 2 and "no such directory" in proc.stderr
+    proc = cmm("fleet", "diagnose", str(tmp_path), "--json", "o.json", "--workers", "0",
+               check=False)  # fmt: skip
+    assert proc.returncode == 2
+    assert "no session" in proc.stderr or "--workers 0" in proc.stderr
