@@ -22,11 +22,8 @@ _REGISTRARS: tuple[tuple[str, str], ...] = (
     ("cmm_comp.cli.mcap", "add_parsers"),
     ("cmm_comp.cli.uncertainty", "add_parsers"),
     ("cmm_comp.cli.export", "add_parsers"),
-<<<<<<< HEAD
     ("cmm_comp.cli.calibrate", "add_parsers"),
-=======
     ("cmm_comp.cli.fleet", "add_parsers"),
->>>>>>> issue-28fleet
 )
 
 

@@ -2,7 +2,7 @@
 
 Exit codes: 0 every session done; 1 some sessions failed (each named on stderr and in OUT's
 ``failed``; the others are in OUT); 2 bad input to the command itself (ROOT, the grid map, a
-flag) or Dask missing (the message says how to install it). docs/fleet.md, docs/formats.md §10.
+flag) or Dask missing (the message says how to install it). docs/fleet.md, docs/formats.md §11.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def add_parsers(subparsers: Any) -> None:
         help="diagnose every ROOT/<machine>/<date>/ session; trends and changes per machine",
     )
     d.add_argument("root", metavar="ROOT", help="fleet directory: ROOT/<machine>/<date>/")
-    d.add_argument("--json", required=True, metavar="OUT", help="output JSON (formats.md §10)")
+    d.add_argument("--json", required=True, metavar="OUT", help="output JSON (formats.md §11)")
     d.add_argument("--report", metavar="DIR", help="PNG plots of the trends and index.html")
     d.add_argument(
         "--alpha",
@@ -70,7 +70,7 @@ def add_parsers(subparsers: Any) -> None:
     )
     r.add_argument("root", metavar="ROOT", help="fleet directory: *.mcap under ROOT/<machine>/")
     r.add_argument("--grid-map", metavar="MAP.toml", help="[grids] machine = GRID (new grids)")
-    r.add_argument("--json", required=True, metavar="OUT", help="output JSON (formats.md §10)")
+    r.add_argument("--json", required=True, metavar="OUT", help="output JSON (formats.md §11)")
     _cluster_flags(r)
     r.set_defaults(handler=cmd_replay)
     from .generate import add_generate_parser

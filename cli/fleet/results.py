@@ -3,7 +3,7 @@
 ``fleet diagnose``: per machine :func:`cmm_comp.compensation.trend.machine_trend` of its
 sessions' ``effects``; ``--report DIR`` adds the plots (:mod:`.report`). ``fleet replay``: per
 machine the totals of its sessions' replay reports (readings, status changes, the largest
-difference and the RMS over every compared reading, U where known). docs/formats.md §10.
+difference and the RMS over every compared reading, U where known). docs/formats.md §11.
 """
 
 from __future__ import annotations
