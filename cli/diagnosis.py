@@ -12,6 +12,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from cmm_comp.compensation.errors import CmmCompError
+
 from .common import load_machine, write_json_atomic
 
 
@@ -44,12 +46,11 @@ def run_diagnosis(
         raise _RefusedData(f"{measurements_path}: {exc}") from None
 
 
-class _RefusedData(ValueError):
+class _RefusedData(CmmCompError, ValueError):
     """The diagnosis refused the data (message names the measurements file)."""
 
 
 def _run(args: argparse.Namespace, action: Any) -> int:
-    from cmm_comp.compensation import CmmCompError
 
     def progress(line: str) -> None:
         print(f"cmm-comp {args.command}: {line}", file=sys.stderr, flush=True)

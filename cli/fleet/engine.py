@@ -23,6 +23,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from cmm_comp.compensation.errors import CmmCompError
+
 from .discover import Job
 from .store import ResultStore
 from .tasks import code_fingerprint, worker_fingerprint
@@ -45,7 +47,7 @@ WORKER_WAIT_S = 60.0
 """How long a run on ``--scheduler`` waits for its first worker, s."""
 
 
-class DaskMissing(RuntimeError):
+class DaskMissing(CmmCompError, RuntimeError):
     """``distributed`` cannot be imported (the message says how to install it)."""
 
 
