@@ -26,6 +26,9 @@ from ..effects import Effect, EvalContext, StaticImageEffect
 from ..parametric_errors import AXIS_INDEX
 from .residuals import FloatArray, Residuals
 
+#: Designs kept per candidate whose parameter is refined continuously (``theta_step``).
+_REFINED_CACHE = 8
+
 #: ``(amplitudes, theta) → Effect``: builds a candidate's effect for fitted amplitudes.
 EffectBuilder = Callable[[list[float], Any], Effect]
 
@@ -110,6 +113,9 @@ class Candidate:
     #: For a tuple-valued nonlinear parameter (a ripple's period law): the step of each of its
     #: numeric entries for the continuous refinement after the grid (None: grid only).
     theta_step: tuple[float, ...] | None = None
+    #: For a cyclic error: the order of its envelope (an amplitude that changes along the
+    #: travel as Legendre polynomials up to this order; 0: constant).
+    envelope: int = 0
     _cache: dict[tuple[Any, Any], FloatArray] = field(default_factory=dict, repr=False)
     _statics: dict[tuple[int, Any], Candidate | None] = field(default_factory=dict, repr=False)
 
@@ -140,6 +146,9 @@ class Candidate:
         live as long as the candidate — use :meth:`design_uncached` for temporary data)."""
         key = (id(res), theta)
         if key not in self._cache:
+            if self.theta_step is not None and len(self._cache) >= _REFINED_CACHE:
+                # a continuously refined parameter tries hundreds of values: keep the last few
+                self._cache.pop(next(iter(self._cache)))
             self._cache[key] = self.design_uncached(res, theta)
         return self._cache[key]
 

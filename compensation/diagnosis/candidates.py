@@ -32,6 +32,7 @@ from .candidate import (
     span_of,
     with_static_image,
 )
+from .reference_candidates import forward_candidates, twin_candidates
 from .residuals import FloatArray, Residuals
 from .thermal_candidates import LAG_TIME_CONSTANTS_S, thermal_candidates
 
@@ -179,9 +180,30 @@ def _periodic_builder(a: str) -> EffectBuilder:
     )
 
 
+def periodic_scans(res: Residuals, axis: str) -> list[tuple[tuple[float, ...], float]]:
+    """The period grids scanned on ``axis`` (and their look-elsewhere factors): the usual one,
+    and for a dense record the short periods too."""
+    q = res.q_mm[:, AXIS_INDEX[axis]]
+    scans = [periodic_periods(span_of(res, axis), q)]
+    if res.n >= DENSE_POINTS:
+        scans.append(periodic_periods(span_of(res, axis), q, (PERIODIC_CYCLES, DENSE_CYCLES)))
+    return [sc for sc in scans if sc[0]]
+
+
+def _moved(res: Residuals) -> dict[str, bool]:
+    return {a: float(np.ptp(res.q_mm[:, k])) > 1e-6 for k, a in enumerate(AXES)}
+
+
+def all_twins(res: Residuals) -> list[Candidate]:
+    """The other instrument's version of the machine's terms (:mod:`.reference_candidates`)."""
+    moved = _moved(res)
+    scans = {a: periodic_scans(res, a) for a in AXES if moved[a]}
+    return twin_candidates(res, moved, scans)
+
+
 def all_candidates(res: Residuals) -> list[Candidate]:
     """Every cause of docs/formats.md §4 that the measurements can show (signals present, axis moved)."""
-    moved = {a: float(np.ptp(res.q_mm[:, k])) > 1e-6 for k, a in enumerate(AXES)}
+    moved = _moved(res)
     out: list[Candidate] = []
     for comp in (*TABLE_COMPONENTS, *SQUARENESS):
         orders = candidate_orders(comp)
@@ -248,17 +270,8 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                         hold_time=True,
                     ).with_rich(n_params=2 * hi_k + 1, build=_drift_builder(a, t_span, hi_k))
                 )
-        scans = [periodic_periods(span_of(res, a), res.q_mm[:, AXIS_INDEX[a]])]
-        if res.n >= DENSE_POINTS:
-            scans.append(
-                periodic_periods(
-                    span_of(res, a),
-                    res.q_mm[:, AXIS_INDEX[a]],
-                    (PERIODIC_CYCLES, DENSE_CYCLES),
-                )
-            )
         h_lo, h_hi = PERIODIC_HARMONICS
-        for periods, n_eff in scans:
+        for periods, n_eff in periodic_scans(res, a):
             if not periods:
                 continue
             out.append(
@@ -279,6 +292,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 )
             )
     out += thermal_candidates(res, moved)
+    out += forward_candidates(res, moved)
     if res.has("nx", "ny", "nz"):
         out.append(
             Candidate(
@@ -299,6 +313,7 @@ __all__ = [
     "LOBES",
     "Candidate",
     "all_candidates",
+    "all_twins",
     "contract_keys",
     "effect_displacement_um",
     "is_finite_design",

@@ -16,17 +16,15 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..effects import Effect
 from ..formats.measurements import Measurements
 from ..machine import Machine
-from .alternatives import find_alternatives
-from .candidates import Candidate, all_candidates, contract_keys, is_finite_design
+from .candidates import Candidate, all_candidates, all_twins, is_finite_design
 from .consistency import spatial_consistency
 from .fitting import (
     Problem,
@@ -39,10 +37,12 @@ from .fitting import (
     fit,
     make_problem,
     predictions,
-    split_coefficients,
 )
 from .merge import one_for_several
-from .residuals import Residuals, compute_residuals, length_error_e0_um, rms3d
+from .outcome import Diagnosis, Finding, describe_terms, session_summary
+from .periods import CYCLIC, check_period
+from .residuals import compute_residuals
+from .sources import decide_sources
 from .unexplained import (
     is_local,
     local_candidates,
@@ -59,30 +59,13 @@ __all__ = ["Diagnosis", "diagnose"]
 #: explanations on a few hundred points (paired CV differences of that size come and go with
 #: the fold assignment).
 SIMPLER_WITHIN = 0.005
-
-
-@dataclass
-class Diagnosis:
-    """The outcome: effects found (as model effects), statistics before/after, what was tried."""
-
-    verdict: str
-    effects: list[Effect]
-    entries: list[dict[str, Any]]  # docs/formats.md §4 "effects" entries
-    residuals: Residuals
-    fitted_um: Any  # (N, 3) in-sample prediction of the effects found
-    heldout_pred_um: Any  # (N, 3) out-of-fold prediction
-    summary: dict[str, Any]
-    rounds: list[list[dict[str, Any]]] = field(default_factory=list)
-    terms: list[Term] = field(default_factory=list)  # the accepted terms, in ``effects`` order
-    problem: Problem | None = None
-
-    def to_json(self) -> dict[str, Any]:
-        return {"verdict": self.verdict, "effects": self.entries, **self.summary}
-
-    def extended_machine(self) -> Machine:
-        """The machine with the compensable effects found (a ``drift`` describes the session
-        but cannot be predicted at run time: it is not added)."""
-        return self.residuals.machine.with_effects([e for e in self.effects if e.compensable])
+#: What an ``unexplained`` entry says of its source: structure no cause of either instrument
+#: explains.
+UNEXPLAINED_SOURCE = {
+    "source": "either",
+    "locked_to": "undetermined",
+    "evidence": {"summary": "structure no cause of the machine or of the reference explains"},
+}
 
 
 @dataclass
@@ -111,6 +94,7 @@ def _round(
     min_cv_gain: float,
     cv_base: float,
     local_hits: list[dict[str, Any]],
+    refused: list[dict[str, Any]],
 ) -> tuple[Term | None, list[dict[str, Any]]]:
     """One forward step. New candidates are tested against the accepted causes at their *rich*
     shape, so what a mis-shaped accepted cause leaves behind (same signal, same axis, same Abbe
@@ -163,6 +147,14 @@ def _round(
         if is_local(term.candidate):
             family = _family_rather_than_bump(problem, current, eligible, pick["cv_mse"], folds)
             return family or term, rows
+        if term.candidate.cause in CYCLIC:
+            period = check_period(problem, [*current, term], len(current))
+            if not period.ok:
+                # not a period (a flank of a smooth curve, or not the same in every subset):
+                # never named; its shape is left to the smooth tables
+                refused.append(_refusal(term, period.evidence()))
+                eligible = [r for r in eligible if r is not pick]
+                continue
         check = spatial_consistency(problem, [*current, term], len(current))
         if not check.local:
             return term, rows
@@ -172,6 +164,17 @@ def _round(
         local_hits.append(pick)
         eligible = [r for r in eligible if r is not pick]
     return None, rows
+
+
+def _refusal(term: Term, evidence: dict[str, Any]) -> dict[str, Any]:
+    theta = term.theta
+    return {
+        "label": term.candidate.label,
+        "axis": term.candidate.keys.get("axis"),
+        "period_mm": float(theta[1] if isinstance(theta, tuple) else theta),
+        "candidate": id(term.candidate),
+        **evidence,
+    }
 
 
 def _other_gain(
@@ -357,7 +360,10 @@ def _merge_causes(
             return changed
         group = [causes[i] for i in merge.indices]
         kept = [s for i, s in enumerate(slots) if i not in group]
-        if spatial_consistency(problem, [*_terms(kept), merge.term], len(kept)).local:
+        new = [*_terms(kept), merge.term]
+        if spatial_consistency(problem, new, len(kept)).local:
+            return changed
+        if merge.term.candidate.cause in CYCLIC and not check_period(problem, new, len(kept)).ok:
             return changed
         say(
             f"  one cause for several: {merge.term.candidate.label} replaces "
@@ -423,18 +429,35 @@ def diagnose(
     rounds: list[list[dict[str, Any]]] = []
     cv_history = [cv_mse(problem, [])]
     local_hits: list[dict[str, Any]] = []
+    refused: list[dict[str, Any]] = []
     while len(slots) < max_effects:
-        taken = {id(s.root) for s in slots} | excluded
+        taken = {id(s.root) for s in slots} | excluded | {r["candidate"] for r in refused}
         # one entry per identity (the shapes of one family compete, never both named); two
         # cyclic errors of one axis with different periods are two causes, and a local bump
-        # is fitted per error component (one `unexplained` entry for all of them)
+        # is fitted per error component (one `unexplained` entry for all of them); a chirped
+        # cyclic error is one object, whichever coordinate it was named in
         named = {
-            s.root.identity for s in slots if s.root.cause != "periodic" and not is_local(s.root)
+            s.root.identity for s in slots if s.root.cause not in CYCLIC and not is_local(s.root)
         }
-        remaining = [c for c in pool if id(c) not in taken and c.identity not in named]
+        chirped = {s.root.keys.get("axis") for s in slots if s.root.theta_step is not None}
+        remaining = [
+            c
+            for c in pool
+            if id(c) not in taken
+            and c.identity not in named
+            and not (c.theta_step is not None and c.keys.get("axis") in chirped)
+        ]
         say(f"round {len(rounds) + 1}: {len(remaining)} candidates")
         term, rows = _round(
-            problem, slots, remaining, n_tried, alpha, min_cv_gain, cv_history[-1], local_hits
+            problem,
+            slots,
+            remaining,
+            n_tried,
+            alpha,
+            min_cv_gain,
+            cv_history[-1],
+            local_hits,
+            refused,
         )
         rounds.append(_public_rows(rows))
         if term is None:
@@ -450,52 +473,29 @@ def diagnose(
         if dropped:  # what a dropped cause carried may need the others' rich shapes now
             _choose_variants(problem, slots, alpha, min_cv_gain)
         cv_history.append(_model_cv(problem, _terms(slots)))
-    if _merge_causes(problem, slots, pool, alpha, min_cv_gain, say):
+    refused_ids = {r["candidate"] for r in refused}
+    usable = [c for c in pool if id(c) not in refused_ids]
+    if _merge_causes(problem, slots, usable, alpha, min_cv_gain, say):
         cv_history.append(_model_cv(problem, _terms(slots)))
 
+    # which instrument carries each term, and which coordinate it is locked to
     accepted = _terms(slots)
-    beta, rss_after, rank_after = fit(problem, accepted, ridge=True)
+    roots = [s.root for s in slots]
+    twins = all_twins(res)
+    say("sources: each term against its twins")
+    calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
+    for s, t, root in zip(slots, accepted, roots, strict=True):
+        s.root, s.term = root, t
+    finding = Finding(problem, accepted, roots, calls, [*pool, *twins], alpha, refused)
+    entries, effects, sources, either_machine, terms, _ = describe_terms(finding, say)
+    beta, _, _ = fit(problem, accepted, ridge=True)
     fitted = predictions(problem, accepted, beta)
     say("held-out predictions")
     held_folds = problem.judged_folds(accepted)
     heldout_pred = cv_predictions(problem, accepted, folds=held_folds)
-    coefs = split_coefficients(problem, accepted, beta)
     local = [i for i, t in enumerate(accepted) if is_local(t.candidate)]
-    local_entries = [local_entry(problem, accepted, local, beta)] if local else []
-    causes = [i for i in range(len(accepted)) if i not in local]
-    effects = [accepted[i].candidate.build(coefs[i], accepted[i].theta) for i in causes]
-    rss_before = float(np.sum(problem.y**2))
-    n_obs = problem.y.size
-    sigma2 = rss_after / max(n_obs - rank_after, 1)
-    entries: list[dict[str, Any]] = []
-    causes_pool = [c for c in pool if not is_local(c)]
-    if effects:
-        say("alternatives")
-    for i, eff in zip(causes, effects, strict=True):
-        t = accepted[i]
-        others = accepted[:i] + accepted[i + 1 :]
-        _, rss_without, _ = fit(problem, others)
-        entry = {**contract_keys(eff), "parameters": eff.describe().get("parameters", {})}
-        entry["explained_fraction"] = (rss_without - rss_after) / rss_before if rss_before else 0.0
-        entry["label"] = t.candidate.label
-        alt = find_alternatives(
-            problem, others, t, eff, causes_pool, [s.root for s in slots], rss_after, sigma2, alpha
-        )
-        if alt is not None:
-            entry["alternatives"] = alt["alternatives"]
-            entry["separate_by"] = alt["separate_by"]
-        if not eff.compensable:
-            entry["compensable"] = False
-        entries.append(entry)
-    order = np.argsort([-e["explained_fraction"] for e in entries], kind="stable")
-    entries = [entries[i] for i in order]
-    effects = [effects[i] for i in order]
-
-    # structure no cause explains?
-    r_before = res.residual_um
-    r_after = r_before - fitted
-    if local_entries:
-        entries.extend(local_entries)
+    if local:
+        entries.append(local_entry(problem, accepted, local, beta))
     else:
         unexplained = unexplained_candidate(
             problem,
@@ -513,50 +513,25 @@ def diagnose(
             if hits:
                 unexplained = local_unexplained(problem, accepted, hits)
         if unexplained is not None:
-            unexplained["parameters"].update(locate(res, r_after))
+            unexplained["parameters"].update(locate(res, res.residual_um - fitted))
+            unexplained.update(UNEXPLAINED_SOURCE)
             entries.append(unexplained)
-    r_heldout = r_before - heldout_pred
-    # "before" is the model as described with the same nuisance offsets removed (in-sample and
-    # held out), so before/after differ by the effects found and nothing else
-    beta0, _, _ = fit(problem, [])
-    r_before_in = r_before - predictions(problem, [], beta0)
-    r_before_out = r_before - cv_predictions(problem, [], folds=held_folds)
-    sigma = float(np.sqrt(sigma2))
-    summary = {
-        "residual_rms_um": {"before": rms3d(r_before_in), "after": rms3d(r_after)},
-        "heldout_rms_um": {"before": rms3d(r_before_out), "after": rms3d(r_heldout)},
-        "e0_um": {
-            "before": length_error_e0_um(data.reference_mm, r_before_out, data.group),
-            "after": length_error_e0_um(data.reference_mm, r_heldout, data.group),
-            "definition": "max |length error| over point pairs of one group (artefact "
-            "position); 'after' uses out-of-fold predictions",
-        },
-        "noise_sigma_um": sigma,
-        "offset_um": {
-            "xyz"[k]: float(v)
-            for k, v in zip(problem.axes, beta[: problem.n_nuisance], strict=False)
-        },
-        "n_points": int(data.n),
-        "n_points_given": int(n_given),
-        "measured_axes": ["xyz"[k] for k in problem.axes],
-        "folds": len(problem.folds),
-        "heldout_method": (
-            "grouped cross-validation: each fold predicted by the effects fitted on the other "
-            "folds (nonlinear parameters re-profiled near the full-data value)"
-            if held_folds is None
-            else "cross-validation on short blocks of time dealt out to the folds (a drift or a "
-            "start-up transient is named: no cause of time predicts hours it never saw); each "
-            "fold predicted by the effects fitted on the others"
-        ),
+    for e in entries:
+        if e["cause"] == "unexplained":
+            e.update({k: v for k, v in UNEXPLAINED_SOURCE.items() if k not in e})
+    extra = {
         "cv_mse_um2": cv_history,
         "alpha": alpha,
         "min_cv_gain": min_cv_gain,
         "candidates_tried": len(pool),
-        "elapsed_s": time.perf_counter() - t0,
+        "refused_periods": refused,
     }
-    verdict = "found" if entries else "none"
+    summary = session_summary(
+        problem, data, n_given, accepted, fitted, heldout_pred, held_folds, extra
+    )
+    summary["elapsed_s"] = time.perf_counter() - t0
     return Diagnosis(
-        verdict=verdict,
+        verdict="found" if entries else "none",
         effects=effects,
         entries=entries,
         residuals=res,
@@ -564,8 +539,10 @@ def diagnose(
         heldout_pred_um=heldout_pred,
         summary=summary,
         rounds=rounds,
-        terms=[accepted[causes[i]] for i in order],
+        terms=terms,
         problem=problem,
+        sources=sources,
+        either_machine=either_machine,
     )
 
 
