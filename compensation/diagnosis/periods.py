@@ -124,30 +124,35 @@ def _smooth_tables(terms: Sequence[Term], axis: str) -> set[int]:
     return out
 
 
-def _gain(x: FloatArray, y: FloatArray) -> tuple[float, FloatArray, float]:
+def _gain(
+    x: FloatArray, y: FloatArray, t: FloatArray | None = None
+) -> tuple[float, FloatArray, float]:
     """RSS reduction of ``[1, x]`` over a constant fitted to ``y``; the coefficients of ``x``
-    and the residual's σ."""
+    and the residual's σ per effective observation (with times ``t``: inflated by
+    (1 + ρ)/(1 − ρ), ρ the residual's lag-one correlation in time — what other, unmodelled
+    structure leaves in a subset is not independent noise)."""
     a = np.column_stack([np.ones(len(y)), x])
     coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-    rss1 = float(np.sum((y - a @ coef) ** 2))
+    r = y - a @ coef
+    rss1 = float(np.sum(r**2))
     rss0 = float(np.sum((y - np.mean(y)) ** 2))
-    sigma = float(np.sqrt(rss1 / max(len(y) - a.shape[1], 1)))
-    return rss0 - rss1, np.asarray(coef[1:], float), sigma
+    var = rss1 / max(len(y) - a.shape[1], 1)
+    if t is not None and len(r) > 2 and rss1 > 0:
+        r = r[np.argsort(t, kind="stable")]
+        rho = min(max(float(np.sum(r[1:] * r[:-1])) / rss1, 0.0), 0.95)
+        var *= (1.0 + rho) / (1.0 - rho)
+    return rss0 - rss1, np.asarray(coef[1:], float), float(np.sqrt(var))
 
 
 def _columns(
     problem: Problem, term: Term, theta: Any, k: int, rows: Any = slice(None), plain: bool = False
 ) -> Any:
-    """The term's columns on axis ``k``; ``plain``: only its constant-amplitude ones (envelope
-    order 0 of each harmonic: an envelope could follow a phase drifting by a few cycles over
-    the travel, and a period test must not let it)."""
+    """The term's columns on axis ``k``; ``plain``: only its first harmonic at constant
+    amplitude (an envelope could follow a phase drifting by a few cycles over the travel, and
+    a harmonic of a period twice as long lands on the period itself: a period test must let
+    neither stand in for the period tested)."""
     x = term.candidate.design_uncached(problem.res, theta)[rows, k, :]
-    e = term.candidate.envelope
-    if plain and e > 0:
-        block = 2 * (e + 1)
-        keep = [b + c for b in range(0, x.shape[1], block) for c in (0, 1)]
-        x = x[:, keep]
-    return x
+    return x[:, :2] if plain else x
 
 
 def _first_harmonic(coef: FloatArray, envelope: int, s: float) -> tuple[float, float]:
@@ -171,7 +176,10 @@ def _fit_subset(
             best = (g, float(dk), th)
     assert best is not None
     _, dk, th = best
-    _, coef, sigma = _gain(_columns(problem, term, th, k, rows), y[rows])
+    t = problem.res.data.t_s
+    _, coef, sigma = _gain(
+        _columns(problem, term, th, k, rows), y[rows], None if t is None else t[rows]
+    )
     amp, phase = _first_harmonic(coef, term.candidate.envelope, s_at)
     n = len(rows)
     sigma_a = sigma * np.sqrt(2.0 / max(n, 1))
@@ -223,9 +231,15 @@ def _disagree(kind: str, a: dict[str, Any], b: dict[str, Any], envelope: int) ->
 
 
 def check_period(
-    problem: Problem, terms: Sequence[Term], index: int, beta: FloatArray | None = None
+    problem: Problem,
+    terms: Sequence[Term],
+    index: int,
+    beta: FloatArray | None = None,
+    subsets: bool = True,
 ) -> PeriodCheck:
-    """Both tests of the module docstring for the cyclic ``terms[index]``."""
+    """Both tests of the module docstring for the cyclic ``terms[index]`` (the peak alone
+    without ``subsets``: while other causes are still to be named, what they leave in a subset
+    would move its phase)."""
     if beta is None:
         beta, _, _ = fit(problem, terms)
     term = terms[index]
@@ -253,7 +267,7 @@ def check_period(
         )
     envelope = term.candidate.envelope
     q = problem.res.q_mm[:, k]
-    for kind, pair in _subsets(problem, k, term):
+    for kind, pair in _subsets(problem, k, term) if subsets else []:
         fits = []
         for name, mask in pair:
             rows = np.flatnonzero(mask)
