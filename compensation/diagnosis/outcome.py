@@ -111,6 +111,10 @@ class Finding:
     pool: list[Candidate]  # every global candidate and twin
     alpha: float
     refused_periods: list[dict[str, Any]] = field(default_factory=list)
+    #: the candidates of the forward search (alternatives are sought among them; the twins
+    #: only through :mod:`.sources`: a smooth function of the reading beside the machine's
+    #: smooth tables would explain the observed error by itself)
+    searched: list[Candidate] = field(default_factory=list)
 
 
 def _keys(cand: Candidate) -> dict[str, Any]:
@@ -166,7 +170,7 @@ def describe_terms(
     causes = [i for i, t in enumerate(accepted) if not is_local(t.candidate)]
     rss_before = float(np.sum(problem.y**2))
     sigma2 = rss_after / max(problem.y.size - rank_after, 1)
-    causes_pool = [c for c in f.pool if not is_local(c)]
+    causes_pool = [c for c in (f.searched or f.pool) if not is_local(c)]
     rows: list[tuple[dict[str, Any], Effect, str, Effect | None, Term]] = []
     if causes:
         say("sources, evidence and alternatives")

@@ -6,7 +6,8 @@ local period somewhere. A cyclic error (``periodic``, ``reference_ripple``) is t
 only when two tests pass, given the other terms at their joint fit:
 
 * **a peak, not a flank**: the gain of the term at its period against its gain with the phase
-  changed by 2–4 cycles over the travel (its period law scaled; ``SHOULDERS``), on the part of
+  changed by 2–4 cycles over the travel (its period law scaled; ``SHOULDERS``; further by the
+  order E of its envelope, whose amplitude changes spread the line by ~E/2 cycles), on the part of
   the residual it explains *plus* the smooth tables of its axis (a smooth curve's spectrum falls
   with frequency: a sine on its flank gains less than the same sine a few cycles lower), with
   constant amplitudes (an envelope could follow the shifted phase). The ratio must reach
@@ -250,12 +251,14 @@ def check_period(
     y_peak = _partial(problem, terms, beta, {index} | _smooth_tables(terms, axis))[:, k]
     n_cyc = cycles(problem, k, term.theta)
     g0, _, _ = _gain(_columns(problem, term, term.theta, k, plain=True), y_peak)
+    # an envelope of order E spreads the line over ~E/2 cycles each side: shoulders beyond it
+    away = [dk + np.sign(dk) * term.candidate.envelope for dk in SHOULDERS]
     shoulders = [
         _gain(
             _columns(problem, term, scaled(term.theta, n_cyc / (n_cyc + dk)), k, plain=True),
             y_peak,
         )[0]
-        for dk in SHOULDERS
+        for dk in away
         if n_cyc + dk >= 1.0
     ]
     ratio = float(g0 / max(max(shoulders, default=0.0), 1e-300))

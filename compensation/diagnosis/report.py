@@ -1,9 +1,10 @@
-"""The diagnosis report: residual plots (PNG, Agg backend) and one HTML page linking them.
+"""The diagnosis report: the diagnosis in words (``report.md``, :mod:`.words`), residual plots
+(PNG, Agg backend) and one HTML page with both.
 
-Plots: residual per axis against each position, time, temperature, the temperature difference,
-travel directions and probing azimuth, before (model as described) and after (extended model,
-out-of-fold predictions); residual statistics per axis; the effects found and the candidates'
-test table of the first round.
+Plots, for the measured axes only: residual against each moved position, time, temperature, the
+temperature difference, travel directions and probing azimuth, before (model as described) and
+after (extended model, out-of-fold predictions); residual statistics per axis; the effects found
+and the candidates' test table of the first round.
 """
 
 from __future__ import annotations
@@ -15,20 +16,28 @@ from typing import Any
 
 import numpy as np
 
+from .outcome import Diagnosis
 from .residuals import axis_statistics, binned_statistics, explanatory_variables
-from .selection import Diagnosis
+from .words import report_markdown
 
 
 def _plot_against(
-    path: Path, name: str, x: np.ndarray, before: np.ndarray, after: np.ndarray
+    path: Path,
+    name: str,
+    x: np.ndarray,
+    before: np.ndarray,
+    after: np.ndarray,
+    measured: tuple[int, ...] = (0, 1, 2),
 ) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharex=True)
-    for k, ax in enumerate(axes):
+    fig, axes = plt.subplots(
+        1, len(measured), figsize=(4 * len(measured), 3.4), sharex=True, squeeze=False
+    )
+    for k, ax in zip(measured, axes[0], strict=True):
         ax.plot(x, before[:, k], ".", ms=3, alpha=0.5, label="before")
         ax.plot(x, after[:, k], ".", ms=3, alpha=0.5, label="after (held out)")
         stats = binned_statistics(x, before)
@@ -37,7 +46,7 @@ def _plot_against(
         ax.set_xlabel(name)
         ax.set_ylabel("µm")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -48,19 +57,23 @@ def _slug(name: str) -> str:
 
 
 def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagnosis") -> Path:
-    """Write PNGs, ``diagnosis.json`` and ``index.html`` into ``out_dir``; returns the HTML path."""
+    """Write ``report.md``, PNGs, ``diagnosis.json`` and ``index.html`` into ``out_dir``;
+    returns the HTML path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     res = diagnosis.residuals
     before = res.residual_um
     after = before - diagnosis.heldout_pred_um
+    measured = tuple("xyz".index(a) for a in diagnosis.summary["measured_axes"])
+    words = report_markdown(diagnosis, title)
+    (out / "report.md").write_text(words + "\n", encoding="utf-8")
     images: list[tuple[str, str]] = []
     binned: dict[str, Any] = {}
     for name, x in explanatory_variables(res).items():
         if np.ptp(x) == 0:
             continue
         fname = f"residual_vs_{_slug(name)}.png"
-        _plot_against(out / fname, name, x, before, after)
+        _plot_against(out / fname, name, x, before, after, measured)
         images.append((name, fname))
         binned[name] = binned_statistics(x, before)
     stats = {"before": axis_statistics(before), "after_heldout": axis_statistics(after)}
@@ -70,7 +83,7 @@ def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagno
     )
     rows = "".join(
         f"<tr><td>{html.escape(str(e.get('cause')))}</td><td>"
-        f"{html.escape(json.dumps({k: v for k, v in e.items() if k not in ('cause', 'parameters', 'explained_fraction', 'label')}))}"
+        f"{html.escape(json.dumps({k: v for k, v in e.items() if k not in ('cause', 'parameters', 'explained_fraction', 'label', 'evidence', 'alternatives')}))}"
         f"</td><td>{html.escape(json.dumps(e.get('parameters', {}), default=float))}</td>"
         f"<td>{e.get('explained_fraction', 0):.3f}</td></tr>"
         for e in diagnosis.entries
@@ -83,7 +96,7 @@ def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagno
             for m in ("mean_um", "std_um", "rms_um")
         )
         + "</tr>"
-        for a in ("x", "y", "z")
+        for a in diagnosis.summary["measured_axes"]
     )
     cand_rows = ""
     if diagnosis.rounds:
@@ -105,6 +118,7 @@ CV folds: {s["folds"]}.</p>
 <tr><td>residual RMS 3-D (µm)</td><td>{s["residual_rms_um"]["before"]:.3f}</td><td>{s["residual_rms_um"]["after"]:.3f}</td></tr>
 <tr><td>held-out RMS 3-D (µm)</td><td>{s["heldout_rms_um"]["before"]:.3f}</td><td>{s["heldout_rms_um"]["after"]:.3f}</td></tr>
 <tr><td>E0 estimate (µm)</td><td>{s["e0_um"]["before"]:.3f}</td><td>{s["e0_um"]["after"]:.3f}</td></tr></table>
+<h2>In words</h2><pre style="white-space:pre-wrap">{html.escape(words)}</pre>
 <h2>Effects found</h2><table><tr><th>cause</th><th>keys</th><th>parameters</th><th>explained</th></tr>{rows}</table>
 <h2>Residual statistics per axis (µm)</h2><table><tr><th>axis</th><th>mean</th><th>std</th><th>rms</th>
 <th>mean (after)</th><th>std (after)</th><th>rms (after)</th></tr>{stat_rows}</table>

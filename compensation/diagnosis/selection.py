@@ -421,7 +421,7 @@ def diagnose(
     calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
     for s, t, root in zip(slots, accepted, roots, strict=True):
         s.root, s.term = root, t
-    finding = Finding(problem, accepted, roots, calls, [*pool, *twins], alpha, refused)
+    finding = Finding(problem, accepted, roots, calls, [*pool, *twins], alpha, refused, pool)
     entries, effects, sources, either_machine, terms, _ = describe_terms(finding, say)
     beta, _, _ = fit(problem, accepted, ridge=True)
     fitted = predictions(problem, accepted, beta)
