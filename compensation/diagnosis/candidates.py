@@ -268,6 +268,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                         _drift_builder(a, t_span, lo_k),
                         drivers=("t",),
                         hold_time=True,
+                        locked_to="time",
                     ).with_rich(n_params=2 * hi_k + 1, build=_drift_builder(a, t_span, hi_k))
                 )
         h_lo, h_hi = PERIODIC_HARMONICS

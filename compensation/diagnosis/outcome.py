@@ -146,7 +146,7 @@ def _evidence(f: Finding, index: int, beta: Any, call: SourceCall, label: str) -
     if root.cause in CYCLIC:
         check = check_period(f.problem, f.accepted, index, beta)
         ev.update(check.evidence())
-        cyclic_twins = twins_of(root, f.pool)
+        cyclic_twins = twins_of(root, f.pool, term.theta)
         twin = cyclic_twins[0] if cyclic_twins else None
         if twin is not None and term.candidate is not root and twin.rich is not None:
             twin = twin.rich

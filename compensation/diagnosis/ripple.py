@@ -5,8 +5,9 @@ A dense record (thousands of samples along an axis) shows a cyclic error's *loca
 travel is cut into windows, the smooth part of the error (a curve per direction of travel, a slow
 drift) is removed, and in each window the period of the strongest sine is found (a least-squares
 periodogram, refined between grid values), with its Cramér–Rao uncertainty
-σ_f = √12·σ/(2π·A·L_w·√N_w) inflated by the scatter the law leaves. The local periods are then
-fitted by the laws of :mod:`cmm_comp.compensation.effects.period_law`:
+σ_f = √12·σ/(2π·A·L_w·√N_w) inflated by the scatter the law leaves. Windows whose period is far off a
+smooth law through the others (an alias of the sampling, a spurious peak) are left out. The
+local periods are then fitted by the laws of :mod:`cmm_comp.compensation.effects.period_law`:
 
 * ``constant``: one period;
 * ``triangulation``: √p linear in the reading (p = P·((r − r0)/(c − r0))²): a weighted straight
@@ -168,6 +169,35 @@ def _cycles(law: PeriodLaw, period: float, lo: float, hi: float) -> float:
     return float(np.ptp(dphi) / (2.0 * np.pi))
 
 
+#: A window whose period is this many (inflated) σ off the triangulation law fitted to the
+#: others is an alias or a spurious peak: left out (at most a quarter of the windows).
+OUTLIER_Z = 4.0
+
+
+def _without_outliers(win: list[LocalPeriod]) -> list[LocalPeriod]:
+    """The windows minus those far off a smooth law fitted to the rest (log p quadratic in r:
+    any law of interest is that smooth over a window spacing)."""
+    win = list(win)
+    for _ in range(max(len(win) // 4, 0)):
+        if len(win) < 5:
+            break
+        x = np.array([w.centre_mm for w in win])
+        lp = np.log([w.period_mm for w in win])
+        sig = np.array([max(w.sigma_mm / w.period_mm, 1e-9) for w in win])
+        z = np.empty(len(win))
+        for i in range(len(win)):  # each window against the law of the others
+            keep = np.arange(len(win)) != i
+            coef, _ = _wls_line(x[keep], lp[keep], 1.0 / sig[keep] ** 2, 2)
+            scatter = lp[keep] - np.polyval(coef[::-1], x[keep])
+            spread = max(float(np.median(np.abs(scatter / sig[keep]))), 1.0)
+            z[i] = abs(lp[i] - np.polyval(coef[::-1], x[i])) / (sig[i] * spread)
+        worst = int(np.argmax(z))
+        if z[worst] < OUTLIER_Z:
+            break
+        del win[worst]
+    return win
+
+
 def find_chirp(
     r: FloatArray,
     y: FloatArray,
@@ -177,7 +207,7 @@ def find_chirp(
     alpha: float = 1e-3,
 ) -> Chirp | None:
     """A chirped cyclic error along ``r`` (module docstring), or None."""
-    win = local_periods(r, y, groups, t, p_min_mm)
+    win = _without_outliers(local_periods(r, y, groups, t, p_min_mm))
     if len(win) < 4:
         return None
     x = np.array([w.centre_mm for w in win])

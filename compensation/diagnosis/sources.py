@@ -44,6 +44,7 @@ from scipy import stats
 
 from .candidate import Candidate
 from .fitting import Problem, Term, best_theta, fit
+from .reference_candidates import through_map
 
 #: Twins that are smooth functions of the reference's reading: never named in place of a machine
 #: term (a smooth function of the reading beside smooth functions of the position spans the
@@ -79,9 +80,9 @@ def _axis_of(c: Candidate) -> str | None:
     return None
 
 
-def twins_of(cand: Candidate, pool: Sequence[Candidate]) -> list[Candidate]:
+def twins_of(cand: Candidate, pool: Sequence[Candidate], theta: Any = None) -> list[Candidate]:
     """The twins of ``cand`` in ``pool`` (same axis, a twin cause, a cyclic error's twin with
-    the same kind of period law)."""
+    the same kind of period law, scanning the period ``theta`` when given)."""
     axis = _axis_of(cand)
     if axis is None:
         return []
@@ -92,8 +93,15 @@ def twins_of(cand: Candidate, pool: Sequence[Candidate]) -> list[Candidate]:
             continue
         if c.cause in ("periodic", "reference_ripple") and (c.theta_step is not None) != chirped:
             continue
+        if theta is not None and isinstance(theta, float) and not _covers(c, theta):
+            continue  # a scan of other periods (the dense record's short ones)
         out.append(c)
     return out
+
+
+def _covers(c: Candidate, theta: float) -> bool:
+    grid = [v for v in c.thetas if isinstance(v, float)]
+    return not grid or min(grid) * 0.9 <= theta <= max(grid) * 1.1
 
 
 @dataclass
@@ -128,7 +136,12 @@ class SourceCall:
 def _twin_fit(
     problem: Problem, others: list[Term], term: Term, twin: Candidate, rich: bool
 ) -> tuple[Term, float]:
-    """The twin at the term's shape level (``rich``), its parameter profiled about the term's."""
+    """The twin at the term's shape level (``rich``), its parameter profiled about the term's;
+    a twin in the other coordinate (position ↔ reading) through the session's map between them
+    (:func:`.reference_candidates.through_map`: a function of the reading beside functions of
+    the position would otherwise span the observed error itself)."""
+    if {twin.locked_to, term.candidate.locked_to} == {"position", "reference"}:
+        twin = through_map(twin, problem.res)
     cand = twin.rich if rich and twin.rich is not None else twin
     near = term.theta if isinstance(term.theta, float) else None
     if isinstance(term.theta, tuple) and cand.theta_step is not None:
@@ -183,7 +196,7 @@ def decide_sources(
             target = _contribution(problem, accepted, beta, i)
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
-            for twin in twins_of(root, pool):
+            for twin in twins_of(root, pool, term.theta):
                 t_term, rss = _twin_fit(problem, others, term, twin, term.candidate is not root)
                 extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
                 delta = (rss - rss_full) / sigma2 + extra
