@@ -21,7 +21,7 @@ import numpy as np
 
 from .candidate import Candidate
 from .fitting import Problem, Term
-from .periods import _first_harmonic, _partial, cyclic_axis
+from .periods import _first_harmonic, cyclic_axis, partial_residual
 from .residuals import FloatArray
 
 __all__ = ["cyclic_locking"]
@@ -60,7 +60,7 @@ def cyclic_locking(
     k = cyclic_axis(term)
     assert k is not None
     res = problem.res
-    y = _partial(problem, terms, beta, {index})[:, k]
+    y = partial_residual(problem, terms, beta, {index})[:, k]
     env = term.candidate.envelope
     theta = term.theta
     period = float(theta[1] if isinstance(theta, tuple) else theta)

@@ -23,7 +23,7 @@ from .alternatives import find_alternatives
 from .candidate import Candidate, contract_keys
 from .fitting import Problem, Term, cv_predictions, fit, predictions, split_coefficients
 from .locking import cyclic_locking
-from .periods import CYCLIC, check_period
+from .periods import CYCLIC, check_period, partial_residual
 from .residuals import Residuals, length_error_e0_um, rms3d
 from .sources import SourceCall, twins_of
 from .unexplained import is_local
@@ -152,11 +152,32 @@ def _evidence(f: Finding, index: int, beta: Any, call: SourceCall, label: str) -
             twin = twin.rich
         ev["locking"] = cyclic_locking(f.problem, f.accepted, index, beta, twin)
     axis = root.keys.get("axis") or str(root.keys.get("component", ""))[-1:]
+    if root.cause == "reversal":
+        ev.update(_reversal_by_state(f, index, beta, axis))
     if root.cause in ("parametric", "reference_nonlinearity"):
         refused = [r for r in f.refused_periods if r.get("axis") == axis]
         if refused:
             ev["refused_periods"] = refused
     return ev
+
+
+def _reversal_by_state(f: Finding, index: int, beta: Any, axis: str) -> dict[str, Any]:
+    """The reversal (µm, error after − minus after + approach) seen at rest and while moving,
+    from the residual with the reversal term added back: at rest it is the drive's alone; while
+    moving a latency between the streams adds to it."""
+    res = f.problem.res
+    k = "xyz".index(axis)
+    d = res.signals.get(f"dir_{axis}")
+    v = res.signals.get(f"v_{axis}")
+    if d is None or v is None:
+        return {}
+    y = partial_residual(f.problem, f.accepted, beta, {index})[:, k]
+    out: dict[str, Any] = {}
+    for name, state in (("at_rest_um", v == 0), ("moving_um", v != 0)):
+        plus, minus = state & (d > 0), state & (d < 0)
+        if plus.sum() >= 3 and minus.sum() >= 3:
+            out[name] = float(np.mean(y[minus]) - np.mean(y[plus]))
+    return {"reversal_by_state": out} if out else {}
 
 
 def describe_terms(

@@ -38,7 +38,14 @@ from .fitting import Problem, Term, fit, predictions
 from .reference_candidates import law_of
 from .residuals import FloatArray
 
-__all__ = ["CYCLIC", "PeriodCheck", "check_period", "cyclic_axis", "scaled"]
+__all__ = [
+    "CYCLIC",
+    "PeriodCheck",
+    "check_period",
+    "cyclic_axis",
+    "partial_residual",
+    "scaled",
+]
 
 #: Causes that are cyclic errors.
 CYCLIC = ("periodic", "reference_ripple")
@@ -100,7 +107,7 @@ def scaled(theta: Any, factor: float) -> Any:
     return float(theta) * factor
 
 
-def _partial(
+def partial_residual(
     problem: Problem, terms: Sequence[Term], beta: FloatArray, keep: set[int]
 ) -> FloatArray:
     """(N, 3) residual with the terms at indices ``keep`` (and the offsets) added back."""
@@ -247,8 +254,8 @@ def check_period(
     k = cyclic_axis(term)
     assert k is not None
     axis = "xyz"[k]
-    y_term = _partial(problem, terms, beta, {index})[:, k]
-    y_peak = _partial(problem, terms, beta, {index} | _smooth_tables(terms, axis))[:, k]
+    y_term = partial_residual(problem, terms, beta, {index})[:, k]
+    y_peak = partial_residual(problem, terms, beta, {index} | _smooth_tables(terms, axis))[:, k]
     n_cyc = cycles(problem, k, term.theta)
     g0, _, _ = _gain(_columns(problem, term, term.theta, k, plain=True), y_peak)
     # an envelope of order E spreads the line over ~E/2 cycles each side: shoulders beyond it

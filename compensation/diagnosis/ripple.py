@@ -16,8 +16,10 @@ local periods are then fitted by the laws of :mod:`cmm_comp.compensation.effects
 
 A chirp is reported only when the constant law is refused (χ² test at ``alpha``) *and* the law
 changes the phase across the travel by at least :data:`MIN_CHIRP_CYCLES` against the best
-constant period (less than that a constant-period candidate follows it); ``triangulation`` is
-preferred to ``smooth`` unless it fits significantly worse.
+constant period (less than that a constant-period candidate follows it); ``triangulation`` (the
+physical law) is preferred to ``smooth`` unless their phases part by more than
+:data:`MAX_LAW_GAP_CYCLES` over the travel (beyond a linear difference, which the refinement of
+the period at the centre takes up).
 """
 
 from __future__ import annotations
@@ -198,6 +200,19 @@ def _without_outliers(win: list[LocalPeriod]) -> list[LocalPeriod]:
     return win
 
 
+#: The triangulation law is kept when its phase stays within this many cycles of the smooth
+#: law's over the travel (a linear phase difference aside: the period at the centre is
+#: refined on all the data afterwards).
+MAX_LAW_GAP_CYCLES = 0.5
+
+
+def _law_gap_cycles(a: PeriodLaw, b: PeriodLaw, lo: float, hi: float) -> float:
+    r = np.linspace(lo, hi, 401)
+    d = a.phase(r) - b.phase(r)
+    d -= np.polyval(np.polyfit(r, d, 1), r)
+    return float(np.ptp(d) / (2.0 * np.pi))
+
+
 def find_chirp(
     r: FloatArray,
     y: FloatArray,
@@ -248,11 +263,15 @@ def find_chirp(
     if float(stats.chi2.sf((chi_c - best_chi) / inflate, dof_c - best_dof)) >= alpha:
         return None
     chosen = laws[0]
-    if chosen[2].kind == "triangulation" and len(laws) > 1:
-        smooth = laws[1]
-        extra = chosen[1] - smooth[1]
-        if extra > 0 and stats.chi2.sf((chosen[0] - smooth[0]) / inflate, extra) < alpha:
-            chosen = smooth
+    # the physical law unless its phase parts from the smooth one's by a sizeable part of a
+    # cycle over the travel (window periods are far more precise than a law needs to be: the
+    # term's envelope follows a slow phase drift of a fraction of a cycle)
+    if (
+        chosen[2].kind == "triangulation"
+        and len(laws) > 1
+        and _law_gap_cycles(chosen[2], laws[1][2], lo, hi) > MAX_LAW_GAP_CYCLES
+    ):
+        chosen = laws[1]
     cycles = _cycles(chosen[2], float(p_const[0]), lo, hi)
     if cycles < MIN_CHIRP_CYCLES:
         return None

@@ -180,6 +180,14 @@ def _evidence_words(e: dict[str, Any]) -> str:
             f"its phase holds from pass to pass (coherence {lock['pass_phase_coherence']:.2f} "
             f"over {lock['passes']} passes; ~{1 / math.sqrt(lock['passes']):.2f} if it did not)"
         )
+    state = ev.get("reversal_by_state", {})
+    if state:
+        out.append(
+            "reversal "
+            + " and ".join(
+                f"{v:.3g} µm {k.replace('_um', '').replace('_', ' ')}" for k, v in state.items()
+            )
+        )
     if "peak_ratio" in ev:
         out.append(
             f"a spectral peak {ev['peak_ratio']:.3g}× above its shoulders, the same in every "
