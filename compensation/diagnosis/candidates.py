@@ -131,6 +131,42 @@ def _coupling_builder(
     )
 
 
+#: A guideway's bend that changes with another axis' position, its carriage following the
+#: slope: orders along the guideway (default, rich) and along the other axis.
+BEND_ORDERS = ((1, 2, 3, 4), (1, 2, 3, 4, 5, 6))
+BEND_WITH = (1, 2)
+
+
+def _bend_candidate(
+    comp: str, other: str, sa: tuple[float, float], sb: tuple[float, float]
+) -> Candidate:
+    """A guideway of ``comp``'s axis bent by an amount that changes with ``other``'s position
+    (a load that moves, a ram whose moment grows as it extends), its carriage pitching by the
+    local slope of the bend (:func:`cmm_comp.compensation.effects.parametric.slope_of`): one
+    physical cause, the straightness and the angle tied, named as the straightness coupling."""
+
+    def builder(orders: tuple[int, ...]) -> EffectBuilder:
+        # a: the bend where the other axis is at its reference (orders along the guideway),
+        # then how it changes with the other axis (with_orders-major, along the guideway also
+        # uniformly: the deflection at the reference point itself changes with it)
+        n = len(orders)
+        return lambda a, _t: CouplingEffect(
+            comp, other, a[n:], sa, sb, (0, *orders), BEND_WITH, 0.0, a[:n], with_slope=True
+        )
+
+    def size(orders: tuple[int, ...]) -> int:
+        return len(orders) + (1 + len(orders)) * len(BEND_WITH)
+
+    lo, hi = BEND_ORDERS
+    return Candidate(
+        "coupling",
+        {"component": comp, "varies_with": other},
+        size(lo),
+        builder(lo),
+        static_columns=len(lo),
+    ).with_rich(n_params=size(hi), build=builder(hi), static_columns=len(hi))
+
+
 def _drift_builder(a: str, span: tuple[float, float], order: int) -> EffectBuilder:
     return lambda p, _t: DriftEffect(a, span, p[:order], p[order:])  # K offsets, K + 1 scales
 
@@ -248,6 +284,8 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     static_columns=1 + n2,
                 )
             )
+            if comp in LINEAR:
+                out.append(_bend_candidate(comp, other, sa, sb))
 
     for a in AXES:
         if not moved[a]:

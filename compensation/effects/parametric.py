@@ -44,6 +44,7 @@ __all__ = [
     "default_orders",
     "legendre_shape",
     "normalised",
+    "slope_of",
 ]
 
 
@@ -198,8 +199,12 @@ class CouplingEffect(Effect):
         with_orders: Sequence[int] = (1,),
         offset: float = 0.0,
         along: Sequence[float] = (),
+        with_slope: bool = False,
     ) -> None:
         c = parse_component(component)
+        self.slope = slope_of(c.name) if with_slope else None
+        if with_slope and self.slope is None:
+            raise ValueError(f"coupling: with_slope needs a straightness, got {component!r}")
         self.along = read_floats(along, "along")
         self.offset = float(offset)
         if not math.isfinite(self.offset):
@@ -231,6 +236,33 @@ class CouplingEffect(Effect):
                 total += self.coefficients[i] * sb * sa
                 i += 1
         add_to_component(ctx, self.component, total)
+        if self.slope is not None:
+            angular, sign = self.slope
+            add_to_component(ctx, angular, sign * self._slope_urad(ctx, a, b))
+
+    def _slope_urad(self, ctx: EvalContext, a: int, b: int) -> FloatArray:
+        """d(straightness)/d(q_a) in µrad (µm/mm · 1000) at the context's points."""
+        lo, hi = self.span_mm
+        s = normalised(ctx.q_mm[:, a], self.span_mm)
+        scale = 2.0 / (hi - lo) * 1000.0
+
+        def dshape(k: int) -> FloatArray:
+            if k == 0:
+                return np.zeros(ctx.n)
+            c = np.zeros(k + 1)
+            c[k] = 1.0
+            return np.asarray(legendre.legval(s, legendre.legder(c)), dtype=float) * scale
+
+        total = np.zeros(ctx.n)
+        for k, c in enumerate(self.along, start=1):
+            total += c * dshape(k)
+        i = 0
+        for j in self.with_orders:
+            sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
+            for k in self.orders:
+                total += self.coefficients[i] * sb * dshape(k)
+                i += 1
+        return total
 
     def _names(self) -> list[str]:
         return [
@@ -251,18 +283,22 @@ class CouplingEffect(Effect):
             "coefficients": list(self.coefficients),
             "offset": self.offset,
             "along": list(self.along),
+            **({"with_slope": True} if self.slope is not None else {}),
         }
 
     def describe(self) -> dict[str, Any]:
+        params: dict[str, Any] = {
+            **dict(zip(self._names(), self.coefficients, strict=True)),
+            "offset_at_reference": self.offset,
+            **{f"along_{k}": c for k, c in enumerate(self.along, start=1)},
+        }
+        if self.slope is not None:
+            params["carriage_follows_slope"] = self.slope[0]
         return {
             "cause": self.cause,
             "component": self.component,
             "varies_with": self.varies_with,
-            "parameters": {
-                **dict(zip(self._names(), self.coefficients, strict=True)),
-                "offset_at_reference": self.offset,
-                **{f"along_{k}": c for k, c in enumerate(self.along, start=1)},
-            },
+            "parameters": params,
         }
 
     @classmethod
@@ -279,7 +315,23 @@ class CouplingEffect(Effect):
             with_orders,
             read_number(t, "offset", 0.0),
             read_floats(t.get("along", []), "along"),
+            bool(t.get("with_slope", False)),
         )
+
+
+def slope_of(straightness: str) -> tuple[str, float] | None:
+    """The angular error a carriage gets from the slope of its guideway's straightness, and its
+    sign: a carriage riding a rail bent by w (µm) in direction r along axis a tilts about the
+    third axis c by ±dw/da — ``+`` when a → r → c is cyclic (x→y→z), ``−`` otherwise
+    (``dz_x`` → ``ey_x = −dw/dx``, ``dz_y`` → ``ex_y = +dw/dy``, ``dx_z`` → ``ey_z = +dw/dz``,
+    as the thermal bend of docs/formats.md §1.9). None for a positional or angular component."""
+    c = parse_component(straightness)
+    if not c.is_straightness:
+        return None
+    a, r = straightness[-1], straightness[1]
+    third = next(x for x in "xyz" if x not in (a, r))
+    cyclic = "xyzxy".find(a + r) >= 0
+    return f"e{third}_{a}", 1.0 if cyclic else -1.0
 
 
 # ----------------------------------------------------------------------------- direction
