@@ -155,7 +155,13 @@ def local_entry(
     _, rss1, _ = fit(problem, accepted)
     total = float(np.sum(problem.y**2))
     params: dict[str, Any] = {"varies_mostly_with": "position", "local": True}
-    params.update(locate(problem.res, contrib))
+    # located on the data (the residual with the bump added back), not on the fitted local
+    # basis: its Gaussians sit on a fixed grid and are shrunk, which pulls a bump at an edge
+    # towards the grid's interior
+    others = np.zeros((problem.res.n, 3))
+    others[:, problem.axes] = (problem.stacked(accepted) @ beta).reshape(problem.res.n, -1)
+    partial = problem.res.residual_um - others + contrib
+    params.update(locate(problem.res, partial))
     return {
         "cause": "unexplained",
         "parameters": params,
@@ -211,9 +217,16 @@ def unexplained_candidate(
 
 def locate(res: Residuals, remaining_um: FloatArray) -> dict[str, Any]:
     """Where and when the structure that remains sits: the axis carrying most of it, the centre
-    and extent (mm) of the 10 % of points with the largest remaining residual on that axis
-    (smoothed over each point's 10 nearest neighbours in position, so noise does not pick them),
-    and their time span (s) when the session has times."""
+    and extent (mm) of a bump fitted to it, and the time span (s) of the points near it.
+
+    A first guess is the mean position of the 10 % of points with the largest remaining
+    residual on that axis (smoothed over each point's 10 nearest neighbours in position, so
+    noise does not pick them). Near an edge of the volume those points all lie on the inner
+    side of the bump, so their mean is pulled towards the centre of the volume (by a radius or
+    more); the centre is therefore refined by fitting a Gaussian bump
+    ``v·exp(−½|(q − c)/(w·span)|²)`` (plus offsets) to the remaining residual — centre c, width
+    w, direction v — which may place it at the edge or just beyond the points measured
+    (:func:`fit_bump`). ``located_by`` says which of the two was used."""
     r = np.asarray(remaining_um, dtype=float)
     axis = int(np.argmax(np.sum(r**2, axis=0)))
     q = res.q_mm
@@ -225,16 +238,77 @@ def locate(res: Residuals, remaining_um: FloatArray) -> dict[str, Any]:
     _, nn = cKDTree(qn).query(qn, k=k)
     smooth = np.mean(r[np.asarray(nn).reshape(n, k), axis], axis=1)
     top = np.argsort(-np.abs(smooth))[: max(1, n // 10)]
+    where = np.mean(q[top], axis=0)
+    extent = np.ptp(q[top], axis=0)
+    located_by = "largest residuals"
+    bump = fit_bump(q, r, where)
+    if bump is not None:
+        where, radius = bump
+        extent = 2.0 * radius
+        located_by = "gaussian fit"
+    near = np.linalg.norm((q - where) / span, axis=1)
+    close = np.argsort(near)[: max(1, n // 10)]
     out: dict[str, Any] = {
         "axis": "xyz"[axis],
-        "where_mm": [float(v) for v in np.mean(q[top], axis=0)],
-        "where_extent_mm": [float(v) for v in np.ptp(q[top], axis=0)],
+        "where_mm": [float(v) for v in where],
+        "where_extent_mm": [float(v) for v in extent],
         "mean_there_um": float(np.mean(smooth[top])),
+        "located_by": located_by,
     }
     t = res.data.t_s
     if t is not None:
-        out["when_s"] = [float(np.min(t[top])), float(np.max(t[top]))]
+        out["when_s"] = [float(np.min(t[close])), float(np.max(t[close]))]
     return out
+
+
+#: The bump fit's width (fraction of the travel) is kept within these bounds.
+BUMP_WIDTH = (0.03, 0.6)
+
+
+def fit_bump(
+    q_mm: FloatArray, r_um: FloatArray, start_mm: FloatArray
+) -> tuple[FloatArray, FloatArray] | None:
+    """(centre mm, radius mm per axis) of the Gaussian bump that best fits ``r_um`` (N, 3;
+    amplitudes per axis and offsets linear, profiled), started at ``start_mm``; None when the
+    fit does not improve on offsets alone or runs away (more than half a travel outside)."""
+    from scipy import optimize
+
+    moved = np.ptp(q_mm, axis=0) > 1e-6
+    if not np.any(moved):
+        return None
+    lo, span = np.min(q_mm, axis=0), np.where(moved, np.ptp(q_mm, axis=0), 1.0)
+    qn = (q_mm - lo) / span
+    cols = np.flatnonzero(np.any(r_um != 0.0, axis=0))
+    y = r_um[:, cols]
+    ones = np.ones((len(q_mm), 1))
+
+    def rss(p: FloatArray) -> float:
+        c, w = p[:-1], float(np.clip(p[-1], *BUMP_WIDTH))
+        d2 = np.sum(((qn[:, moved] - c) / w) ** 2, axis=1)
+        g = np.exp(-0.5 * d2)[:, None]
+        a = np.hstack([ones, g])
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        return float(np.sum((y - a @ coef) ** 2))
+
+    x0 = np.concatenate([((start_mm - lo) / span)[moved], [0.15]])
+    base = float(np.sum((y - y.mean(axis=0)) ** 2))
+    best = None
+    for w0 in (0.1, 0.2, 0.35):
+        x0[-1] = w0
+        sol = optimize.minimize(
+            rss, x0, method="Nelder-Mead", options={"xatol": 1e-4, "maxfev": 600}
+        )
+        if best is None or sol.fun < best.fun:
+            best = sol
+    assert best is not None
+    c = best.x[:-1]
+    if not best.fun < 0.9 * base or np.any(c < -0.5) or np.any(c > 1.5):
+        return None
+    centre = start_mm.astype(float).copy()
+    centre[moved] = lo[moved] + c * span[moved]
+    radius = np.zeros(3)
+    radius[moved] = float(np.clip(best.x[-1], *BUMP_WIDTH)) * span[moved]
+    return centre, radius
 
 
 def local_unexplained(
