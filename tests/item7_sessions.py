@@ -23,13 +23,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from heldout_generator.case import Case  # noqa: E402
-from heldout_generator.design import SessionDesign, make_session  # noqa: E402
-from heldout_generator.effect_base import Contribution, HiddenEffect  # noqa: E402
-from heldout_generator.files import write_case  # noqa: E402
-from heldout_generator.identity import Identity  # noqa: E402
-from heldout_generator.machine import random_machine  # noqa: E402
-from heldout_generator.truth import effect_signal_um, rms3d_um, true_error_um  # noqa: E402
+from heldout_generator.case import Case
+from heldout_generator.design import SessionDesign, make_session
+from heldout_generator.effect_base import Contribution, HiddenEffect
+from heldout_generator.files import write_case
+from heldout_generator.identity import Identity
+from heldout_generator.machine import random_machine
+from heldout_generator.truth import effect_signal_um, rms3d_um, true_error_um
 
 AXES = ("x", "y", "z")
 

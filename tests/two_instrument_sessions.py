@@ -15,7 +15,8 @@ instruments, each with its own errors:
   interpolation error is periodic in u with period Λ: ε = A(d)·cos(2πu/Λ + φ) + a harmonic. In
   distance the period is then p(d) = Λ·d²/K (the triangulation law), amplitude A(d) varying
   slowly with distance. Its timestamps may be late (``latency_s``): the sample stamped t was
-  taken at t − τ.
+  taken at t − τ; its reading may creep with time (a warm-up, ``reference_drift_um``), the same
+at every distance.
 
 The CSV follows docs/formats.md §2 (x, ref_x …, t, dir_x, v_x, state, group); the reference's
 reading is written in the axis frame: ``ref_x = sensor_mm − d_read``.
@@ -23,6 +24,7 @@ reading is written in the axis frame: ``ref_x = sensor_mm − d_read``.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -62,6 +64,7 @@ class Truth:
     lambda_mm: float = 1.0  # the interpolation error's period in u
     ripple_um: float = 6.0  # its amplitude at the centre of the travel
     latency_s: float = 0.0
+    reference_drift_um: float = 0.0  # the sensor's reading creeps over the session (warm-up)
     noise_um: float = 0.5
 
     def ripple_period_mm(self, x_mm: float) -> float:
@@ -137,7 +140,7 @@ def simulate(
         start, stop = (lo, hi) if d > 0 else (hi, lo)
         stops = np.arange(start, stop + d * 1e-9, d * targets_mm)
         phase = rng.uniform(0.0, 1.0 / rate_hz)
-        for a, b in zip(stops[:-1], stops[1:], strict=True):
+        for a, b in itertools.pairwise(stops):
             # rest at a (its samples at x = a), then move to b at speed v
             n_rest = int(rest_s * rate_hz)
             ts = t0 + phase + np.arange(n_rest) / rate_hz
@@ -166,7 +169,7 @@ def simulate(
     x_then = x - v * truth.latency_s
     true = x_then + _machine_error_um(truth, x_then, d, heat) / 1000.0
     dist = truth.sensor_mm - true
-    read = dist + _sensor_error_um(truth, dist) / 1000.0
+    read = dist + _sensor_error_um(truth, dist) / 1000.0 + truth.reference_drift_um * heat / 1000.0
     read = read + rng.normal(0.0, truth.noise_um, len(x)) / 1000.0
     ref_x = truth.sensor_mm - read
     n = len(x)

@@ -76,7 +76,8 @@ def cyclic_locking(
             x = cand.design_uncached(res, theta)[:, k, :]
             _, phi_p = _phase(x[d > 0], y[d > 0], cand.envelope)
             _, phi_m = _phase(x[d < 0], y[d < 0], cand.envelope)
-            shift = -_wrap(phi_m - phi_p) / (2.0 * np.pi) * period * 1000.0
+            # the fitted term is A·cos(φ(c) − θ): moved by δ, θ grows by 2πδ/p
+            shift = _wrap(phi_m - phi_p) / (2.0 * np.pi) * period * 1000.0
             out[f"shift_in_{locked}_coordinates_um"] = shift
         out["meaning"] = (
             "how far the cyclic error moved from the + to the − passes in each coordinate: "

@@ -140,6 +140,18 @@ def _twin_alternatives(
     return out, machine
 
 
+def _unique(alts: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One alternative per identity (the first: a twin's, with its source test)."""
+    seen: set[tuple[Any, ...]] = set()
+    out = []
+    for a in alts:
+        key = tuple(a.get(k) for k in ("cause", "component", "axis", "varies_with"))
+        if key not in seen:
+            seen.add(key)
+            out.append(a)
+    return out
+
+
 def _evidence(f: Finding, index: int, beta: Any, call: SourceCall, label: str) -> dict[str, Any]:
     term, root = f.accepted[index], f.roots[index]
     ev: dict[str, Any] = {"summary": call.summary(label), "twins": call.twins}
@@ -220,7 +232,7 @@ def describe_terms(
         alt = find_alternatives(
             problem, others, t, eff, causes_pool, f.roots, rss_after, sigma2, f.alpha
         )
-        alts = twin_alts + (alt["alternatives"] if alt is not None else [])
+        alts = _unique(twin_alts + (alt["alternatives"] if alt is not None else []))
         if alts:
             entry["alternatives"] = alts
             advice = [f"{a['cause']}: {a['separated_by']}" for a in alts if a["separated_by"]]
