@@ -60,23 +60,23 @@ def test_a_bend_with_its_slope_is_one_entry(tmp_path, model: str, seed: int) -> 
 CORNERS = [(0.1, 0.9, 0.15), (0.9, 0.15, 0.8), (0.12, 0.1, 0.85)]
 
 
-def test_a_bump_near_an_edge_is_located_where_it_is(tmp_path) -> None:
+@pytest.mark.parametrize("i", range(len(CORNERS)))
+def test_a_bump_near_an_edge_is_located_where_it_is(tmp_path, i: int) -> None:
     """Where the diagnosis says the bump sits, against the true centre, in units of its radius:
-    unbiased (no systematic pull towards the centre of the volume) and within half a radius on
-    the median; the naive estimate (the mean position of the points with the largest residual)
-    is pulled inwards by about a radius."""
-    offs, inward = [], []
-    for i, corner in enumerate(CORNERS):
-        case, centre, radius = bump_case("MB1", 10 + i, corner)
-        machine, csv = write(case, tmp_path / f"b{i}")
-        d = diagnose(Machine.from_toml(machine), read_measurements(csv))
-        bumps = [e for e in d.entries if e["cause"] == "unexplained"]
-        assert bumps, [e["cause"] for e in d.entries]
-        where = np.asarray(bumps[0]["parameters"]["where_mm"])
-        lo, hi = case.description.lower_mm, case.description.upper_mm
-        towards_middle = (lo + hi) / 2 - centre
-        towards_middle /= np.linalg.norm(towards_middle)
-        offs.append(float(np.linalg.norm(where - centre)) / radius)
-        inward.append(float((where - centre) @ towards_middle) / radius)
-    assert np.median(offs) < 0.5, offs
-    assert np.mean(inward) < 0.35, inward
+    within a fifth of a radius and no pull towards the centre of the volume (the naive estimate,
+    the mean position of the points with the largest residual, was pulled inwards by about a
+    radius: 0.9–1.3 on these three cases). Its radius is recovered too."""
+    case, centre, radius = bump_case("MB1", 10 + i, CORNERS[i])
+    machine, csv = write(case, tmp_path)
+    d = diagnose(Machine.from_toml(machine), read_measurements(csv))
+    bumps = [e for e in d.entries if e["cause"] == "unexplained"]
+    assert bumps, [e["cause"] for e in d.entries]
+    p = bumps[0]["parameters"]
+    where = np.asarray(p["where_mm"])
+    lo, hi = case.description.lower_mm, case.description.upper_mm
+    towards_middle = (lo + hi) / 2 - centre
+    towards_middle /= np.linalg.norm(towards_middle)
+    assert np.linalg.norm(where - centre) / radius < 0.2, (where, centre, radius)
+    assert abs((where - centre) @ towards_middle) / radius < 0.15
+    got = np.asarray(p["radius_mm"])
+    assert np.all(np.abs(got / radius - 1) < 0.25), (got, radius)
