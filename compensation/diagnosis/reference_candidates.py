@@ -81,9 +81,11 @@ def law_of(theta: Any, centre: float, span: tuple[float, float]) -> PeriodLaw:
     if kind == "triangulation":
         return PeriodLaw(kind, p_c, centre, r0_mm=float(theta[2]))
     lo, hi = span
-    knots = np.linspace(lo, hi, 5)
-    s = 2.0 * (knots - lo) / (hi - lo) - 1.0
+    knots = np.sort(np.r_[np.linspace(lo, hi, 5), centre])
+    knots = np.unique(knots)
+    s = 2.0 * (knots - 0.5 * (lo + hi)) / (hi - lo)
     p = p_c * np.exp(float(theta[2]) * s + float(theta[3]) * s**2)
+    p[np.argmin(np.abs(knots - centre))] = p_c  # the law's period at the centre is P exactly
     return PeriodLaw(
         "smooth", p_c, centre, knots_mm=tuple(float(v) for v in knots), period_at_knots_mm=tuple(p)
     )

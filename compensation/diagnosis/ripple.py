@@ -17,9 +17,9 @@ local periods are then fitted by the laws of :mod:`cmm_comp.compensation.effects
 A chirp is reported only when the constant law is refused (χ² test at ``alpha``) *and* the law
 changes the phase across the travel by at least :data:`MIN_CHIRP_CYCLES` against the best
 constant period (less than that a constant-period candidate follows it); ``triangulation`` (the
-physical law) is preferred to ``smooth`` unless their phases part by more than
-:data:`MAX_LAW_GAP_CYCLES` over the travel (beyond a linear difference, which the refinement of
-the period at the centre takes up).
+physical law) is preferred to ``smooth`` unless the smooth law fits the local periods
+significantly better and their phases part by more than :data:`MAX_LAW_GAP_CYCLES` over the
+travel (beyond a linear difference, which the refinement of the period at the centre takes up).
 """
 
 from __future__ import annotations
@@ -246,10 +246,10 @@ def find_chirp(
     s = 2.0 * (x - lo) / (hi - lo) - 1.0
     deg = min(2, len(win) - 2)
     coef_s, chi_s = _wls_line(s, np.log(p), w * p**2, deg)
-    knots = np.linspace(lo, hi, 5)
+    knots = np.unique(np.sort(np.r_[np.linspace(lo, hi, 5), centre]))
     sk = 2.0 * (knots - lo) / (hi - lo) - 1.0
     pk = np.exp(np.polynomial.polynomial.polyval(sk, coef_s))
-    p_mid = float(np.exp(np.polynomial.polynomial.polyval(0.0, coef_s)))
+    p_mid = float(pk[np.argmin(np.abs(knots - centre))])
     laws.append(
         (
             chi_s,
@@ -263,15 +263,15 @@ def find_chirp(
     if float(stats.chi2.sf((chi_c - best_chi) / inflate, dof_c - best_dof)) >= alpha:
         return None
     chosen = laws[0]
-    # the physical law unless its phase parts from the smooth one's by a sizeable part of a
-    # cycle over the travel (window periods are far more precise than a law needs to be: the
-    # term's envelope follows a slow phase drift of a fraction of a cycle)
-    if (
-        chosen[2].kind == "triangulation"
-        and len(laws) > 1
-        and _law_gap_cycles(chosen[2], laws[1][2], lo, hi) > MAX_LAW_GAP_CYCLES
-    ):
-        chosen = laws[1]
+    # the physical law unless the smooth one fits the windows significantly better *and* their
+    # phases part by a sizeable part of a cycle over the travel (window periods are far more
+    # precise than a law needs to be: the term's envelope follows a slow phase drift)
+    if chosen[2].kind == "triangulation" and len(laws) > 1:
+        smooth = laws[1]
+        extra = max(chosen[1] - smooth[1], 1)
+        better = stats.chi2.sf(max(chosen[0] - smooth[0], 0.0) / inflate, extra) < alpha
+        if better and _law_gap_cycles(chosen[2], smooth[2], lo, hi) > MAX_LAW_GAP_CYCLES:
+            chosen = smooth
     cycles = _cycles(chosen[2], float(p_const[0]), lo, hi)
     if cycles < MIN_CHIRP_CYCLES:
         return None

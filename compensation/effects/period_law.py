@@ -11,8 +11,8 @@ zero; an error periodic in u is periodic in r with the local period
     p(r) = P·((r − r0)/(c − r0))²           (law ``triangulation``),
 
 P the period at the centre c of the travel. A general slowly varying period is
-``log p(r) = Σ_k g_k·s^k`` (s the coordinate normalised over the knots' span, degree ≤ 3),
-given by its value at knots (law ``smooth``). The phase is φ(r) = 2π∫_c^r dr'/p(r') (0 at the
+given by its values at knots (law ``smooth``): log p through them, a monotone cubic (PCHIP),
+with constant slope beyond the first and last knot. The phase is φ(r) = 2π∫_c^r dr'/p(r') (0 at the
 centre): closed form for ``triangulation``, integrated numerically for ``smooth``; ``constant``
 keeps φ = 2πr/P (0 at r = 0, as the cyclic errors of the machine description always had).
 
@@ -70,15 +70,26 @@ class PeriodLaw:
                 raise ValueError("knots_mm must be finite and increasing")
             if not (np.all(np.isfinite(p)) and np.all(p > 0)):
                 raise ValueError("period_at_knots_mm must be finite and > 0")
+            at_centre = float(self.period_at(np.array([self.centre_mm]))[0])
+            if abs(at_centre - self.period_mm) > 1e-6 * self.period_mm:
+                raise ValueError(
+                    f"period_mm {self.period_mm} must be the law's period at centre_mm "
+                    f"({at_centre:.6g} mm there)"
+                )
 
     # ------------------------------------------------------------------ the law
-    def _log_poly(self) -> tuple[FloatArray, float, float]:
+    def _log_period(self, r: FloatArray) -> FloatArray:
+        """log p through the knots (a monotone cubic, PCHIP; constant slope beyond them)."""
+        from scipy.interpolate import PchipInterpolator
+
         k = np.asarray(self.knots_mm, float)
+        f = PchipInterpolator(k, np.log(self.period_at_knots_mm), extrapolate=True)
         lo, hi = float(k[0]), float(k[-1])
-        s = 2.0 * (k - lo) / (hi - lo) - 1.0
-        deg = min(3, len(k) - 1)
-        coef = np.polynomial.polynomial.polyfit(s, np.log(self.period_at_knots_mm), deg)
-        return np.asarray(coef, float), lo, hi
+        inside = np.clip(r, lo, hi)
+        slope_lo, slope_hi = float(f.derivative()(lo)), float(f.derivative()(hi))
+        out = f(inside)
+        out = out + np.where(r < lo, (r - lo) * slope_lo, 0.0)
+        return np.asarray(out + np.where(r > hi, (r - hi) * slope_hi, 0.0), float)
 
     def period_at(self, r_mm: Any) -> FloatArray:
         """Local period (mm) at ``r_mm``."""
@@ -88,9 +99,7 @@ class PeriodLaw:
         if self.kind == "triangulation":
             r0 = float(self.r0_mm)  # type: ignore[arg-type]
             return self.period_mm * ((r - r0) / (self.centre_mm - r0)) ** 2
-        coef, lo, hi = self._log_poly()
-        s = 2.0 * (r - lo) / (hi - lo) - 1.0
-        return np.asarray(np.exp(np.polynomial.polynomial.polyval(s, coef)), float)
+        return np.asarray(np.exp(self._log_period(r)), float)
 
     def phase(self, r_mm: Any) -> FloatArray:
         """φ(r) (rad) of the first harmonic (module docstring)."""
