@@ -168,18 +168,22 @@ def simulate(
     }
 
 
-def session_facts(d: SessionDesign, effects: list[object], rows: dict[str, object]) -> SessionFacts:
+def session_facts(
+    d: SessionDesign, effects: list[object], rows: dict[str, object], offset_um: float
+) -> SessionFacts:
     """What the truth rules need, measured on the written rows."""
     state = np.asarray(rows["state"])
     speeds = np.abs(np.asarray(rows["velocity_mm_s"]))[state == "steady"]
     distinct = np.unique(np.round(np.log(speeds), 2)) if speeds.size else np.array([])
     reversal = sum(abs(e.reversal_um) for e in effects if isinstance(e, Reversal))
+    ref = np.asarray(rows["reference_mm"]) - offset_um / 1000.0
     return SessionFacts(
         axis=d.axis,
         bidirectional=bool(np.unique(np.asarray(rows["direction"])).size == 2),
         rest_rows=int(np.sum(state == "rest")),
         n_speeds=int(distinct.size),
         reversal_um=float(reversal),
+        ref_centre_mm=float(0.5 * (np.min(ref) + np.max(ref))),
     )
 
 
@@ -203,7 +207,7 @@ def draw_case(family: str, variant: str, seed: int) -> Case:
         if rng.random() < 0.5:
             calibrated = (float(rng.uniform(-5, 5)), float(rng.uniform(-0.2, 0.2) * _sgn(rng)))
         rows = simulate(design, effects, noise, rng, offset, calibrated)
-        facts = session_facts(design, effects, rows)
+        facts = session_facts(design, effects, rows, offset)
         if mode_of(variant) == "bidirectional" and not facts.bidirectional:
             continue
         hidden, nothing = truth_labels(effects, facts)

@@ -52,7 +52,10 @@ class ReferenceRipple:
     phase: float
     h2: float
     phase2: float
-    family: str = "ripple"
+
+    @property
+    def family(self) -> str:
+        return f"ripple_{self.law}"
 
     def local_period_mm(self, r: FloatArray) -> FloatArray:
         r = np.asarray(r, dtype=float)

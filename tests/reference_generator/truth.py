@@ -19,7 +19,8 @@ the lead's contract (/work/issues/24-contract.md, "The right source"); never fro
 
 Identities: ``parametric`` by ``component`` (dx_x, dy_y, dz_z of the measured axis), every other
 cause by ``axis``; ``periodic`` also by ``period_mm`` and ``reference_ripple`` by ``law`` and
-``period_mm`` (the period at the centre of the travel).
+``period_mm`` (the period at the centre of the travel the reference saw: the middle of its
+readings' range, the constant offset between the instruments removed).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ class SessionFacts:
     rest_rows: int
     n_speeds: int
     reversal_um: float  # |reversal| of the machine, 0 without one
+    ref_centre_mm: float = 0.0  # centre of the travel the reference saw (its reading − offset)
 
     @property
     def has_rest(self) -> bool:
@@ -136,8 +138,10 @@ def _truth_of(effect: object, facts: SessionFacts) -> Hidden | str:
         keys = {"axis": axis, "period_mm": effect.period_mm}
         return Hidden("periodic", "periodic", keys, source, why)
     if isinstance(effect, ReferenceRipple):
-        source, why = _periodic_source(facts, effect.period_c_mm, "reference")
-        keys = {"axis": axis, "law": effect.law, "period_mm": effect.period_c_mm}
+        # the contract's period_mm: the period at the centre of the measured travel
+        p_c = float(effect.local_period_mm(np.array([facts.ref_centre_mm]))[0])
+        source, why = _periodic_source(facts, p_c, "reference")
+        keys = {"axis": axis, "law": effect.law, "period_mm": p_c}
         family = f"ripple_{effect.law}"
         return Hidden(family, "reference_ripple", keys, source, why, effect.describe())
     if isinstance(effect, Reversal):
