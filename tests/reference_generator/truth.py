@@ -78,6 +78,7 @@ class Hidden:
 
     def as_dict(self) -> dict[str, object]:
         return {
+            "label": self.label,
             "family": self.family,
             "cause": self.cause,
             "keys": self.keys,
