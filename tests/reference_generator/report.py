@@ -124,7 +124,7 @@ def rate_table(records: Sequence[Record]) -> str:
         fam = str(r["case"]).split("/")[0]
         spur[fam][0] += len((r.get("score") or {}).get("spurious", []))
         spur[fam][1] += 1
-    lines += ["", "spurious entries per family (entries / sessions): "]
+    lines += ["", "spurious entries per family (entries / sessions):"]
     lines.append(", ".join(f"{f} {a}/{b}" for f, (a, b) in sorted(spur.items())))
     return "\n".join(lines)
 
