@@ -146,11 +146,17 @@ def print_report(records: list[dict[str, Any]], meta: dict[str, Any]) -> dict[st
         f"spurious entries: {s['spurious_entries']} in {s['sessions_with_spurious']} sessions; "
         f"diagnosis failed: {len(s['diagnosis_failed'])}"
     )
-    w, e = s["wall_s"], s["elapsed_s"]
-    print(
-        f"time per session: wall (whole CLI) median {w['median']} s, p90 {w['p90']}, max "
-        f"{w['max']}; the diagnosis' elapsed_s median {e['median']}, p90 {e['p90']}, max {e['max']}"
+    for name, key in (("wall (whole CLI)", "wall_s"), ("CPU (whole CLI)", "cpu_s")):
+        st = s[key]
+        print(
+            f"time per session, {name}: median {st['median']} s, p90 {st['p90']}, max {st['max']}"
+        )
+    by = ", ".join(
+        f"{k} rows {v['median']} s (max {v['max']})" for k, v in s["cpu_s_by_rows"].items()
     )
+    print(f"CPU per session by size: {by}")
+    e = s["elapsed_s"]
+    print(f"the diagnosis' own elapsed_s: median {e['median']} s, p90 {e['p90']}, max {e['max']}")
     print("\n" + misses_text(records, limit=400))
     return s
 

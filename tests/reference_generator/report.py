@@ -6,8 +6,8 @@
 * sessions whose truth names nothing (clean ones, and those where naming nothing is right):
   **false alarms** (verdict not ``none`` or any effect listed);
 * **spurious** entries (named but hidden nowhere) on every session;
-* time per session: wall (the whole CLI, on this machine as it was) and the diagnosis' own
-  ``elapsed_s``.
+* time per session: wall and CPU of the whole CLI (the child's own CPU time: less sensitive to
+  a shared machine's load than its wall time) and the diagnosis' own ``elapsed_s``.
 """
 
 from __future__ import annotations
@@ -65,6 +65,8 @@ def summary(records: Sequence[Record]) -> dict[str, Any]:
     failed = [r["case"] for r in records if r.get("exit_code") != 0]
     wall = np.array([r["wall_s"] for r in records], dtype=float)
     elapsed = np.array([r.get("elapsed_s") or np.nan for r in records], dtype=float)
+    cpu = np.array([r.get("cpu_s", np.nan) for r in records], dtype=float)
+    rows_n = np.array([r["rows"] for r in records])
     return {
         "sessions": len(records),
         "hidden_effects": n,
@@ -80,6 +82,11 @@ def summary(records: Sequence[Record]) -> dict[str, Any]:
         "diagnosis_failed": failed,
         "wall_s": _stats(wall),
         "elapsed_s": _stats(elapsed),
+        "cpu_s": _stats(cpu),
+        "cpu_s_by_rows": {
+            f"{lo}-{hi}": _stats(cpu[(rows_n >= lo) & (rows_n < hi)])
+            for lo, hi in ((0, 1000), (1000, 2000), (2000, 4000))
+        },
     }
 
 
