@@ -78,21 +78,15 @@ UNEXPLAINED_SOURCE = {
 
 
 def _round(
-    problem: Problem,
-    slots: list[Slot],
-    pool: list[Candidate],
-    n_tried: int,
-    alpha: float,
-    min_cv_gain: float,
-    cv_base: float,
-    local_hits: list[dict[str, Any]],
-    refused: list[dict[str, Any]],
+    problem: Problem, slots: list[Slot], pool: list[Candidate], search: _Search
 ) -> tuple[Term | None, list[dict[str, Any]]]:
     """One forward step. New candidates are tested against the accepted causes at their *rich*
     shape, so what a mis-shaped accepted cause leaves behind (same signal, same axis, same Abbe
     arms) is absorbed by it and never named as a second cause. A pick that fails the volume
     consistency test (:mod:`.consistency`) is not taken; it is appended to ``local_hits`` and the
     next eligible candidate is considered."""
+    n_tried, alpha, min_cv_gain = search.n_tried, search.alpha, search.min_cv_gain
+    cv_base, local_hits, refused = search.cv_history[-1], search.local_hits, search.refused
     base = terms_of(slots, rich=True)
     n_obs = problem.y.size
     _, rss0, rank0 = fit(problem, base)
@@ -243,6 +237,9 @@ class _Search:
     """The state of the forward search: causes named, excluded, rounds, refusals."""
 
     cv_history: list[float]
+    n_tried: int
+    alpha: float
+    min_cv_gain: float
     slots: list[Slot] = field(default_factory=list)
     excluded: set[int] = field(default_factory=set)
     rounds: list[list[dict[str, Any]]] = field(default_factory=list)
@@ -259,9 +256,6 @@ def _rounds(
     problem: Problem,
     pool: list[Candidate],
     search: _Search,
-    n_tried: int,
-    alpha: float,
-    min_cv_gain: float,
     max_effects: int,
     say: Callable[[str], None],
 ) -> None:
@@ -286,35 +280,19 @@ def _rounds(
             and not (c.theta_step is not None and c.keys.get("axis") in chirped)
         ]
         say(f"round {len(search.rounds) + 1}: {len(remaining)} candidates")
-        term, rows = _round(
-            problem,
-            slots,
-            remaining,
-            n_tried,
-            alpha,
-            min_cv_gain,
-            search.cv_history[-1],
-            search.local_hits,
-            search.refused,
-        )
+        term, rows = _round(problem, slots, remaining, search)
         search.rounds.append(_public_rows(rows))
         if term is None:
             break
         slots.append(Slot(term.candidate, term))
         say(f"  accepted {term.candidate.label}")
-        _after_change(problem, search, n_tried, alpha, min_cv_gain, say)
+        _after_change(problem, search, say)
 
 
-def _after_change(
-    problem: Problem,
-    search: _Search,
-    n_tried: int,
-    alpha: float,
-    min_cv_gain: float,
-    say: Callable[[str], None],
-) -> None:
+def _after_change(problem: Problem, search: _Search, say: Callable[[str], None]) -> None:
     """Re-profile, choose shapes, drop what is no longer needed, score the model."""
     slots = search.slots
+    n_tried, alpha, min_cv_gain = search.n_tried, search.alpha, search.min_cv_gain
     reprofile(problem, slots)
     choose_variants(problem, slots, alpha, min_cv_gain)
     dropped = backward(problem, slots, n_tried, alpha, min_cv_gain)
@@ -326,14 +304,7 @@ def _after_change(
     search.cv_history.append(model_cv(problem, terms_of(slots)))
 
 
-def _final_periods(
-    problem: Problem,
-    search: _Search,
-    n_tried: int,
-    alpha: float,
-    min_cv_gain: float,
-    say: Callable[[str], None],
-) -> bool:
+def _final_periods(problem: Problem, search: _Search, say: Callable[[str], None]) -> bool:
     """The full period test (peak and subsets) of every cyclic error named, with the other
     causes now named beside it; those refused are removed (True when any was)."""
     removed = False
@@ -348,7 +319,7 @@ def _final_periods(
             say(f"  refused {slot.root.label}: " + "; ".join(check.disagreements))
             removed = True
     if removed:
-        _after_change(problem, search, n_tried, alpha, min_cv_gain, say)
+        _after_change(problem, search, say)
     return removed
 
 
@@ -401,14 +372,14 @@ def diagnose(
     # the null "a bump somewhere in the volume": every cause must explain more than it
     pool += local_candidates(res)
     n_tried = max(len(pool), 1)
-    search = _Search(cv_history=[cv_mse(problem, [])])
+    search = _Search([cv_mse(problem, [])], n_tried, alpha, min_cv_gain)
     for _ in range(MAX_PASSES):
-        _rounds(problem, pool, search, n_tried, alpha, min_cv_gain, max_effects, say)
+        _rounds(problem, pool, search, max_effects, say)
         refused_ids = {r["candidate"] for r in search.refused}
         usable = [c for c in pool if id(c) not in refused_ids]
         if _merge_causes(problem, search.slots, usable, alpha, min_cv_gain, say):
             search.cv_history.append(model_cv(problem, terms_of(search.slots)))
-        if not _final_periods(problem, search, n_tried, alpha, min_cv_gain, say):
+        if not _final_periods(problem, search, say):
             break
     slots, rounds, cv_history = search.slots, search.rounds, search.cv_history
     local_hits, refused = search.local_hits, search.refused
