@@ -78,12 +78,13 @@ def _periodic_design_many(
     return design
 
 
-#: Cycles per travel scanned by the periodic candidate; a dense record (``DENSE_POINTS`` or more,
-#: positions finer than Nyquist allows) also gets a short-period candidate up to
-#: ``DENSE_CYCLES`` (a screw's pitch, an encoder's interpolation error, a stick-slip cycle).
+#: Cycles per travel scanned by the periodic candidate; a dense record (:func:`dense_record`)
+#: also gets a short-period candidate up to ``DENSE_CYCLES`` (a screw's pitch, an encoder's or a
+#: sensor's interpolation error), never beyond what the positions' spacing resolves.
 PERIODIC_CYCLES = 80.0
-DENSE_CYCLES = 400.0
+DENSE_CYCLES = 2000.0
 DENSE_POINTS = 2000
+DENSE_ONE_AXIS = 400
 #: Spacing of the period scan in cycles per travel: 5 grid values per resolution element 1/L
 #: (a peak between two of them loses at most 3 % of its power before refinement).
 PERIOD_STEP_CYCLES = 0.2
@@ -102,9 +103,9 @@ def periodic_periods(
     length = span_mm[1] - span_mm[0]
     f_min, f_max = cycles[0] / length, cycles[1] / length
     if positions_mm is not None and len(positions_mm) > 1:
-        distinct = np.unique(np.round(np.asarray(positions_mm) / (1e-3 * length)))
+        distinct = np.unique(np.round(np.asarray(positions_mm) / (1e-6 * length)))
         if len(distinct) > 1:
-            gap = float(np.median(np.diff(distinct))) * 1e-3 * length
+            gap = float(np.median(np.diff(distinct))) * 1e-6 * length
             f_max = min(
                 f_max, 1.0 / (2.5 * gap)
             )  # margin: at 2 samples per period a sine aliases to ~0
@@ -221,9 +222,28 @@ def periodic_scans(res: Residuals, axis: str) -> list[tuple[tuple[float, ...], f
     and for a dense record the short periods too."""
     q = res.q_mm[:, AXIS_INDEX[axis]]
     scans = [periodic_periods(span_of(res, axis), q)]
-    if res.n >= DENSE_POINTS:
+    if dense_record(res):
         scans.append(periodic_periods(span_of(res, axis), q, (PERIODIC_CYCLES, DENSE_CYCLES)))
     return [sc for sc in scans if sc[0]]
+
+
+def dense_record(res: Residuals) -> bool:
+    """A record dense along its axis: ``DENSE_POINTS`` points or more, or a one-axis stream of
+    ``DENSE_ONE_AXIS`` or more (a laser or sensor calibration of one axis): short periods and a
+    period that changes along the travel can show there."""
+    moved = sum(float(np.ptp(res.q_mm[:, k])) > 1e-6 for k in range(3))
+    return res.n >= DENSE_POINTS or (moved == 1 and res.n >= DENSE_ONE_AXIS)
+
+
+#: A reversal needs each direction of travel on at least this share of the points (a session
+#: run one way, with a few points from the move that set it up, shows none: its "reversal" would
+#: only be a scale term times the direction).
+MIN_DIRECTION_SHARE = 0.1
+
+
+def _both_directions(d: FloatArray) -> bool:
+    share = float(np.mean(d > 0))
+    return MIN_DIRECTION_SHARE <= share <= 1.0 - MIN_DIRECTION_SHARE
 
 
 def _moved(res: Residuals) -> dict[str, bool]:
@@ -290,7 +310,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
     for a in AXES:
         if not moved[a]:
             continue
-        if res.has(f"dir_{a}"):
+        if res.has(f"dir_{a}") and _both_directions(res.signals[f"dir_{a}"]):
             span = span_of(res, a)
             out.append(Candidate("reversal", {"axis": a}, 2, _reversal_builder(a, span)))
         if res.has("t") and float(np.ptp(res.signals["t"])) > 0:

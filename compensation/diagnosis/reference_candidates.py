@@ -53,10 +53,14 @@ __all__ = [
 #: (harmonics, envelope order) of a chirped cyclic error: default and rich. A triangulation
 #: sensor's ripple is rarely a pure sine, and its amplitude changes with the distance.
 CHIRP_SHAPES = ((2, 3), (3, 5))
-#: A record with at least this many points along an axis is searched for a chirped cyclic error.
+#: A record with at least this many points (a one-axis stream: ``CHIRP_ONE_AXIS``) is searched
+#: for a chirped cyclic error.
 CHIRP_POINTS = 2000
+CHIRP_ONE_AXIS = 400
 #: Drift shapes along the axis (Legendre orders of position per time order): default and rich.
 SMOOTH_DRIFT = ((1, 3), (2, 4))
+#: Time orders of the drift twins (the same at every position).
+DRIFT_TWIN_ORDERS = (1, 2, 3)
 #: Orders of the reference's smooth nonlinearity (as the machine's positional table).
 NONLINEARITY_ORDERS = ((1, 2, 3, 4), tuple(range(1, 9)))
 
@@ -192,7 +196,9 @@ def _chirp_candidates(res: Residuals, axis: str) -> list[Candidate]:
     q, r = res.q_mm[:, k], res.ref_mm[:, k]
     span = (float(np.min(q)), float(np.max(q)))
     length = span[1] - span[0]
-    if res.n < CHIRP_POINTS or length <= 0:
+    moved = sum(float(np.ptp(res.q_mm[:, j])) > 1e-6 for j in range(3))
+    dense = res.n >= CHIRP_POINTS or (moved == 1 and res.n >= CHIRP_ONE_AXIS)
+    if not dense or length <= 0:
         return []
     groups = res.signals.get(f"dir_{axis}", np.zeros(res.n))
     chirp = find_chirp(
@@ -365,19 +371,22 @@ def _drift_twins(res: Residuals, axis: str) -> list[Candidate]:
     out = []
     for source, builder in (("reference", reference), ("machine", machine)):
         cause = "reference_drift" if source == "reference" else "drift"
-        out.append(
-            Candidate(
-                cause,
-                {"axis": axis},
-                3,
-                builder(3),
-                design_fn=design_for(3),
-                drivers=("t",),
-                hold_time=True,
-                source=source,
-                locked_to="time",
-            ).with_rich(n_params=10, build=builder(10), design_fn=design_for(10))
-        )
+        # one per time order of the machine's drifts (linear, quadratic, cubic): a drift that
+        # changes along the axis is compared with the same change in time, uniform
+        for order in DRIFT_TWIN_ORDERS:
+            out.append(
+                Candidate(
+                    cause,
+                    {"axis": axis},
+                    order,
+                    builder(order),
+                    design_fn=design_for(order),
+                    drivers=("t",),
+                    hold_time=True,
+                    source=source,
+                    locked_to="time",
+                ).with_rich(n_params=10, build=builder(10), design_fn=design_for(10))
+            )
     return out
 
 
