@@ -16,7 +16,9 @@ Two figures per twin, both in units of that σ²: Δχ², how much worse the twi
 *separability*, how badly the twin (the other terms free) can imitate the named term's fitted
 contribution — what the session could at best show. With ``band = χ²₁(1 − α)``:
 
-* separable and Δχ² > band: the twin is refuted; the term's own source and coordinate stand;
+* separable (beyond the band, and missing at least 1 % of the term's energy — a cyclic error
+  moved by ~5 % of its period between the directions: below that the difference is the map's
+  own imperfection in a quiet session, not a physical one) and Δχ² > band: the twin is refuted; the term's own source and coordinate stand;
 * separable and Δχ² < −band: the twin replaces the term (the data say which object it is) and
   is then tested against its own twins — except a smooth function of the reading
   (:data:`READING_SHAPES`), which is never named in place of a machine term;
@@ -46,6 +48,9 @@ from .candidate import Candidate
 from .fitting import Problem, Term, best_theta, fit
 from .reference_candidates import through_map
 
+#: A twin is separable only when it misses at least this share of the named term's energy.
+SEPARATION_FLOOR = 0.01
+
 #: Twins that are smooth functions of the reference's reading: never named in place of a machine
 #: term (a smooth function of the reading beside smooth functions of the position spans the
 #: observed error itself, ``(ref − indicated)·1000``: the model would explain the data by the
@@ -70,13 +75,16 @@ TWINS: dict[str, tuple[str, ...]] = {
 
 
 def _axis_of(c: Candidate) -> str | None:
-    """The axis a candidate acts along: its ``axis``, or that of a positional component."""
+    """The axis a candidate is a function of: its ``axis``, or that of a table's component
+    (``dx_x``, ``ey_x`` … → x: a table is a function of its axis' position; through the Abbe
+    arms it may act on the other components too, which a twin of the reading then cannot
+    imitate)."""
     axis = c.keys.get("axis")
     if isinstance(axis, str):
         return axis
     comp = c.keys.get("component")
-    if isinstance(comp, str) and len(comp) == 4 and comp[0] == "d" and comp[1] == comp[3]:
-        return comp[1]
+    if isinstance(comp, str) and len(comp) == 4 and comp[2] == "_" and comp[3] in "xyz":
+        return comp[3]
     return None
 
 
@@ -200,7 +208,13 @@ def decide_sources(
                 t_term, rss = _twin_fit(problem, others, term, twin, term.candidate is not root)
                 extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
                 delta = (rss - rss_full) / sigma2 + extra
-                apart = _imitation_misfit(problem, others, t_term, target) / sigma2
+                misfit = _imitation_misfit(problem, others, t_term, target)
+                apart = misfit / sigma2
+                # separable only by a difference that is a sizeable part of the term itself
+                # (≥ 1 % of its energy: a cyclic error moved by ~0.05 period between the
+                # directions), not by the imperfections of the map in a quiet session
+                if misfit < SEPARATION_FLOOR * float(target @ target):
+                    apart = min(apart, band)
                 call.twins.append(
                     {
                         "cause": twin.cause,
