@@ -2,7 +2,8 @@
 which law does its period follow?
 
 A dense record (thousands of samples along an axis) shows a cyclic error's *local* period: the
-travel is cut into windows, the smooth part of the error (a curve per direction of travel, a slow
+strongest cyclic error of the whole record is found first, then the travel is cut into up to 10
+windows holding at least 3.5 of its cycles each (4 windows at least), the smooth part of the error (a curve per direction of travel, a slow
 drift) is removed, and in each window the period of the strongest sine is found (a least-squares
 periodogram, refined between grid values), with its Cramér–Rao uncertainty
 σ_f = √12·σ/(2π·A·L_w·√N_w) inflated by the scatter the law leaves. Windows whose period is far off a
@@ -37,12 +38,17 @@ from .residuals import FloatArray
 __all__ = ["MIN_CHIRP_CYCLES", "Chirp", "LocalPeriod", "find_chirp", "local_periods"]
 
 #: A chirped law must change the phase across the travel by this many cycles against the best
-#: constant period (below it, a constant-period candidate follows the cyclic error anyway).
-MIN_CHIRP_CYCLES = 1.0
-#: Windows along the travel and the shortest / longest period searched in them (as a fraction
-#: of the travel: at least this many cycles over the travel).
+#: constant period (below it, a constant-period candidate follows the cyclic error anyway; the
+#: period test refuses a constant period whose halves of the travel part by one cycle).
+MIN_CHIRP_CYCLES = 0.5
+#: Windows along the travel (at most; each holds ≥ ``WINDOW_CYCLES`` of the record's strongest
+#: cyclic error, and a law needs ``MIN_WINDOWS``), the longest period searched (at least this many
+#: cycles over the travel) and how far a window's period may be from the record's (factor).
 WINDOWS = 10
-MIN_CYCLES_PER_TRAVEL = 30.0
+WINDOW_CYCLES = 3.5
+MIN_WINDOWS = 4
+MIN_CYCLES_PER_TRAVEL = 15.0
+PERIOD_RANGE = 2.5
 #: Frequency step of a window's periodogram (in units of its resolution 1/L_w).
 STEP = 0.2
 
@@ -128,6 +134,15 @@ def _window_peak(r: FloatArray, y: FloatArray, f_lo: float, f_hi: float) -> Loca
     return LocalPeriod(float(np.mean(r)), 1.0 / f, float(sigma_f / f**2), amp)
 
 
+def _pass_nyquist_mm(r: FloatArray, t: FloatArray | None) -> float:
+    """2.5× the median step between consecutive samples in time (0 without times)."""
+    if t is None or len(r) < 3:
+        return 0.0
+    step = np.abs(np.diff(r[np.argsort(t, kind="stable")]))
+    step = step[step > 0]
+    return 2.5 * float(np.median(step)) if len(step) else 0.0
+
+
 def local_periods(
     r: FloatArray,
     y: FloatArray,
@@ -144,11 +159,24 @@ def local_periods(
     if p_max <= p_min_mm or length <= 0:
         return []
     z = _detrend(r, y, groups, t)
-    edges = np.linspace(lo, hi, windows + 1)
+    # the strongest cyclic error of the whole record sets the windows: each holds at least
+    # WINDOW_CYCLES of it, and each searches a factor PERIOD_RANGE either side of it. It is
+    # sought above 2.5× the spacing of consecutive samples in time (a pass samples regularly:
+    # shorter periods alias there, whatever the passes resolve together)
+    p_pass = _pass_nyquist_mm(r, t)
+    whole = _window_peak(r, z, 1.0 / p_max, 1.0 / max(p_min_mm, p_pass))
+    if whole is None:
+        return []
+    n_win = int(min(windows, length / (WINDOW_CYCLES * whole.period_mm)))
+    if n_win < MIN_WINDOWS:
+        return []
+    f_lo = max(1.0 / (whole.period_mm * PERIOD_RANGE), WINDOW_CYCLES / 2 * n_win / length)
+    f_hi = min(PERIOD_RANGE / whole.period_mm, 1.0 / p_min_mm)
+    edges = np.linspace(lo, hi, n_win + 1)
     out: list[LocalPeriod] = []
     for a, b in itertools.pairwise(edges):
         m = (r >= a) & (r <= b)
-        peak = _window_peak(r[m], z[m], 1.0 / p_max, 1.0 / p_min_mm)
+        peak = _window_peak(r[m], z[m], f_lo, f_hi)
         if peak is not None:
             out.append(peak)
     return out
