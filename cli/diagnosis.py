@@ -51,9 +51,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         from cmm_comp.compensation.diagnosis.words import verdict_line
 
         write_json_atomic(Path(args.json), diagnosis.to_json())  # standard JSON, else refused
-        if args.report:
-            from cmm_comp.compensation.diagnosis.report import write_report
+        from cmm_comp.compensation.diagnosis.report import write_report
 
+        if args.report:
             write_report(diagnosis, args.report, title=f"Diagnosis of {args.machine}")
         print(verdict_line(diagnosis))
         return 0

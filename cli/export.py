@@ -2,9 +2,10 @@
 
 ``cmm-comp export MACHINE --format sinumerik-cec|twincat-cnc|linuxcnc [--tool X Y Z] -o DIR``
 writes the controller files, ``export.json`` (what is left after the control's own
-interpolation, and why), ``export.png`` and ``export.html`` into DIR (docs/export.md). Bad input
-is one error line, exit 2, nothing written; an existing non-empty DIR is not touched without
-``--force``.
+interpolation, and why), ``export.png`` and ``export.html`` into DIR (docs/export.md); with
+``--check-table`` only the one-table sign check of the format (and its instructions,
+``check-table.txt``). Bad input is one error line, exit 2, nothing written; an existing non-empty
+DIR is not touched without ``--force``.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from .common import load_machine
 
@@ -35,7 +37,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         value = getattr(args, name)
         if value is not None:
             setattr(opts, name, value)
-    opts.products = not args.no_products
+    opts.products = bool(args.products)
+    opts.invert_sign = bool(args.invert_sign)
     if args.cec_max_sum_mm is not None:
         opts.cec_max_sum_mm = args.cec_max_sum_mm
     if args.eval_steps is not None:
@@ -48,6 +51,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.axis_numbers is not None:
         opts.twincat_axis_numbers = tuple(args.axis_numbers)
         opts.linuxcnc_joints = tuple(args.axis_numbers)
+    if args.check_table:
+        return _write_check(args, machine, opts, out)
 
     def progress(line: str) -> None:
         print(f"cmm-comp export: {line}", file=sys.stderr, flush=True)
@@ -59,6 +64,33 @@ def cmd_export(args: argparse.Namespace) -> int:
     print(
         f"wrote {out}/: {', '.join(result.report['files'])}, export.json, export.png, export.html"
     )
+    return 0
+
+
+def _write_check(args: argparse.Namespace, machine: Any, opts: Any, out: Path) -> int:
+    """``--check-table``: the check files, check-table.json, and the instructions printed."""
+    import json
+
+    from cmm_comp.compensation.export import check_tables, validate_axes
+    from cmm_comp.compensation.formats.atomic import write_text_atomic
+
+    validate_axes(args.format, opts)
+    cec = args.format == "sinumerik-cec"
+    result = check_tables(
+        machine,
+        args.format,
+        input_axis="xyz".index(args.check_axes[0]),
+        output_axis="xyz".index(args.check_axes[1]),
+        axis_names=opts.cec_axis_names if cec else opts.twincat_axis_names,
+        axis_numbers=opts.twincat_axis_numbers,
+        products=opts.products,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    for name, text in result.files.items():
+        write_text_atomic(out / name, text)
+    write_text_atomic(out / "check-table.json", json.dumps(result.report, indent=2) + "\n")
+    print(result.text, end="")
+    print(f"wrote {out}/: {', '.join(sorted(result.files))}, check-table.json")
     return 0
 
 
@@ -93,9 +125,31 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     )
     p.add_argument("--max-tables", type=int, help="sinumerik-cec: CEC tables available (default 8)")
     p.add_argument(
-        "--no-products",
+        "--products",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="sinumerik-cec: carry two-axis terms with $AN_CEC_MULT_BY_TABLE products, in "
+        "Siemens' example semantics (not verified: run the product check first; default: none)",
+    )
+    p.add_argument(
+        "--invert-sign",
         action="store_true",
-        help="sinumerik-cec: no $AN_CEC_MULT_BY_TABLE products",
+        help="write the unverified sign negated (CEC values, TwinCAT cross corrections): only "
+        "after --check-table showed the opposite of the documented reading",
+    )
+    p.add_argument(
+        "--check-table",
+        action="store_true",
+        help="write only the sign check (one table with a known 0.010 mm step) and what a dial "
+        "indicator must show; with --products also the product check (sinumerik-cec)",
+    )
+    p.add_argument(
+        "--check-axes",
+        nargs=2,
+        choices=("x", "y", "z"),
+        default=("y", "x"),
+        metavar=("IN", "OUT"),
+        help="--check-table: input and output axis of the check table (default y x)",
     )
     p.add_argument(
         "--cec-max-sum-mm",

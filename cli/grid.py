@@ -1,4 +1,4 @@
-"""``cmm-comp grid build|keygen|sign`` and ``cmm-comp correct`` (docs/formats.md §3).
+"""``cmm-comp grid build|info|keygen|sign`` and ``cmm-comp correct`` (docs/formats.md §3).
 
 Register with ``add_parsers(subparsers)``; each handler takes the parsed arguments and returns
 an exit code. User-file problems raise ``ValueError`` (``GridFileError`` is one) with a message
@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import json
 import math
 import sys
 from pathlib import Path
@@ -24,12 +25,37 @@ __all__ = [
     "add_parsers",
     "cmd_correct",
     "cmd_grid_build",
+    "cmd_grid_info",
     "cmd_grid_keygen",
     "cmd_grid_sign",
+    "grid_info_lines",
     "read_points_csv",
 ]
 
 DIRECTION_COLUMNS = ("dir_x", "dir_y", "dir_z")
+
+#: ``cmm-comp correct --help``: the columns it reads and writes (docs/formats.md §3)
+CORRECT_COLUMNS = """\
+input columns (POINTS.csv, a header row, comma-separated; other columns are carried through):
+  x, y, z               indicated position, mm (required)
+  px, py, pz            stylus offset, mm (all three or none; default: the grid's probe offset,
+                        shown by `cmm-comp grid info GRID`)
+  T_x, T_y, T_z         scale temperatures as read, °C
+  T_wp                  workpiece temperature, °C
+  T_top, T_bottom       structure top and bottom, °C (thermal gradient)
+  T_air                 ambient air, °C
+  dir_x, dir_y, dir_z   direction each axis last travelled before the point: +1 or -1
+                        (0: unknown; needed when the machine has reversal tables)
+  Which signals a grid needs: `cmm-comp grid info GRID`. A needed signal that is missing or
+  empty leaves the point uncorrected for its terms, with status no_temperature / missing_input.
+
+output columns (OUT.csv): the input columns, then
+  cx, cy, cz            corrected position, mm (empty for invalid_input and outside_volume;
+                        use it as corrected only when status is ok)
+  Ux_um, Uy_um, Uz_um   expanded uncertainty U (k = 2) per component, µm (only for status ok on a
+                        grid built with --uncertainty)
+  status                ok, or why the point is not fully corrected (docs/formats.md §7)
+"""
 
 
 def _signal_columns() -> tuple[str, ...]:
@@ -98,12 +124,125 @@ def _add_uncertainty(grid: Any, machine: Any, args: argparse.Namespace) -> Any:
     if sys.stderr.isatty():
         print(file=sys.stderr)
     info = out.uncertainty.info if out.uncertainty is not None else {}
-    defaulted = len(info.get("defaulted", []))
-    print(
-        f"uncertainty: {info.get('trials')} virtual machines per node"
-        + (f", {defaulted} input(s) defaulted (see the grid header)" if defaulted else "")
+    print(f"uncertainty: {info.get('trials')} virtual machines per node")
+    from .uncertainty import print_assumptions
+
+    print_assumptions(
+        info.get("defaulted", []),
+        info.get("taken_as_zero", []),
+        machine.error_label,
+        where=f"the grid header: cmm-comp grid info {args.output}",
     )
     return out
+
+
+def cmd_grid_info(args: argparse.Namespace) -> int:
+    """``cmm-comp grid info GRID [--public-key PEM] [--json]``: what a grid file holds."""
+    from cmm_comp.compensation.grid import CorrectionGrid
+    from cmm_comp.compensation.grid.signing import (
+        load_public_key,
+        signature_info,
+        verify_signature,
+    )
+
+    seen: list[Any] = []
+    key = load_public_key(args.public_key) if args.public_key is not None else None
+
+    def check(contents: Any) -> None:  # the bytes the grid is built from, read once
+        seen.append(contents)
+        if key is not None:
+            verify_signature(contents, key)  # GridSignatureError: one line, exit 2
+
+    grid = CorrectionGrid.load(args.grid, verify=check)
+    contents = seen[0]
+    sig = signature_info(contents)
+    if args.json:
+        print(json.dumps({"sha256": contents.sha256, "header": contents.header,
+                          "signature": None if sig is None else {"algorithm": sig.algorithm,
+                          "key_id": sig.key_id, "verified": key is not None}}, indent=1))  # fmt: skip
+        return 0
+    for line in grid_info_lines(grid, contents.header, contents.sha256):
+        print(line)
+    if sig is None:
+        print("signature: none (the daemon refuses it unless grid.allow_unsigned = true; "
+              "cmm-comp grid sign)")  # fmt: skip
+    else:
+        state = "verified with " + str(args.public_key) if key is not None else "not verified"
+        print(f"signature: {sig.algorithm}, key id {sig.key_id} ({state}; --public-key PEM)")
+    return 0
+
+
+def grid_info_lines(grid: Any, header: dict[str, Any], sha256: str) -> list[str]:
+    """The header of a grid file in words (steps, signals, probe, U, provenance)."""
+    import numpy as np
+
+    m = header.get("machine", {})
+    lo, hi = grid.lower_mm, grid.upper_mm
+    steps = list(grid.steps)
+    lines = [
+        f"grid: {header.get('format')} version {header.get('format_version')}, sha256 {sha256}",
+        f"machine: {m.get('name')} ({m.get('model')}), description sha256 {m.get('sha256')}",
+        "volume: "
+        + ", ".join(f"{a} {lo[k]:g}…{hi[k]:g}" for k, a in enumerate("xyz"))
+        + f" mm; steps {steps[0]} × {steps[1]} × {steps[2]} ({int(np.prod(steps))} nodes); "
+        f"outside the volume: {header.get('outside_policy')}",
+        f"probe offset (the stylus correct uses by default): {header.get('probe_offset_mm')} mm; "
+        f"reference point {header.get('reference_mm')} mm, reference temperature "
+        f"{header.get('reference_C')} °C",
+    ]
+    needed = [f"{s.name} (reference {s.reference:g})" for s in grid.signals if s.needed]
+    other = [s.name for s in grid.signals if not s.needed]
+    lines.append(
+        "signals the correction needs: " + (", ".join(needed) or "none")
+        + (f"; carried, not needed: {', '.join(other)}" if other else "")
+    )  # fmt: skip
+    for f in header.get("signal_filters", []):
+        lines.append(f"signal filter: {json.dumps(f)}")
+    lines += _uncertainty_lines(grid, header)
+    lines.append(
+        f"built {header.get('built_utc')} by cmm-comp {header.get('library_version')} "
+        f"from {header.get('source', '?')}"
+    )
+    return lines
+
+
+def _uncertainty_lines(grid: Any, header: dict[str, Any]) -> list[str]:
+    """U of the grid: its range at the nodes (probe offset, reference temperatures) and how it
+    was computed, with the inputs defaulted and taken as zero."""
+    import numpy as np
+
+    if not grid.has_uncertainty:
+        return ["uncertainty: none (grid build --uncertainty adds U per node)"]
+    u_info = header.get("uncertainty", {})
+    nodes = np.stack(np.meshgrid(*grid.axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    probe = np.asarray(header.get("probe_offset_mm", [0.0, 0.0, 0.0]), float)
+    refs = {s.name: np.full(len(nodes), s.reference) for s in grid.signals}
+    temps = {k: v for k, v in refs.items() if k.startswith("T_")}
+    inputs = {k: v for k, v in refs.items() if not k.startswith("T_")}
+    _, status, u_um = grid.correct(
+        nodes, probe, temps or None, inputs or None, with_uncertainty=True
+    )
+    ok = status == "ok"
+    if not ok.any():  # not reachable: every signal is at its reference
+        return [f"uncertainty: no node corrected ({sorted(set(status.tolist()))})"]
+    k = u_info.get("coverage_factor")
+    ranges = ", ".join(
+        f"{a} {np.nanmin(u_um[ok, i]):.3g}…{np.nanmax(u_um[ok, i]):.3g}"
+        for i, a in enumerate("xyz")
+    )
+    stable = "" if u_info.get("stable") is None else f", stable: {u_info.get('stable')}"
+    lines = [
+        f"uncertainty: U (k = {k:g}) at the nodes, probe offset, reference temperatures: {ranges} µm",
+        f"  {u_info.get('trials')} virtual machines per node in {u_info.get('runs')} run(s), "
+        f"seed {u_info.get('seed')}{stable}; probing σ {u_info.get('probe_um')} µm",
+    ]
+    from .uncertainty import assumption_lines
+
+    lines += [
+        f"  {line}"
+        for line in assumption_lines(u_info.get("defaulted", []), u_info.get("taken_as_zero", []))
+    ]
+    return lines
 
 
 def cmd_grid_keygen(args: argparse.Namespace) -> int:
@@ -229,6 +368,23 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     )
     b.add_argument("--seed", type=int, default=0, help="random seed of the virtual CMM (default 0)")
     b.set_defaults(handler=cmd_grid_build)
+    i = grid_sub.add_parser(
+        "info",
+        help="what a grid file holds: steps, signals, probe, U, signature",
+        description="Print a grid file's header in words: machine, volume and steps, the "
+        "signals the correction needs, the probe offset, U (k = 2) at the nodes with how it was "
+        "computed and what it assumed (grid build --uncertainty), provenance and signature. "
+        "The file is checked as the daemon checks it (format, SHA-256).",
+    )
+    i.add_argument("grid", type=Path, help="grid file")
+    i.add_argument(
+        "--public-key",
+        type=Path,
+        metavar="PEM",
+        help="verify the signature with this public key (grid keygen's .pub.pem)",
+    )
+    i.add_argument("--json", action="store_true", help="the raw header as JSON instead")
+    i.set_defaults(handler=cmd_grid_info)
     k = grid_sub.add_parser("keygen", help="make an Ed25519 key pair for signing grids")
     k.add_argument(
         "--out", type=Path, required=True, help="folder for the two PEM files (never overwritten)"
@@ -240,8 +396,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     s.add_argument("grid", type=Path, help="grid file")
     s.add_argument("--key", type=Path, required=True, help="private key PEM (grid keygen)")
     s.set_defaults(handler=cmd_grid_sign)
-    c = sub.add_parser("correct", help="correct indicated points with a grid (CSV in, CSV out)")
+    c = sub.add_parser(
+        "correct",
+        help="correct indicated points with a grid (CSV in, CSV out)",
+        description="Correct indicated points with a grid: corrected = indicated + error "
+        "(error = true − indicated, docs/conventions.md).",
+        epilog=CORRECT_COLUMNS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     c.add_argument("grid", type=Path, help="grid file")
-    c.add_argument("--in", dest="input", type=Path, required=True, help="POINTS.csv")
-    c.add_argument("--out", dest="output", type=Path, required=True, help="OUT.csv")
+    c.add_argument(
+        "--in", dest="input", type=Path, required=True, help="POINTS.csv (columns below)"
+    )
+    c.add_argument("--out", dest="output", type=Path, required=True, help="OUT.csv (columns below)")
     c.set_defaults(handler=cmd_correct)

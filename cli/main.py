@@ -56,7 +56,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.handler(args) or 0)
     except (CmmCompError, ValueError, OSError) as exc:
-        print(f"cmm-comp: error: {exc}", file=sys.stderr)
+        for line in str(exc).splitlines() or [""]:  # one line per problem (a file's checks)
+            print(f"cmm-comp: error: {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("cmm-comp: interrupted", file=sys.stderr)

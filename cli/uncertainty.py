@@ -13,6 +13,7 @@ import csv
 import io
 import math
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,7 +23,7 @@ if TYPE_CHECKING:
     from cmm_comp.compensation import Machine
     from cmm_comp.compensation.uncertainty import MonteCarloSettings, PointUncertainty
 
-__all__ = ["add_parsers", "cmd_uncertainty"]
+__all__ = ["add_parsers", "assumption_lines", "cmd_uncertainty", "print_assumptions"]
 
 _POINT_COLUMNS = (
     "Ux_um", "Uy_um", "Uz_um",
@@ -48,15 +49,74 @@ def _progress(label: str) -> Any:
     return report
 
 
+_TABLE_KEYS = ("u", "u_per_m", "u_relative", "correlation_mm")
+
+
+def assumption_lines(
+    defaulted: Sequence[str], zero: Sequence[str], label: Callable[[str], str] = str
+) -> list[str]:
+    """What an uncertainty statement assumed, for the terminal: every input ``defaulted``
+    (``uncertainty.errors.dx_x.u`` …) grouped by kind, and every component taken as exactly
+    ``zero``; error components named by ``label`` (the machine file's own names)."""
+    tables: dict[str, list[str]] = {}
+    groups: dict[str, list[str]] = {}
+    for name in defaulted:
+        parts = name.split(".")
+        if len(parts) == 4 and parts[1] == "errors":
+            tables.setdefault(parts[2], []).append(parts[3])
+        elif len(parts) == 3:
+            groups.setdefault(parts[1], []).append(parts[2])
+        else:
+            groups.setdefault("", []).append(parts[-1])
+    lines = []
+    if defaulted:
+        lines.append(
+            f"{len(defaulted)} uncertainty input(s) not in [uncertainty], defaulted "
+            "(values: docs/uncertainty.md §2):"
+        )
+        by_keys: dict[tuple[str, ...], list[str]] = {}
+        for comp, keys in tables.items():
+            ordered = tuple(k for k in _TABLE_KEYS if k in keys) + tuple(
+                k for k in keys if k not in _TABLE_KEYS
+            )
+            by_keys.setdefault(ordered, []).append(label(comp))
+        for key_set, comps in by_keys.items():
+            lines.append(f"  {', '.join(key_set)} of {len(comps)} table(s): {', '.join(comps)}")
+        for group, names in groups.items():
+            lines.append(f"  {group}: {', '.join(names)}" if group else f"  {', '.join(names)}")
+    if zero:
+        lines.append(
+            f"taken as exactly zero (no table, no [uncertainty.errors.<name>]): "
+            f"{', '.join(label(c) for c in zero)}; give [uncertainty.errors.<name>] u = … for "
+            "an error that was never measured"
+        )
+    return lines
+
+
+def print_assumptions(
+    defaulted: Sequence[str],
+    zero: Sequence[str],
+    label: Callable[[str], str] = str,
+    *,
+    where: str,
+) -> None:
+    """:func:`assumption_lines` on stderr as ``cmm-comp: note:`` lines (all also in ``where``)."""
+    lines = assumption_lines(defaulted, zero, label)
+    if lines:
+        lines[-1] += f" (all in {where})"
+    for line in lines:
+        print(f"cmm-comp: note: {line}", file=sys.stderr)
+
+
 def _end_progress() -> None:
     if sys.stderr.isatty():
         print(file=sys.stderr)
 
 
-def _settings(args: argparse.Namespace, many_outputs: bool) -> MonteCarloSettings:
+def _settings(args: argparse.Namespace, default_ndig: int) -> MonteCarloSettings:
     from cmm_comp.compensation.uncertainty import MonteCarloSettings
 
-    ndig = args.ndig if args.ndig is not None else (1 if many_outputs else 2)
+    ndig = args.ndig if args.ndig is not None else default_ndig
     try:
         return MonteCarloSettings(
             probability=args.probability,
@@ -106,14 +166,7 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     machine = load_machine(args.machine)
     model = machine.uncertainty_model()
     if not args.quiet:
-        n_def = len(model.defaulted)
-        if n_def:
-            print(
-                f"cmm-comp: note: {n_def} uncertainty input(s) defaulted (not in [uncertainty]): "
-                f"{', '.join(model.defaulted[:6])}{' …' if n_def > 6 else ''} "
-                "(all listed in the JSON output)",
-                file=sys.stderr,
-            )
+        print_assumptions(model.defaulted, model.zero, machine.error_label, where="the JSON output")
     seed = args.seed
     rng = np.random.default_rng(seed)
     temps = temps_from_args(args)
@@ -169,7 +222,7 @@ def _points_mode(
         signals or None,
         inputs,
         rng=rng,
-        settings=_settings(args, many_outputs=True),
+        settings=_settings(args, default_ndig=1),
         progress=_progress("uncertainty"),
     )
     _end_progress()
@@ -308,7 +361,7 @@ def _task_mode(
 
     from cmm_comp.compensation import uncertainty as unc
 
-    settings = _settings(args, many_outputs=False)
+    settings = _settings(args, default_ndig=unc.E0_NDIG if mode == "--e0-test" else 2)
     progress = _progress("uncertainty")
     kw: dict[str, Any] = {"rng": rng, "settings": settings, "progress": progress}
     mpe_ratio_limit = None
@@ -351,27 +404,37 @@ def _task_mode(
     if args.plot is not None:
         from cmm_comp.compensation.uncertainty.plots import plot_histogram
 
-        if mc.values is None:
-            raise ValueError("uncertainty: too many trials kept no values to plot a histogram")
         gum_u = result.gum["u"] if result.gum is not None else [None] * len(result.outputs)
         shown = [
             i for i, name in enumerate(result.outputs) if not name.startswith("length_error_um[")
         ]
+        columns = {i: mc.column(i) for i in shown}
+        if any(c is None for c in columns.values()):  # not reachable with the tasks' defaults
+            raise ValueError(
+                f"uncertainty: the {mc.trials} trials' values were not kept "
+                "(more than keep_values_limit): no histogram; fewer --max-trials or --trials"
+            )
         panels = [
             (
                 result.outputs[i],
-                mc.values[:, i],
+                columns[i],
                 (float(mc.low[i]), float(mc.high[i])),
                 gum_u[i],
                 mpe_ratio_limit if result.outputs[i] == "E0_over_MPE" else None,
             )
             for i in shown
         ]
+        title = f"{machine.name}: {_TASK_TITLES.get(result.task, result.task)}, {mc.trials} virtual machines"
+        if "p_pass" in result.nominal:
+            title += f", probability of passing {_p_pass_text(result.nominal)}"
+        if not mc.stable and args.trials is None:
+            title += " (NOT stable: --max-trials reached)"
         plot_histogram(
             panels,
             args.plot,
-            title=f"{machine.name}: {result.task}, {mc.trials} virtual machines",
+            title=title,
             limit_label="pass limit E0/MPE =",
+            probability=mc.probability,
         )
     for i, name in enumerate(result.outputs):
         if name.startswith("length_error_um["):
@@ -381,10 +444,24 @@ def _task_mode(
             f"95 % interval [{mc.low[i]:.4g}, {mc.high[i]:.4g}]"
         )
     if "p_pass" in result.nominal:
-        print(f"probability of passing the E0 test: {result.nominal['p_pass']:.3f}")
+        print(f"probability of passing the E0 test: {_p_pass_text(result.nominal)}")
     print(f"{mc.trials} trials{_stability(mc, args)}")
     _warn_if_unstable(mc, args)
     return 0
+
+
+_TASK_TITLES = {
+    "length": "length",
+    "e0": "ISO 10360-2 E0 test",
+    "sphere": "sphere",
+    "flatness": "flatness",
+}
+
+
+def _p_pass_text(nominal: dict[str, Any]) -> str:
+    two_s = nominal.get("p_pass_2s")
+    spread = "" if two_s is None else f" ± {two_s:.3f} (2s between the runs)"
+    return f"{nominal['p_pass']:.3f}{spread}"
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -461,7 +538,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     mc.add_argument(
         "--ndig",
         type=int,
-        help="significant digits of u the result must be stable to (default 2; 1 for --points/--volume)",
+        help="significant digits of u the result must be stable to (default 2; 1 for "
+        "--points/--volume/--e0-test)",
     )
     mc.add_argument(
         "--tolerance-um", type=float, help="numerical tolerance of u in µm (instead of --ndig)"
@@ -481,5 +559,5 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     out.add_argument(
         "--plot", type=Path, help="PNG: U over the volume / at the points, or histograms"
     )
-    out.add_argument("--quiet", action="store_true", help="no note about defaulted inputs")  # fmt: skip
+    out.add_argument("--quiet", action="store_true", help="no notes about defaulted inputs and components taken as zero")  # fmt: skip
     p.set_defaults(handler=cmd_uncertainty)

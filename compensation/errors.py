@@ -18,6 +18,7 @@ __all__ = [
     "MachineFileError",
     "MeasurementFileError",
     "RealDataError",
+    "SchemaError",
 ]
 
 
@@ -26,14 +27,40 @@ class CmmCompError(Exception):
 
 
 class MachineFileError(CmmCompError, ValueError):
-    """A machine description (TOML, CSV or seed-style file set) is malformed."""
+    """A machine description (TOML, CSV or seed-style file set) is malformed.
 
-    def __init__(self, source: str, where: str, problem: str) -> None:
+    ``where`` (a key path, a line) and ``problem`` name the first problem; ``lines`` holds one
+    line per problem, each naming the file (the message is those lines joined by newlines).
+    """
+
+    def __init__(
+        self, source: str, where: str, problem: str, *, lines: list[str] | None = None
+    ) -> None:
         self.source = source
         self.where = where
         self.problem = problem
         location = f"{source}: {where}" if where else source
-        super().__init__(f"{location}: {problem}")
+        self.lines = list(lines) if lines else [f"{location}: {problem}"]
+        super().__init__("\n".join(self.lines))
+
+    @classmethod
+    def from_schema(cls, exc: SchemaError, source: str) -> MachineFileError:
+        """Every problem a check of the file's values found (:class:`SchemaError`)."""
+        loc = exc.locs[0] if exc.locs else ()
+        where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in loc).lstrip(".")
+        first = exc.lines[0].removeprefix(f"{source}: ")
+        return cls(source, where, first.removeprefix(where).lstrip(": "), lines=exc.lines)
+
+
+class SchemaError(CmmCompError, ValueError):
+    """A TOML file's values break its rules (:mod:`.toml_schema`). ``lines``: one line per
+    problem, naming the file and the key path; ``locs``: the key path of each
+    (``("can", "bitrate")``)."""
+
+    def __init__(self, lines: list[str], locs: list[tuple[str | int, ...]] | None = None) -> None:
+        self.lines = list(lines)
+        self.locs = list(locs or [])
+        super().__init__("\n".join(self.lines))
 
 
 class MeasurementFileError(CmmCompError, ValueError):

@@ -29,7 +29,7 @@ from .kinematics import (
 )
 from .machine_parts import ArmDeflection, Probe, Volume
 from .offsets import refer_to_reference
-from .parametric_errors import AXIS_INDEX, ParametricErrors
+from .parametric_errors import AXIS_INDEX, ParametricErrors, canonical_name, names_as_written
 from .tables import ErrorTable
 from .thermal import TEMPERATURE_ROLES, Thermal
 from .uncertainty.model import UncertaintyModel
@@ -54,6 +54,20 @@ class PoseError:
         return self.translation_um + 1000.0 * np.einsum("nij,nj->ni", self.rotation - np.eye(3), p)
 
 
+def _written_names(data: Mapping[str, Any]) -> dict[str, str]:
+    """Our name → the key the description used, for its ``[errors.*]`` tables and its
+    ``[uncertainty.errors.*]`` (keys checked by the parser: unknown ones are not here)."""
+    out: dict[str, str] = {}
+    unc = data.get("uncertainty")
+    sections = [data.get("errors"), unc.get("errors") if isinstance(unc, Mapping) else None]
+    for section in sections:
+        for key in section if isinstance(section, Mapping) else ():
+            canon = canonical_name(str(key))
+            if canon is not None:
+                out.setdefault(canon, str(key))
+    return out
+
+
 @dataclass
 class Machine:
     """A CMM described by its kinematic model, 21 parametric errors, thermal data and effects."""
@@ -73,6 +87,8 @@ class Machine:
     source: str = "<memory>"
     warnings: list[str] = field(default_factory=list)  # accepted but questionable input
     uncertainty: UncertaintyModel | None = None  # [uncertainty], defaults resolved
+    #: our component name → the name the file used (``EXX`` …; :meth:`error_label`)
+    error_names: dict[str, str] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -108,6 +124,7 @@ class Machine:
             source=source,
             warnings=parsed.warnings,
             uncertainty=parsed.uncertainty,
+            error_names=_written_names(data),
         )
         try:
             refer_to_reference(machine, parsed.squareness_offset_mm)
@@ -160,16 +177,30 @@ class Machine:
         return cls.from_dict(data, source="<python>")
 
     def to_toml(self, path: str | Path) -> None:
-        """Write a self-contained description (tables inline) that loads back to this machine."""
+        """Write a self-contained description (tables inline) that loads back to this machine,
+        each error table under the name the file used (ISO 230-1 or ours)."""
         from .formats.machine_toml import write_machine_toml
 
-        write_machine_toml(self.description, Path(path))
+        write_machine_toml(self._description_as_written(), Path(path))
+
+    def _description_as_written(self) -> dict[str, Any]:
+        data = json.loads(json.dumps(self.description))
+        errors = data.get("errors")
+        if isinstance(errors, dict):
+            data["errors"] = {self.error_names.get(k, k): v for k, v in errors.items()}
+        return data
 
     def with_effects(self, effects: list[Effect]) -> Machine:
         """A copy of this machine with ``effects`` added (the description is updated too)."""
-        data = json.loads(json.dumps(self.description))
+        data = self._description_as_written()
         data["effects"] = list(data.get("effects", [])) + [e.to_table() for e in effects]
         return type(self).from_dict(data, source=self.source, base_dir=Path.cwd())
+
+    def error_label(self, component: str) -> str:
+        """The name to show a user for a table component (ours or ISO): the one the file used,
+        or for a component it did not name, the convention it used (ISO 230-1 or ours)."""
+        canon = canonical_name(component) or component
+        return names_as_written(self.error_names).get(canon, component)
 
     # ------------------------------------------------------------------ identity
     def identity_sha256(self) -> str:
@@ -255,11 +286,10 @@ class Machine:
         defaults resolved; built from the defaults alone for a machine made without a file."""
         if self.uncertainty is not None:
             return self.uncertainty
-        from .uncertainty.model import parse_uncertainty
+        from .uncertainty.model import resolve_uncertainty
 
-        return parse_uncertainty(
+        return resolve_uncertainty(
             None,
-            source=self.source,
             tables=self.tables,
             lower_mm=self.volume.lower_mm,
             upper_mm=self.volume.upper_mm,
@@ -395,9 +425,10 @@ MAX_ANGLE_URAD = 1e6
 
 
 def _check_magnitudes(machine: Machine) -> None:
-    """MachineFileError naming the first error table (systematic or random part) or squareness
+    """MachineFileError naming every error table (systematic or random part) and squareness
     whose value within the working volume is not finite or beyond the limits above."""
     lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
+    problems: list[tuple[str, str]] = []
     for name, table in machine.tables.items():
         c = table.component
         k = AXIS_INDEX[c.axis]
@@ -411,21 +442,27 @@ def _check_magnitudes(machine: Machine) -> None:
                 bad = ~(np.abs(values) <= limit)
             if bad.any():
                 i = int(np.argmax(bad))
-                raise MachineFileError(
-                    machine.source,
-                    f"errors.{name}",
-                    f"{part} reaches {values[i]:g} {c.unit} at {c.axis} = {q[i]:g} mm: beyond "
-                    f"±{limit:g} {c.unit} it is no machine error (check the values and the unit, "
-                    f"{c.unit})",
+                problems.append(
+                    (
+                        f"errors.{name}",
+                        f"{part} reaches {values[i]:g} {c.unit} at {c.axis} = {q[i]:g} mm: beyond "
+                        f"±{limit:g} {c.unit} it is no machine error (check the values and the "
+                        f"unit, {c.unit})",
+                    )
                 )
     for what, values in (
         ("squareness", machine.squareness_urad),
         ("squareness random", machine.squareness_random_urad),
     ):
         if not np.all(np.abs(values) <= MAX_ANGLE_URAD):
-            raise MachineFileError(
-                machine.source,
-                what,
-                f"{np.asarray(values).tolist()} urad: beyond ±{MAX_ANGLE_URAD:g} urad it is no "
-                "machine error (check the values and the unit, urad)",
+            problems.append(
+                (
+                    what,
+                    f"{np.asarray(values).tolist()} urad: beyond ±{MAX_ANGLE_URAD:g} urad it is "
+                    "no machine error (check the values and the unit, urad)",
+                )
             )
+    if problems:
+        where, problem = problems[0]
+        lines = [f"{machine.source}: {w}: {p}" for w, p in problems]
+        raise MachineFileError(machine.source, where, problem, lines=lines)

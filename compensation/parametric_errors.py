@@ -80,6 +80,26 @@ class Component:
         return "um" if self.kind == "d" else "urad"
 
 
+#: our name → ISO 230-1 name (the inverse of :data:`ISO_ALIASES`).
+ISO_NAMES: dict[str, str] = {ours: iso for iso, ours in ISO_ALIASES.items()}
+
+
+def iso_name(name: str) -> str:
+    """The ISO 230-1 name (``EXX``, ``EBX`` …) of a table component (ours or ISO); squareness
+    names are returned unchanged (ISO 230-1 names them by the pair of axes, not one symbol)."""
+    canon = canonical_name(name)
+    return ISO_NAMES.get(canon or name, name)
+
+
+def names_as_written(written: Mapping[str, str]) -> dict[str, str]:
+    """How to name every table component for a user who wrote the components ``written``
+    (our name → the key as written): each written one as written; the others in the same
+    convention — ISO 230-1 names when most written names were ISO ones, else ours."""
+    iso = sum(1 for ours, key in written.items() if key != ours and key.upper() in ISO_ALIASES)
+    use_iso = iso > len(written) - iso
+    return {c: written.get(c, ISO_NAMES[c] if use_iso else c) for c in TABLE_COMPONENTS}
+
+
 def canonical_name(name: str) -> str | None:
     """Our name for ``name`` (ours or an ISO 230-1 alias), or None when unknown."""
     if name in ALL_COMPONENTS:
@@ -89,6 +109,24 @@ def canonical_name(name: str) -> str | None:
         return ISO_ALIASES[upper]
     lower = name.lower()
     return lower if lower in ALL_COMPONENTS else None
+
+
+def bad_component_keys(tables: Mapping[str, object]) -> list[tuple[tuple[str], str]]:
+    """The keys of ``tables`` (a mapping by component name, ours or ISO 230-1) that name no
+    table component, or one already named (an alias counts): (key path, problem) each."""
+    seen: set[str] = set()
+    out: list[tuple[tuple[str], str]] = []
+    if not isinstance(tables, Mapping):  # not a table: said by the table's own check
+        return out
+    for key in tables:
+        canon = canonical_name(key)
+        if canon is None or canon not in TABLE_COMPONENTS:
+            allowed = ", ".join(TABLE_COMPONENTS)
+            out.append(((key,), f"unknown error component; allowed: {allowed} or ISO 230-1 names"))
+        elif canon in seen:
+            out.append(((key,), f"component {canon} is given twice (aliases count)"))
+        seen.add(str(canon))
+    return out
 
 
 def parse_component(name: str) -> Component:
@@ -115,6 +153,8 @@ class ParametricErrors:
 
     tables: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     squareness_urad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    written: Mapping[str, str] = field(default_factory=dict)
+    """Our name → the name the caller used (ISO 230-1 or ours): the machine keeps using it."""
 
     @classmethod
     def from_polynomials(
@@ -132,7 +172,8 @@ class ParametricErrors:
         tables = {name: {"polynomial": _floats(c, name)} for name, c in polynomials.items()}
         for name, band in (random_band or {}).items():
             _entry(tables, name)["random_band"] = float(band)
-        return cls(_canonical_tables(tables), _squareness(squareness_urad))
+        canon, written = _canonical_tables(tables)
+        return cls(canon, _squareness(squareness_urad), written)
 
     @classmethod
     def from_tables(
@@ -160,7 +201,8 @@ class ParametricErrors:
             _entry(out, name)["offset"] = _floats(offset, name)
         for name, criterion in (criteria or {}).items():
             _entry(out, name)["criterion"] = str(criterion)
-        return cls(_canonical_tables(out), _squareness(squareness_urad))
+        canon, written = _canonical_tables(out)
+        return cls(canon, _squareness(squareness_urad), written)
 
     def combined(self, other: ParametricErrors) -> ParametricErrors:
         """Both sets together (squareness added); ValueError if an error is given in both."""
@@ -168,12 +210,17 @@ class ParametricErrors:
         if both:
             raise ValueError(f"errors given twice: {', '.join(both)}")
         sq = tuple(a + b for a, b in zip(self.squareness_urad, other.squareness_urad, strict=True))
-        return ParametricErrors({**self.tables, **other.tables}, _squareness(sq))
+        return ParametricErrors(
+            {**self.tables, **other.tables}, _squareness(sq), {**self.written, **other.written}
+        )
 
     def toml_sections(self) -> dict[str, Any]:
-        """The ``[errors]`` and ``[squareness]`` tables of ``machine.toml`` for these errors."""
+        """The ``[errors]`` and ``[squareness]`` tables of ``machine.toml`` for these errors
+        (each error under the name the caller used)."""
         return {
-            "errors": {name: dict(entry) for name, entry in self.tables.items()},
+            "errors": {
+                self.written.get(name, name): dict(entry) for name, entry in self.tables.items()
+            },
             "squareness": dict(zip(SQUARENESS, self.squareness_urad, strict=True)),
         }
 
@@ -191,8 +238,12 @@ def _entry(tables: dict[str, dict[str, Any]], name: str) -> dict[str, Any]:
     return tables[name]
 
 
-def _canonical_tables(tables: Mapping[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+def _canonical_tables(
+    tables: Mapping[str, dict[str, Any]],
+) -> tuple[dict[str, dict[str, Any]], dict[str, str]]:
+    """The tables under our names, and our name → the name as given."""
     out: dict[str, dict[str, Any]] = {}
+    written: dict[str, str] = {}
     for name, entry in tables.items():
         canon = canonical_name(name)
         if canon is None or canon not in TABLE_COMPONENTS:
@@ -203,7 +254,8 @@ def _canonical_tables(tables: Mapping[str, dict[str, Any]]) -> dict[str, dict[st
         if canon in out:
             raise ValueError(f"component {canon} is given twice (aliases count)")
         out[canon] = entry
-    return out
+        written[canon] = name
+    return out, written
 
 
 def _squareness(values: Sequence[float]) -> tuple[float, float, float]:

@@ -4,7 +4,9 @@ from .config import ConfigError, DaemonConfig
 from .engine import Answer, CorrectionEngine, Reading
 from .grid_slot import GridLoadError, GridReloader, GridSlot, load_grid
 from .grid_trust import GridTrust, GridTrustError
+from .init_dir import InitError, InitReport, init_daemon_dir
 from .metrics import LatencyHistogram, Metrics
+from .preflight import Preflight, preflight
 from .service import DaemonService
 from .sessionlog import (
     TOPIC_SCHEMAS,
@@ -36,20 +38,25 @@ __all__ = [
     "GridSlot",
     "GridTrust",
     "GridTrustError",
+    "InitError",
+    "InitReport",
     "LatencyHistogram",
     "LoggerStats",
     "McapLogger",
     "McapProcessLogger",
     "Metrics",
+    "Preflight",
     "Reading",
     "ReplayError",
     "ReplayReport",
     "Session",
     "SessionLogger",
+    "init_daemon_dir",
     "load_grid",
     "load_session",
     "ns_from_can_timestamp",
     "ns_from_stamp",
+    "preflight",
     "read_messages",
     "replay_offline",
     "replay_to_bus",

@@ -99,9 +99,19 @@ def open_bus(cfg: CanSection, ids: CanIds) -> can.BusABC:
     )
 
 
-def frame_record(msg: can.Message, channel: str) -> FrameRecord:
+def can_open_error(cfg: CanSection, exc: BaseException) -> str:
+    """One line for a bus that did not open: interface, channel, the error and what to try."""
+    return (
+        f"cannot open CAN interface {cfg.interface!r} channel {str(cfg.channel)!r}: {exc!r}; "
+        "no CAN hardware here? try --can-interface virtual (a bus inside this process) or "
+        "--can-interface udp_multicast (a bus between processes on this host), docs/daemon.md"
+    )
+
+
+def frame_record(msg: can.Message, channel: str, direction: str) -> FrameRecord:
     """The compact ``/cmm/can_rx`` / ``/cmm/can_tx`` record of one frame (the MCAP writer
-    builds the JSON payload from it: :func:`daemon.sessionlog.records.frame_payload`)."""
+    builds the JSON payload from it: :func:`daemon.sessionlog.records.frame_payload`);
+    ``direction``: ``rx``, ``tx`` or ``tx_echo`` (:data:`.sessionlog.schemas.FRAME_DIRECTIONS`)."""
     return (
         msg.arbitration_id,
         msg.is_extended_id,
@@ -112,6 +122,7 @@ def frame_record(msg: can.Message, channel: str) -> FrameRecord:
         msg.is_fd,
         msg.is_remote_frame,
         msg.is_error_frame,
+        direction,
     )
 
 
@@ -165,6 +176,7 @@ class CanEndpoint(can.Listener):
             self.ids.id_of(MessageKind.CORRECTION_STATUS),
             self.ids.id_of(MessageKind.CORRECTION_UNCERTAINTY),
         )
+        self._own_tx_ids = self.ids.daemon_tx_ids()  # received back: our own frames (echo)
         self._send_u = config.send_uncertainty
         self._stop = threading.Event()
         self._connected = threading.Event()
@@ -214,11 +226,12 @@ class CanEndpoint(can.Listener):
         self._bookkeeping()  # driven by a Notifier: no idle detection, book at once
         self._count_frames()
 
-    def on_error(self, exc: Exception) -> None:
-        """Every exception of the endpoint lands here: counted, logged, reflected in state."""
+    def on_error(self, exc: Exception, message: str | None = None) -> None:
+        """Every exception of the endpoint lands here: counted, logged (``message``, default
+        the exception's repr), reflected in state."""
         self.last_error = exc
         self.metrics.fault("can_error")
-        self.events.emit("can_error", "error", error=repr(exc))
+        self.events.emit("can_error", "error", error=message or repr(exc))
 
     def stop_listener(self) -> None:  # can.Listener API
         self.stop()
@@ -230,8 +243,9 @@ class CanEndpoint(can.Listener):
         except Exception as exc:
             self._bus = None
             self._connected.clear()
-            self.on_error(exc)
-            self.state.set_condition("can", f"cannot open {self.config.interface}: {exc}")
+            message = can_open_error(self.config, exc)
+            self.on_error(exc, message)
+            self.state.set_condition("can", message)
             return False
         self._connected.set()
         self.state.set_condition("can", None)
@@ -359,8 +373,15 @@ class CanEndpoint(can.Listener):
             return
         ch = str(self.config.channel)
         backlog, self._log_backlog = self._log_backlog, []
-        rx = [frame_record(msg, ch) for topic, msg in backlog if topic == "/cmm/can_rx"]
-        tx = [frame_record(msg, ch) for topic, msg in backlog if topic != "/cmm/can_rx"]
+        own = self._own_tx_ids  # a frame on one of these came from us: the bus echoed it
+        rx = [
+            frame_record(
+                msg, ch, "tx_echo" if msg.arbitration_id in own and not msg.is_extended_id else "rx"
+            )
+            for topic, msg in backlog
+            if topic == "/cmm/can_rx"
+        ]
+        tx = [frame_record(msg, ch, "tx") for topic, msg in backlog if topic != "/cmm/can_rx"]
         self.logger.log_many("/cmm/can_rx", rx)
         self.logger.log_many("/cmm/can_tx", tx)
 

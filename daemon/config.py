@@ -1,10 +1,15 @@
 """Daemon configuration: a TOML file (``tomllib``) whose every setting a CLI flag can override.
 
-Sections and keys mirror the dataclasses below (``examples/daemon.toml`` documents them all).
-:func:`add_override_flags` adds one ``--<section>-<key>`` flag per setting to an argparse
-parser (``--can-interface virtual``, ``--modbus-port 1502``, ``--limits-error-um 100``);
+Sections and keys are the dataclasses below; each key's type carries its rule (range, unit,
+allowed values: :mod:`cmm_comp.compensation.toml_schema`), checked by pydantic, which lists
+every problem at once. ``docs/daemon.md`` "Configuration reference" is generated from these
+definitions (:mod:`.config_doc`); ``examples/daemon.toml`` shows them all.
+:func:`add_override_flags` adds one ``--<section>-<key>`` flag per setting to an argparse parser
+(``--can-interface virtual``, ``--modbus-port 1502``, ``--limits-error-um 100``);
 :func:`load_config` reads the file and applies the flags given. Errors name the file, the key
-and what is allowed (:class:`ConfigError`); nothing is started on a bad configuration.
+and what is allowed (:class:`ConfigError`, one line per problem); nothing is started on a bad
+configuration. NaN and ±inf are never allowed: a NaN period would silence the heartbeat, a NaN
+limit would switch a check off.
 """
 
 from __future__ import annotations
@@ -13,16 +18,28 @@ import argparse
 import dataclasses
 import json
 import tomllib
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, get_args, get_origin, get_type_hints
+from typing import Annotated, Any, ClassVar, get_origin, get_type_hints
 
 from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
+from cmm_comp.compensation.toml_schema import (
+    Choice,
+    Num,
+    Problem,
+    Rule,
+    SchemaError,
+    Table,
+    Vec,
+    shown,
+    usable,
+    validate,
+)
 from cmm_comp.protocol.can_ids import NODE_STRIDE, STANDARD_ID_MAX
 
-from .config_checks import range_errors
-from .live.settings import LIVE_RULES, LiveSection, live_problems
+from .live.settings import LiveSection
 
 MCAP_WRITERS = ("thread", "process")
 MCAP_WRITER_PRIORITIES = ("idle", "normal")
@@ -40,14 +57,46 @@ class ConfigError(CmmCompError, ValueError):
         super().__init__("\n".join(self.lines))
 
 
+def _multiple_of_stride(base_id: int) -> Iterable[Problem]:
+    if base_id % NODE_STRIDE:
+        yield f" = {base_id:#x}; allowed: a multiple of {NODE_STRIDE:#x}"
+
+
+def _sensor_ids(sensors: dict[str, str]) -> Iterable[Problem]:
+    for key, role in sensors.items():
+        if not key.isdigit() or not 0 <= int(key) <= 255:
+            yield f"{{path}} key {key!r} must be 0..255"
+        elif role not in TEMPERATURE_ROLES:
+            yield (key,), f" = {role!r}; allowed: {TEMPERATURE_ROLES}"
+
+
+def _known_roles(roles: list[str] | None) -> Iterable[Problem]:
+    for role in roles or []:
+        if role not in TEMPERATURE_ROLES:
+            yield f"{{path}} has unknown role {role!r}"
+
+
+def _low_high(pair: list[float]) -> Iterable[Problem]:
+    if not pair[0] < pair[1]:
+        yield f" = {shown(pair)} must be [low, high]"
+
+
+_LOW_HIGH = Rule(_low_high, doc="low < high")
+_STYLUS = Vec(Num(-2000.0, 2000.0, "mm"), n=3)
+_TEMP_C = Vec(Num(-100.0, 300.0, "°C"), n=2)
+_SECONDS = Num(0.0, 86400.0, "s", lo_open=True)
+
+
 @dataclass
-class GridSection:
+class GridSection(Table):
     """The correction grid (a file built by ``cmm-comp grid build``)."""
 
     path: str = ""
     """Grid file; empty = start without a grid (every answer says ``no_grid``)."""
-    stylus_mm: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    """Stylus tip offset used for every reading, mm (X, Y, Z)."""
+    stylus_mm: Annotated[list[float], _STYLUS] | None = None
+    """Stylus tip offset used for every reading, mm (X, Y, Z); None (not set) = the grid's
+    probe offset (the machine's ``[probe] offset_mm`` it was built with). A value that differs
+    from the grid's is used, and said at start and by ``--check``."""
     machine: str = ""
     """The machine description (TOML) the grid must have been built from: its sha256 is
     computed here and the grid's volume must lie inside the machine's."""
@@ -63,28 +112,40 @@ class GridSection:
 
 
 @dataclass
-class CanSection:
+class CanSection(Table):
     """The CAN side: any python-can interface."""
 
     enabled: bool = True
+    """Answer readings on the CAN bus."""
     interface: str = "socketcan"
     """python-can interface name: socketcan on a real host; virtual or udp_multicast in tests."""
     channel: str = "can0"
-    bitrate: int = 0
+    """python-can channel (``can0``; the group address of udp_multicast)."""
+    bitrate: Annotated[int, Num(0, 20_000_000, "bit/s")] = 0
     """Bit rate, bit/s; 0 = leave the interface's setting alone."""
     fd: bool = False
-    node_id: int = 0
-    base_id: int = 0x200
+    """Open the bus in CAN FD mode."""
+    node_id: Annotated[int, Num(0, (STANDARD_ID_MAX + 1) // NODE_STRIDE - 1)] = 0
+    """Node number: the daemon's ids are ``base_id + 0x10·node_id`` … ``+ 0xF`` (docs/can.md);
+    they must stay 11-bit (0 .. 95 at base_id 0x200)."""
+    base_id: Annotated[
+        int,
+        Num(0, STANDARD_ID_MAX + 1 - NODE_STRIDE),
+        Rule(_multiple_of_stride, doc=f"a multiple of {NODE_STRIDE:#x}"),
+    ] = 0x200
+    """First id of node 0, a multiple of 0x10."""
     options: dict[str, Any] = field(default_factory=dict)
     """Extra keyword arguments for ``can.Bus`` (e.g. ``port`` of udp_multicast)."""
-    triplet_timeout_s: float = 0.05
+    triplet_timeout_s: Annotated[float, Num(0.0, 10.0, "s", lo_open=True)] = 0.05
     """Pending readings are dropped (answered ``incomplete_reading``) after this long without
     any new axis frame, s."""
-    window: int = 4
+    window: Annotated[int, Num(1, 1024)] = 4
     """Pending readings the assembler keeps."""
-    send_timeout_s: float = 0.01
-    heartbeat_s: float = 0.1
-    reconnect_s: float = 0.5
+    send_timeout_s: Annotated[float, Num(0.0, 10.0, "s", lo_open=True)] = 0.01
+    """How long sending one frame may block, s."""
+    heartbeat_s: Annotated[float, Num(0.0, 60.0, "s", lo_open=True)] = 0.1
+    """Heartbeat frame period, s (a heartbeat is also sent on every state change)."""
+    reconnect_s: Annotated[float, Num(0.0, 600.0, "s", lo_open=True)] = 0.5
     """Delay before reopening the bus after a bus error, s (doubles up to 10 s)."""
     log_frames: bool = True
     """Log every received and sent frame to MCAP (/cmm/can_rx, /cmm/can_tx)."""
@@ -93,113 +154,138 @@ class CanSection:
     between CORRECTED_Z and CORRECTION_STATUS (a fifth frame per reading, +25 % answer bus
     load; docs/can.md). U is always in the Modbus registers and the MCAP log."""
 
+    def rules(self, context: Mapping[str, Any]) -> Iterable[Problem]:
+        max_node = (STANDARD_ID_MAX + 1 - self.base_id) // NODE_STRIDE - 1
+        if usable(context, "node_id", "base_id") and self.node_id > max_node:
+            yield (
+                ("node_id",),
+                f" = {self.node_id}; allowed: 0 .. {max_node} for base_id {self.base_id:#x} "
+                "(ids must stay 11-bit)",
+            )
+
 
 @dataclass
-class ModbusSection:
+class ModbusSection(Table):
     """The Modbus TCP server (the daemon is the server, the controller the client)."""
 
     enabled: bool = False
+    """Serve the Modbus registers (docs/modbus.md)."""
     host: str = "127.0.0.1"
     """Bind address; 127.0.0.1 unless the controller is on another host."""
-    port: int = 5020
+    port: Annotated[int, Num(0, 65535)] = 5020
     """TCP port; 0 = any free port (tests)."""
-    device_id: int = 1
+    device_id: Annotated[int, Num(1, 247)] = 1
     """Unit id served (besides 0 and 255, the ids of a directly connected server, docs/modbus.md);
     requests for any other unit id get no response."""
-    idle_timeout_s: float = 60.0
+    idle_timeout_s: Annotated[float, Num(0.0, 86400.0, "s", note="0 = never")] = 60.0
     """Close a connection that sends nothing for this long, s; 0 = never."""
-    frame_timeout_s: float = 1.0
+    frame_timeout_s: Annotated[float, Num(0.0, 60.0, "s", lo_open=True)] = 1.0
     """A request frame begun must be complete within this, else the connection is closed, s."""
 
 
 @dataclass
-class TemperaturesSection:
+class TemperaturesSection(Table):
     """Temperature sensors and the checks applied to them."""
 
-    sensors: dict[str, str] = field(
-        default_factory=lambda: {"0": "T_x", "1": "T_y", "2": "T_z", "3": "T_wp"}
-    )
-    """Sensor id (as a string key) → role (T_x, T_y, T_z, T_wp, T_top, T_bottom, T_air)."""
-    required: list[str] | None = None
-    """Roles a reading needs; None = the ones the grid needs."""
-    stale_s: float = 10.0
+    sensors: Annotated[
+        dict[str, str], Rule(_sensor_ids, doc=f"ids 0..255, roles {', '.join(TEMPERATURE_ROLES)}")
+    ] = field(default_factory=lambda: {"0": "T_x", "1": "T_y", "2": "T_z", "3": "T_wp"})
+    """Sensor id (as a string key, 0..255) → role (T_x, T_y, T_z, T_wp, T_top, T_bottom,
+    T_air)."""
+    required: Annotated[list[str], Rule(_known_roles, doc="roles as in sensors")] | None = None
+    """Roles a reading needs; None (not set) = the ones the grid needs."""
+    stale_s: Annotated[float, _SECONDS] = 10.0
     """A sensor whose sample counter has not changed for this long is stale, s."""
-    plausible_C: list[float] = field(default_factory=lambda: [-10.0, 60.0])
-    """Readings outside this range are sensor faults (implausible), °C."""
-    valid_range_C: list[float] = field(default_factory=lambda: [10.0, 40.0])
-    """Range the compensation is valid for; outside it the reading is not corrected, °C."""
-    max_rate_C_per_s: float = 2.0
+    plausible_C: Annotated[list[float], _TEMP_C, _LOW_HIGH] = field(
+        default_factory=lambda: [-10.0, 60.0]
+    )
+    """Readings outside this range [low, high] are sensor faults (implausible), °C."""
+    valid_range_C: Annotated[list[float], _TEMP_C, _LOW_HIGH] = field(
+        default_factory=lambda: [10.0, 40.0]
+    )
+    """Range [low, high] the compensation is valid for; outside it the reading is not
+    corrected, °C."""
+    max_rate_C_per_s: Annotated[float, Num(0.0, 1e9, "°C/s", lo_open=True)] = 2.0
     """A faster change between two samples is implausible, °C/s."""
-    on_fault: str = "reject"
+    on_fault: Annotated[str, Choice(("reject", "geometry_only"))] = "reject"
     """``reject``: answer the indicated position with the fault status; ``geometry_only``:
     apply the geometric correction and answer ``not_thermally_corrected``."""
 
 
 @dataclass
-class LimitsSection:
+class LimitsSection(Table):
     """Bounds on the size of a correction (length of the correction vector)."""
 
-    warn_um: float = 50.0
+    warn_um: Annotated[float, Num(0.0, 1e6, "µm", lo_open=True)] = 50.0
     """Larger corrections are applied but counted and logged as warnings, µm."""
-    error_um: float = 200.0
-    """Larger corrections are refused: answer ``correction_limit`` with the indicated position, µm."""
+    error_um: Annotated[float, Num(0.0, 1e6, "µm", lo_open=True)] = 200.0
+    """Larger corrections are refused: answer ``correction_limit`` with the indicated position,
+    µm; at least ``warn_um``."""
+
+    def rules(self, context: Mapping[str, Any]) -> Iterable[Problem]:
+        if usable(context, "warn_um", "error_um") and not self.warn_um <= self.error_um:
+            yield (f"{{path}} need 0 < warn_um <= error_um, got {self.warn_um} and {self.error_um}")
 
 
 @dataclass
-class McapSection:
+class McapSection(Table):
     """Session log (MCAP): empty path = off."""
 
     path: str = ""
-    """A directory (rolled files ``session-…-NNN.mcap``) or one ``*.mcap`` file."""
-    roll_mb: float = 256.0
+    """A directory (rolled files ``session-…-NNN.mcap``) or one ``*.mcap`` file; empty = off."""
+    roll_mb: Annotated[float, Num(0.0, 1e6, "MB", note="0 = never")] = 256.0
     """Roll files at this size, MB (directories only; 0 = never)."""
-    roll_s: float = 3600.0
+    roll_s: Annotated[float, Num(0.0, 1e7, "s", note="0 = never")] = 3600.0
     """Roll files at this age, s (directories only; 0 = never)."""
-    flush_s: float = 1.0
+    flush_s: Annotated[float, Num(0.0, 3600.0, "s", lo_open=True)] = 1.0
     """Cut a chunk at least this often: the most a crash loses, s."""
-    writer: str = "process"
+    writer: Annotated[str, Choice(MCAP_WRITERS)] = "process"
     """Where JSON + MCAP writing runs: ``process`` (a child process, off the reply path's GIL
     and CPU; also finishes the file if the daemon is killed) or ``thread`` (a thread of the
     daemon process: shares the GIL with the reply path, adds to its p99). See docs/mcap.md."""
-    writer_priority: str = "idle"
+    writer_priority: Annotated[str, Choice(MCAP_WRITER_PRIORITIES)] = "idle"
     """CPU priority of the ``process`` writer: ``idle`` (Linux ``SCHED_IDLE``: runs only on CPU
     time nothing else wants, so it never delays a reply; under sustained 100 % CPU load the
     queue fills and messages are dropped and counted) or ``normal``."""
-    compression: str = "zstd"
+    compression: Annotated[str, Choice(MCAP_COMPRESSIONS)] = "zstd"
     """Chunk compression: ``zstd`` (smallest files), ``lz4`` (faster, less CPU and cache per
     chunk) or ``none``."""
 
 
 @dataclass
-class MetricsSection:
+class MetricsSection(Table):
     """Counters and latency histogram: Prometheus text on localhost and the MCAP status topic."""
 
     enabled: bool = True
+    """Serve ``/metrics`` (Prometheus text format)."""
     host: str = "127.0.0.1"
-    port: int = 9108
+    """Bind address of ``/metrics``."""
+    port: Annotated[int, Num(0, 65535)] = 9108
     """HTTP port of ``/metrics``; 0 = any free port."""
-    period_s: float = 1.0
+    period_s: Annotated[float, Num(0.0, 3600.0, "s", lo_open=True)] = 1.0
     """Counters are published to /cmm/counters this often, s."""
 
 
 @dataclass
-class LogSection:
+class LogSection(Table):
     """Structured logs: one line per event on stdout."""
 
-    format: str = "json"
+    format: Annotated[str, Choice(("json", "logfmt"))] = "json"
     """``json`` or ``logfmt``."""
-    level: str = "info"
+    level: Annotated[str, Choice(("debug", "info", "warning", "error"))] = "info"
     """``debug``, ``info``, ``warning`` or ``error``."""
-    max_per_s: float = 20.0
+    max_per_s: Annotated[float, Num(0.0, 1e6, "lines/s", note="0 = unlimited")] = 20.0
     """Repeated events of one kind are rate-limited to this many lines per second."""
-    state_repeat_s: float = 10.0
+    state_repeat_s: Annotated[float, _SECONDS] = 10.0
     """A state line whose only change is its detail text (a stale sensor's age) is repeated at
     most this often, with the count of changes in between, s."""
 
 
 @dataclass
-class DaemonConfig:
+class DaemonConfig(Table):
     """The whole daemon configuration."""
+
+    NOT_IN_FILE: ClassVar[frozenset[str]] = frozenset({"source"})
 
     grid: GridSection = field(default_factory=GridSection)
     can: CanSection = field(default_factory=CanSection)
@@ -211,155 +297,44 @@ class DaemonConfig:
     log: LogSection = field(default_factory=LogSection)
     live: LiveSection = field(default_factory=LiveSection)
     source: str = "<defaults>"
+    """The file the configuration was read from (not a key of the file)."""
+
+    @classmethod
+    def unknown_key(cls, key: str, value: Any) -> str:
+        return f"unknown section [{{path}}]; allowed: {', '.join(cls.toml_keys())}"
+
+    def rules(self, context: Mapping[str, Any]) -> Iterable[Problem]:
+        if usable(context, "can", "modbus") and not (self.can.enabled or self.modbus.enabled):
+            yield "enable at least one of can.enabled, modbus.enabled"
 
     def check(self) -> DaemonConfig:
-        """Validate ranges and cross-field rules; ConfigError listing every problem (one line
-        each, naming the key). Returns self."""
+        """Validate every value and rule; ConfigError listing every problem (one line each,
+        naming the key). Returns self."""
         problems = self.problems()
         if problems:
             raise ConfigError(problems)
         return self
 
-    def numeric_values(self) -> dict[str, Any]:
-        """``section.key`` → value of every numeric setting (ints, floats, lists of floats)."""
-        out: dict[str, Any] = {}
-        for section in _SECTIONS:
-            for key, hint in _section_types(section).items():
-                if hint in (int, float) or (
-                    get_origin(hint) is list and get_args(hint)[0] is float
-                ):
-                    out[f"{section}.{key}"] = getattr(getattr(self, section), key)
-        return out
-
-    def problems(self, skip: set[str] | None = None) -> list[str]:
-        """Every rule violated, one line each; keys in ``skip`` (already reported) are left out."""
-        where = self.source
-        skip = set(skip or ())
-        live_keys = {f"live.{k}" for k in LIVE_RULES}  # ranged by live_problems below
-        ranges = range_errors(where, self.numeric_values(), skip | live_keys)
-        out = list(ranges.values())
-        bad = skip | set(ranges)
-        t = self.temperatures
-        for key, role in t.sensors.items():
-            if not key.isdigit() or not 0 <= int(key) <= 255:
-                out.append(f"{where}: temperatures.sensors key {key!r} must be 0..255")
-            elif role not in TEMPERATURE_ROLES:
-                out.append(
-                    f"{where}: temperatures.sensors.{key} = {role!r}; allowed: {TEMPERATURE_ROLES}"
-                )
-        for role in t.required or []:
-            if role not in TEMPERATURE_ROLES:
-                out.append(f"{where}: temperatures.required has unknown role {role!r}")
-        if t.on_fault not in ("reject", "geometry_only"):
-            out.append(
-                f"{where}: temperatures.on_fault = {t.on_fault!r}; allowed: reject, geometry_only"
-            )
-        for name in ("plausible_C", "valid_range_C"):
-            lo_hi = getattr(t, name)
-            if f"temperatures.{name}" not in bad and not lo_hi[0] < lo_hi[1]:
-                out.append(f"{where}: temperatures.{name} = {lo_hi} must be [low, high]")
-        lim = self.limits
-        if not {"limits.warn_um", "limits.error_um"} & bad and not lim.warn_um <= lim.error_um:
-            out.append(
-                f"{where}: limits need 0 < warn_um <= error_um, got "
-                f"{lim.warn_um} and {lim.error_um}"
-            )
-        if "can.base_id" not in bad and self.can.base_id % NODE_STRIDE:
-            out.append(
-                f"{where}: can.base_id = {self.can.base_id:#x}; allowed: a multiple of "
-                f"{NODE_STRIDE:#x}"
-            )
-        elif not {"can.base_id", "can.node_id"} & bad:
-            max_node = (STANDARD_ID_MAX + 1 - self.can.base_id) // NODE_STRIDE - 1
-            if self.can.node_id > max_node:
-                out.append(
-                    f"{where}: can.node_id = {self.can.node_id}; allowed: 0 .. {max_node} for "
-                    f"base_id {self.can.base_id:#x} (ids must stay 11-bit)"
-                )
-        if self.log.format not in ("json", "logfmt"):
-            out.append(f"{where}: log.format = {self.log.format!r}; allowed: json, logfmt")
-        if self.log.level not in ("debug", "info", "warning", "error"):
-            out.append(
-                f"{where}: log.level = {self.log.level!r}; allowed: debug, info, warning, error"
-            )
-        if not (self.can.enabled or self.modbus.enabled):
-            out.append(f"{where}: enable at least one of can.enabled, modbus.enabled")
-        if self.mcap.writer not in MCAP_WRITERS:
-            out.append(
-                f"{where}: mcap.writer = {self.mcap.writer!r}; allowed: {', '.join(MCAP_WRITERS)}"
-            )
-        if self.mcap.writer_priority not in MCAP_WRITER_PRIORITIES:
-            out.append(
-                f"{where}: mcap.writer_priority = {self.mcap.writer_priority!r}; allowed: "
-                f"{', '.join(MCAP_WRITER_PRIORITIES)}"
-            )
-        if self.mcap.compression not in MCAP_COMPRESSIONS:
-            out.append(
-                f"{where}: mcap.compression = {self.mcap.compression!r}; allowed: "
-                f"{', '.join(MCAP_COMPRESSIONS)}"
-            )
-        out += live_problems(self.live, where, skip)
-        return out
+    def problems(self) -> list[str]:
+        """Every rule the current values break, one line each (for a config built or changed in
+        code; a file is checked as it is read)."""
+        data = {s: dataclasses.asdict(getattr(self, s)) for s in self.toml_keys()}
+        try:
+            validate(DaemonConfig, data, self.source)
+        except SchemaError as exc:
+            return exc.lines
+        return []
 
     def sensor_roles(self) -> dict[int, str]:
         """Sensor id → role."""
         return {int(k): v for k, v in self.temperatures.sensors.items()}
 
 
-_SECTIONS = [f.name for f in dataclasses.fields(DaemonConfig) if f.name != "source"]
-
-
-def _section_types(section: str) -> dict[str, Any]:
+def section_types(section: str) -> dict[str, Any]:
+    """Key → type (without its rule) of the section ``section``."""
     cls = type(getattr(DaemonConfig(), section))
-    return get_type_hints(cls)
-
-
-def _short(value: Any, limit: int = 60) -> str:
-    """``repr(value)``, cut to ``limit`` characters (a flag may be any length)."""
-    text = repr(value)
-    return text if len(text) <= limit else f"{text[: limit - 1]}…"
-
-
-def _coerce(where: str, value: Any, hint: Any) -> Any:
-    """Check/convert a TOML or flag value to the field's type."""
-    origin = get_origin(hint)
-    args = get_args(hint)
-    if origin is not None and type(None) in args:  # X | None
-        if value is None:
-            return None
-        hint = next(a for a in args if a is not type(None))
-        origin, args = get_origin(hint), get_args(hint)
-    if hint is bool:
-        if isinstance(value, bool):
-            return value
-        raise ConfigError(f"{where}: {_short(value)} must be true or false")
-    if hint is int:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return value
-        raise ConfigError(f"{where}: {_short(value)} must be an integer")
-    if hint is float:
-        if isinstance(value, int | float) and not isinstance(value, bool):
-            try:
-                return float(value)
-            except OverflowError:
-                raise ConfigError(f"{where}: {_short(value)} is too large") from None
-        raise ConfigError(f"{where}: {_short(value)} must be a number")
-    if hint is str:
-        if isinstance(value, str):
-            return value
-        raise ConfigError(f"{where}: {_short(value)} must be a string")
-    if origin is list:
-        if not isinstance(value, list):
-            raise ConfigError(f"{where}: {_short(value)} must be a list")
-        return [_coerce(f"{where}[{i}]", v, args[0]) for i, v in enumerate(value)]
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise ConfigError(f"{where}: {_short(value)} must be a table")
-        return {
-            str(k): (v if args[1] is Any else _coerce(f"{where}.{k}", v, args[1]))
-            for k, v in value.items()
-        }
-    return value
+    hints = get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
 
 
 def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> DaemonConfig:
@@ -368,40 +343,47 @@ def config_from_dict(data: dict[str, Any], source: str = "<dict>") -> DaemonConf
     Every problem is collected (one line each: unknown section/key, wrong type, out of range,
     cross-field rule) and raised together as one :class:`ConfigError`.
     """
-    cfg = DaemonConfig(source=source)
-    errors: list[str] = []
-    reported: set[str] = set()
-    for section, table in data.items():
-        if section not in _SECTIONS:
-            errors.append(f"{source}: unknown section [{section}]; allowed: {', '.join(_SECTIONS)}")
-            continue
-        if not isinstance(table, dict):
-            errors.append(f"{source}: [{section}] must be a table")
-            continue
-        types = _section_types(section)
-        obj = getattr(cfg, section)
-        for key, value in table.items():
-            if key not in types:
-                errors.append(
-                    f"{source}: unknown key {section}.{key}; allowed: {', '.join(sorted(types))}"
-                )
-                continue
-            try:
-                setattr(obj, key, _coerce(f"{source}: {section}.{key}", value, types[key]))
-            except ConfigError as exc:
-                errors.append(str(exc))
-                reported.add(f"{section}.{key}")
-    errors += cfg.problems(skip=reported)
+    cfg, errors = config_and_problems(data, source)
     if errors:
         raise ConfigError(errors)
     return cfg
 
 
+def config_and_problems(
+    data: dict[str, Any], source: str = "<dict>"
+) -> tuple[DaemonConfig, list[str]]:
+    """The config built from parsed TOML and every problem found (one line each), without
+    raising: what ``--check`` needs to go on checking the files the config names. A key with a
+    problem keeps its default; the others are as given."""
+    try:
+        cfg: DaemonConfig = validate(DaemonConfig, data, source)
+    except SchemaError as exc:
+        problems = exc.lines
+    else:
+        cfg.source = source
+        return cfg, []
+    usable = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}
+    for _ in range(3):  # drop what is bad, then what the rules skipped still finds bad
+        try:
+            cfg = validate(DaemonConfig, usable, source, {"rules": False})
+        except SchemaError as again:
+            for loc in again.locs:
+                table = usable.get(loc[0]) if len(loc) > 1 else None
+                if isinstance(table, dict):
+                    table.pop(loc[1], None)
+                else:
+                    usable.pop(loc[0], None)  # type: ignore[call-overload]
+            continue
+        cfg.source = source
+        return cfg, problems
+    return DaemonConfig(source=source), problems
+
+
 def add_override_flags(parser: argparse.ArgumentParser) -> None:
     """Add ``--<section>-<key>`` for every setting (values in TOML syntax for lists/tables)."""
     group = parser.add_argument_group("configuration overrides (each wins over the file)")
-    for section in _SECTIONS:
-        for key, hint in _section_types(section).items():
+    for section in DaemonConfig.toml_keys():
+        for key, hint in section_types(section).items():
             flag = f"--{section}-{key}".replace("_", "-")
             dest = f"cfg__{section}__{key}"
             if hint is bool:
@@ -411,23 +393,41 @@ def add_override_flags(parser: argparse.ArgumentParser) -> None:
 
 
 def _parse_flag(text: str, hint: Any) -> Any:
+    """A flag's text as a TOML value (lists, tables, numbers; JSON for lists and tables too),
+    else as the text itself: the check then names the flag's value."""
     if hint is str:
         return text
-    if hint in (int, float) or get_origin(hint) is not None or hint is Any:
-        try:
-            return tomllib.loads(f"v = {text}")["v"]
-        except (tomllib.TOMLDecodeError, RecursionError):
-            if get_origin(hint) is not None:
-                try:
-                    return json.loads(text)
-                except (json.JSONDecodeError, RecursionError):
-                    pass
-            return text
-    return text
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except (tomllib.TOMLDecodeError, RecursionError):
+        if get_origin(hint) is not None:
+            try:
+                return json.loads(text)
+            except (json.JSONDecodeError, RecursionError):
+                pass
+        return text
 
 
 def load_config(path: str | Path | None, args: argparse.Namespace | None = None) -> DaemonConfig:
     """Read ``path`` (None = defaults), then apply the override flags present in ``args``."""
+    data, source = _read_with_flags(path, args)
+    return config_from_dict(data, source)
+
+
+def load_config_and_problems(
+    path: str | Path | None, args: argparse.Namespace | None = None
+) -> tuple[DaemonConfig, list[str]]:
+    """:func:`load_config` that lists the problems instead of raising on them (``--check``);
+    ConfigError only when the file cannot be read as TOML at all."""
+    data, source = _read_with_flags(path, args)
+    return config_and_problems(data, source)
+
+
+def _read_with_flags(
+    path: str | Path | None, args: argparse.Namespace | None
+) -> tuple[dict[str, Any], str]:
+    """The parsed file (empty for None) with the override flags of ``args`` applied, and its
+    name; ConfigError (one line) when the file is missing or not TOML."""
     data: dict[str, Any] = {}
     source = "<defaults>"
     if path is not None:
@@ -447,8 +447,9 @@ def load_config(path: str | Path | None, args: argparse.Namespace | None = None)
             if not name.startswith("cfg__") or value is None:
                 continue
             _, section, key = name.split("__")
-            hint = _section_types(section)[key]
-            data.setdefault(section, {})[key] = (
-                _parse_flag(value, hint) if isinstance(value, str) else value
-            )
-    return config_from_dict(data, source)
+            table = data.setdefault(section, {})
+            if not isinstance(table, dict):  # `can = 3` in the file: the check names it
+                continue
+            hint = section_types(section)[key]
+            table[key] = _parse_flag(value, hint) if isinstance(value, str) else value
+    return data, source

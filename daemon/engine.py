@@ -127,8 +127,11 @@ class CorrectionEngine:
         self.metrics = metrics
         self.events = events
         self.logger = logger
-        self._stylus = np.asarray(config.grid.stylus_mm, dtype=float)
-        self._stylus_t = tuple(float(v) for v in config.grid.stylus_mm)
+        stylus = config.grid.stylus_mm
+        self._stylus_t: tuple[float, float, float] | None = (
+            None if stylus is None else (float(stylus[0]), float(stylus[1]), float(stylus[2]))
+        )
+        """The configured stylus, mm; None: each grid's own probe offset (:meth:`stylus_mm`)."""
         self._applied_cache: tuple[LoadedGrid | None, dict[tuple[bool, bool, bool, bool], Applied]]
         self._applied_cache = (None, {})
         """The grid the cache is for (held: its id can never be another grid's) and the cache;
@@ -187,15 +190,14 @@ class CorrectionEngine:
             inputs.update(zip(_PROBE_KEYS, r.probe, strict=True))
         p = mm3_from_nm(r.position_nm)
         grid = loaded.grid
+        stylus = self._stylus_t if self._stylus_t is not None else loaded.probe_offset_mm
         u: tuple[float, float, float] | None = None
         if unknown is not None:  # the grid carries U: correction and U in one call
-            c, label, u = grid.correct_point_with_uncertainty(
-                p, self._stylus_t, temps, inputs or None
-            )
+            c, label, u = grid.correct_point_with_uncertainty(p, stylus, temps, inputs or None)
         elif hasattr(grid, "correct_point"):  # the grid's single-reading fast path
-            c, label = grid.correct_point(p, self._stylus_t, temps, inputs or None)
+            c, label = grid.correct_point(p, stylus, temps, inputs or None)
         else:
-            out, st = grid.correct(np.array([p]), self._stylus, temps, inputs or None)
+            out, st = grid.correct(np.array([p]), np.array(stylus), temps, inputs or None)
             c, label = tuple(out[0].tolist()), str(st[0])
         has_dir = r.directions != (0, 0, 0)
         return self._finish(r, p, c, label, loaded, temps, has_dir, r.probe is not None, u)
@@ -266,6 +268,7 @@ class CorrectionEngine:
             temps = self.temperatures.effective(temps, filters, now_s)
         answers: list[Answer | None] = [None] * len(readings)
         with_u = loaded.has_uncertainty
+        stylus = np.array(self.stylus_mm(loaded))
         plain = [i for i, r in enumerate(readings) if r.probe is None and all(r.valid)]
         for start in range(0, len(plain), BATCH_MAX):
             idx = plain[start : start + BATCH_MAX]
@@ -279,12 +282,12 @@ class CorrectionEngine:
             u_rows: list[list[float]] | None = None
             if with_u:
                 out, st, u_arr = loaded.grid.correct(
-                    np.array(pts), self._stylus, temps, inputs or None, with_uncertainty=True
+                    np.array(pts), stylus, temps, inputs or None, with_uncertainty=True
                 )
                 u_rows = u_arr.tolist()
             else:
                 out, st = loaded.grid.correct(
-                    np.array(pts), self._stylus, temps, inputs or None, outside=None
+                    np.array(pts), stylus, temps, inputs or None, outside=None
                 )
             rows = out.tolist()
             labels = st.tolist()
@@ -297,6 +300,13 @@ class CorrectionEngine:
         return [
             a if a is not None else self.correct(readings[i], now_s) for i, a in enumerate(answers)
         ]
+
+    def stylus_mm(self, loaded: LoadedGrid | None) -> tuple[float, float, float]:
+        """The stylus offset readings are corrected for with ``loaded``, mm: ``grid.stylus_mm``
+        when configured, else the grid's probe offset (no grid: 0, 0, 0)."""
+        if self._stylus_t is not None:
+            return self._stylus_t
+        return loaded.probe_offset_mm if loaded is not None else (0.0, 0.0, 0.0)
 
     def required_roles(self, loaded: LoadedGrid) -> tuple[str, ...]:
         req = self.config.temperatures.required
@@ -392,7 +402,9 @@ class CorrectionEngine:
             reading.directions,
             reading.valid,
             reading.source,
-            self._stylus_t,
+            # (a reload between the answer and this record could change a grid-derived stylus:
+            # only when grid.stylus_mm is unset and the new grid's probe offset differs)
+            self.stylus_mm(self.grids.current),
             reading.probe,
         )
 

@@ -55,6 +55,9 @@ class LoadedGrid:
     """Process that read, verified and built it (a SIGHUP reload: the loader process)."""
     has_uncertainty: bool = False
     """The grid carries U (``grid build --uncertainty``): answers carry it too."""
+    probe_offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """The probe offset the grid was built with (its machine's ``[probe] offset_mm``), mm: the
+    stylus used when ``grid.stylus_mm`` is not set."""
 
     def identity(self) -> dict[str, Any]:
         """The /cmm/grid payload (without stamp)."""
@@ -106,6 +109,12 @@ def load_grid(path: str | Path, trust: GridTrust | None = None) -> LoadedGrid:
     if grid.sha256 is None:  # pragma: no cover - load() always sets it
         raise GridLoadError(f"{path}: grid has no SHA-256")
     machine = grid.metadata.get("machine", {}) or {}
+    probe = grid_probe_offset_mm(grid.metadata)
+    if probe is None:
+        raise GridLoadError(
+            f"{path}: header probe_offset_mm {grid.metadata.get('probe_offset_mm')!r} is not "
+            "3 finite numbers (mm)"
+        )
     return LoadedGrid(
         grid=grid,
         path=str(path),
@@ -118,7 +127,20 @@ def load_grid(path: str | Path, trust: GridTrust | None = None) -> LoadedGrid:
         signed_by=signer[0],
         loaded_by_pid=os.getpid(),
         has_uncertainty=bool(getattr(grid, "has_uncertainty", False)),
+        probe_offset_mm=probe,
     )
+
+
+def grid_probe_offset_mm(header: dict[str, Any]) -> tuple[float, float, float] | None:
+    """A grid header's ``probe_offset_mm`` (mm; absent: 0, 0, 0), None when malformed."""
+    value = header.get("probe_offset_mm", [0.0, 0.0, 0.0])
+    try:
+        xyz = np.asarray(value, dtype=float).reshape(3)
+    except (TypeError, ValueError):
+        return None
+    if not np.all(np.isfinite(xyz)):
+        return None
+    return (float(xyz[0]), float(xyz[1]), float(xyz[2]))
 
 
 class GridSlot:

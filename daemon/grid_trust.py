@@ -84,7 +84,8 @@ class GridTrust:
             try:
                 m = Machine.from_toml(self.machine)
             except (CmmCompError, ValueError, OSError, RecursionError) as exc:
-                raise GridTrustError(f"grid.machine: {exc}") from None
+                lines = str(exc).splitlines() or [""]  # one line per problem of the file
+                raise GridTrustError("\n".join(f"grid.machine: {x}" for x in lines)) from None
             sha = m.identity_sha256()
             if self.expect_machine_sha256 and self.expect_machine_sha256 != sha:
                 raise GridTrustError(
@@ -104,6 +105,30 @@ class GridTrust:
         signer = self._check_signature(contents)
         self._check_machine(contents, machine)
         return signer
+
+    def problems(
+        self,
+        contents: GridContents,
+        machine: TrustedMachine | None,
+        check_signature: bool = True,
+        check_machine: bool = True,
+    ) -> list[str]:
+        """Every reason :meth:`check` would refuse the grid, each check run on its own (one
+        line each; [] when trusted). A check whose setting is already known to be unusable (a
+        key file that does not load, a machine file that does not read) is left out with
+        ``check_signature`` / ``check_machine`` False: its problem is the setting's."""
+        out: list[str] = []
+        if check_signature:
+            try:
+                self._check_signature(contents)
+            except GridFileError as exc:
+                out.append(str(exc))
+        if check_machine:
+            try:
+                self._check_machine(contents, machine)
+            except GridFileError as exc:
+                out.append(str(exc))
+        return out
 
     def _check_signature(self, contents: GridContents) -> str:
         where = contents.source

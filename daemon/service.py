@@ -39,6 +39,7 @@ from .memory import DAEMON_MMAP_THRESHOLD_BYTES, fix_mmap_threshold
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
 from .osthread import name_os_thread
+from .preflight import KERNEL_CACHE_OFF, stylus_note
 from .sessionlog import McapLogger, McapProcessLogger, SessionLogger
 from .state import StateBoard
 from .temperatures import TemperatureTable
@@ -94,6 +95,8 @@ class DaemonService:
         self.modbus: ModbusEndpoint | None = None
         self.metrics_server: MetricsServer | None = None
         self._bus_factory = bus_factory
+        self.grid_problem: str | None = None
+        """Why no grid is active (the last refusal, or no grid configured); None once one is."""
         self._stop = threading.Event()
         self._reload_requested = threading.Event()
         self._housekeeper: threading.Thread | None = None
@@ -137,10 +140,13 @@ class DaemonService:
             )
             self.events.emit("starting", config=cfg.source)
             self._status_log(DaemonState.STARTING, "starting")
+            self._report_kernel_cache()
             if live_error is not None:
                 self._status_log(DaemonState.STARTING, f"live view off: {live_error}")
             if cfg.grid.path:
                 self._load_grid(cfg.grid.path)
+            else:
+                self.grid_problem = "grid.path is empty"
             self.state.set_grid(self.grids.current is not None)
             if cfg.metrics.enabled:
                 self.metrics_server = MetricsServer(
@@ -277,6 +283,8 @@ class DaemonService:
         try:
             loaded = self.grids.reload(path, self.grid_trust, loader or self._grid_loader)
         except GridLoadError as exc:
+            if self.grids.current is None:
+                self.grid_problem = str(exc)
             self.metrics.fault("grid_refused")
             old = self.grids.current
             self.events.emit(
@@ -287,7 +295,9 @@ class DaemonService:
             )
             self._status_log(self.state.state, f"grid refused: {exc}")
             return False
+        self.grid_problem = None
         self.metrics.count("grid_loads")
+        stylus = self.engine.stylus_mm(loaded) if self.engine is not None else None
         self.events.emit(
             "grid_loaded",
             path=loaded.path,
@@ -295,11 +305,26 @@ class DaemonService:
             machine=loaded.machine,
             signed_by=loaded.signed_by or "unsigned (allowed)",
             signals=list(loaded.temperature_roles + loaded.input_signals),
+            stylus_mm=list(stylus) if stylus is not None else None,
         )
+        note = stylus_note(self.config.grid.stylus_mm, loaded.probe_offset_mm, loaded.path)
+        if note is not None:
+            self.events.emit("stylus_differs", "warning", detail=note)
         if self.logger is not None:
             self.logger.log("/cmm/grid", loaded.identity())
         self._status_log(self.state.state, f"grid loaded: {loaded.path}")
         return True
+
+    def _report_kernel_cache(self) -> None:
+        """Say where the compiled grid kernels are cached, or loudly that they are not (each
+        start then compiles them: :data:`.preflight.KERNEL_CACHE_OFF`)."""
+        from cmm_comp.compensation.grid.kernels import kernels_cache_dir
+
+        folder = kernels_cache_dir()
+        if folder is None:
+            self.events.emit("kernel_cache", "warning", cache=None, detail=KERNEL_CACHE_OFF)
+        else:
+            self.events.emit("kernel_cache", cache=folder)
 
     def request_reload(self) -> None:
         """Reload the configured grid in the reload thread (what SIGHUP does): returns at once;

@@ -34,7 +34,7 @@ from .can_frames import (
     RawAxis,
     TemperatureSample,
 )
-from .can_ids import CanIds, MessageKind, dbc_text
+from .can_ids import CanIds, MessageKind, dbc_text, sent_by_daemon
 from .codes import Applied, Axis, DaemonState, Direction, Status, grid_id_from_sha256, seq_distance
 from .modbus_client import AnswerTimeoutError, ControllerClient, ModbusExceptionError
 from .modbus_codec import AnswerBlock, DaemonBlock, ReadingBlock, TemperatureSlot, decode_output
@@ -102,5 +102,6 @@ __all__ = [
     "encode_message",
     "grid_id_from_sha256",
     "parse_request",
+    "sent_by_daemon",
     "seq_distance",
 ]

@@ -57,6 +57,29 @@ CORRECTED_KIND = {
     Axis.Z: MessageKind.CORRECTED_Z,
 }
 _BY_OFFSET = {int(k): k for k in MessageKind}
+CONTROLLER_KINDS = frozenset(
+    {*RAW_KIND.values(), MessageKind.PROBE_DIRECTION, MessageKind.TEMPERATURE}
+)
+"""Messages the controller transmits (DBC transmitter ``Controller``)."""
+DAEMON_KINDS = frozenset(
+    {
+        *CORRECTED_KIND.values(),
+        MessageKind.CORRECTION_UNCERTAINTY,
+        MessageKind.CORRECTION_STATUS,
+        MessageKind.HEARTBEAT,
+    }
+)
+"""Messages the daemon transmits (DBC transmitter ``Daemon``)."""
+
+
+def sent_by_daemon(can_id: int, is_extended: bool = False) -> bool:
+    """True if a frame with this id is one a daemon transmits, per the DBC, whatever its node
+    and base id (blocks start at multiples of 16, so the id's offset in its block is
+    ``can_id % 16``). Extended (29-bit) ids are never the daemon's. How replay recognises the
+    daemon's own frames in a log written before frames carried their direction."""
+    if is_extended or not 0 <= can_id <= STANDARD_ID_MAX:
+        return False
+    return _BY_OFFSET.get(can_id % NODE_STRIDE) in DAEMON_KINDS
 
 
 @dataclass(frozen=True)
@@ -108,18 +131,11 @@ class CanIds:
 
     def controller_tx_ids(self) -> frozenset[int]:
         """Ids the controller sends (raw axes, probing direction, temperature)."""
-        kinds = (*RAW_KIND.values(), MessageKind.PROBE_DIRECTION, MessageKind.TEMPERATURE)
-        return frozenset(self.id_of(k) for k in kinds)
+        return frozenset(self.id_of(k) for k in CONTROLLER_KINDS)
 
     def daemon_tx_ids(self) -> frozenset[int]:
         """Ids the daemon sends (corrected axes, uncertainty, correction status, heartbeat)."""
-        kinds = (
-            *CORRECTED_KIND.values(),
-            MessageKind.CORRECTION_UNCERTAINTY,
-            MessageKind.CORRECTION_STATUS,
-            MessageKind.HEARTBEAT,
-        )
-        return frozenset(self.id_of(k) for k in kinds)
+        return frozenset(self.id_of(k) for k in DAEMON_KINDS)
 
     def can_filters(self) -> list[dict[str, int | bool]]:
         """python-can ``can_filters`` accepting exactly this node's block of 16 standard ids."""

@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
+import signal
+import subprocess
 import threading
-from collections.abc import Iterator
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -21,6 +28,10 @@ settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
 ROOT = Path(__file__).resolve().parents[1]
 REALDATA = ROOT.parent / "shared" / "realdata"
+MCAP_TS = ROOT / "tests" / "mcap_ts"
+REQUIRE_NODE = "CMM_COMP_REQUIRE_NODE"
+"""Set to 1 (``.ci/run`` does): a missing node/npm or a failed ``npm ci`` fails the tests that
+read logs with the TypeScript MCAP reader instead of skipping them."""
 
 
 def _child_pids() -> set[int]:
@@ -95,3 +106,107 @@ def realdata_dir() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"real data folder {REALDATA} is absent (a user's checkout has no ../shared)")
     return REALDATA
+
+
+@pytest.fixture(scope="session")
+def mcap_ts() -> Callable[..., dict[str, Any]]:
+    """``read(path, *count_keys)``: the file read by the official TypeScript MCAP reader
+    (``@mcap/core``'s ``McapIndexedReader`` and ``McapStreamReader``, what Foxglove and
+    Lichtblick use; pinned in ``tests/mcap_ts/package-lock.json``), as the JSON object
+    ``tests/mcap_ts/read_mcap.mjs`` prints. ``npm ci`` installs the pinned packages once per
+    session. Without node/npm or the npm registry the tests skip, saying why; with
+    ``CMM_COMP_REQUIRE_NODE=1`` (the CI) they fail."""
+
+    def unavailable(why: str) -> None:
+        if os.environ.get(REQUIRE_NODE) == "1":
+            pytest.fail(f"{why} ({REQUIRE_NODE}=1: the TypeScript reader check is required)")
+        pytest.skip(why)
+
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if node is None or npm is None:
+        unavailable("node and npm are needed to read logs with @mcap/core (not on PATH)")
+    assert node is not None and npm is not None
+    try:
+        done = subprocess.run(
+            [npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"],
+            cwd=MCAP_TS,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+    except subprocess.TimeoutExpired:
+        unavailable(f"npm ci in {MCAP_TS} took more than 600 s")
+    if done.returncode != 0:
+        unavailable(f"npm ci in {MCAP_TS} failed: {done.stderr.strip()[-500:]}")
+
+    def read(path: Path, *count_keys: str) -> dict[str, Any]:
+        counts = [a for key in count_keys for a in ("--count", key)]
+        out = subprocess.run(
+            [node, "read_mcap.mjs", str(path), *counts],
+            cwd=MCAP_TS,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert out.returncode == 0, out.stderr
+        result: dict[str, Any] = json.loads(out.stdout)
+        return result
+
+    return read
+
+
+class CountingBus:
+    """A controller's bus that counts every frame sent through it, by id."""
+
+    def __init__(self, bus: Any) -> None:
+        self._bus = bus
+        self.sent: Counter[int] = Counter()
+
+    def send(self, msg: Any, timeout: float | None = None) -> None:
+        self._bus.send(msg, timeout)
+        self.sent[msg.arbitration_id] += 1
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._bus, name)
+
+
+@dataclass(frozen=True)
+class UdpSession:
+    """A session of the daemon subprocess on ``udp_multicast`` (``udp_session``)."""
+
+    mcap: Path
+    """The session log (closed by SIGTERM: complete)."""
+    sent: Counter[int]
+    """Frames the controller sent, by CAN id, counted on its bus."""
+    readings: int
+    temperature_samples: int
+
+
+@pytest.fixture(scope="session")
+def udp_session(tmp_path_factory: pytest.TempPathFactory) -> UdpSession:
+    """The daemon as a subprocess (its CLI, process writer) on ``udp_multicast``: one
+    temperature sample per sensor, 300 readings (every fourth with a probing direction), all
+    answered ``ok``; then SIGTERM (exit 0, the log finished)."""
+    from test_daemon_support import daemon_subprocess, npl_grid_path
+
+    from cmm_comp.sim_controller.controller import RawReading
+    from cmm_comp.sim_controller.sim_machine import Environment
+
+    tmp = tmp_path_factory.mktemp("udp-session")
+    counting: list[CountingBus] = []
+
+    def wrap(bus: Any) -> CountingBus:
+        counting.append(CountingBus(bus))
+        return counting[0]
+
+    readings = 300
+    temps = Environment().samples(0.0)
+    with daemon_subprocess(tmp, npl_grid_path(), wrap_bus=wrap) as (proc, ctl, mcap, log):
+        ctl.send_temperatures(temps)
+        for seq in range(readings):
+            probe = (0.0, 0.6, -0.8) if seq % 4 == 0 else None
+            reading = RawReading(seq, (100.0 + seq, 500.0, 200.0), (1, 0, 0), probe)
+            assert ctl.exchange(reading).status == "ok"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(30) == 0, log.read_text()
+    return UdpSession(mcap, counting[0].sent, readings, len(temps))

@@ -1,16 +1,33 @@
 """Independent readers of the three controller formats, written from the public documentation
 (not from cmm-comp's writers), and evaluators that apply a file exactly as the control does.
 
-* SINUMERIK CEC (Function Manual Extended Functions K3, "Compensation of sag and angularity
-  errors", table parameters): ``$AN_CEC[t,N]`` compensation value (mm) at interpolation point N
-  of table t, N = 0 at ``$AN_CEC_MIN[t]``, spacing ``$AN_CEC_STEP[t]``, the last point at
-  ``$AN_CEC_MAX[t]``; linear interpolation between points; "the compensation value of
-  interpolation point 0 is used for all positions smaller than the initial position" and that of
-  the last point beyond the end position; ``$AN_CEC_DIRECTION[t]`` 0 both directions, 1 only
-  positive, −1 only negative traversing direction of the basic (input) axis;
-  ``$AN_CEC_MULT_BY_TABLE[t] = m``: the values of table t multiplied by those of table number m
-  (= index + 1) are added as an additional compensation value; the compensation value is added
-  to the compensation (output) axis' position, so it is the negative of the machine's error.
+* SINUMERIK CEC — applied as the passages quoted in docs/export.md ("SINUMERIK: what the manuals
+  say") describe, and nothing else (Function Manual Extended Functions 6FC5397-1BP40-3BA1, K3;
+  802D sl 6FC5397-1CP10-5BA0):
+  [T] ``$AN_CEC[t,N]`` is "the compensation value of the compensation axis" at interpolation point
+      N; point 0 at ``$AN_CEC_MIN[t]``, spacing ``$AN_CEC_STEP[t]``, the last at ``$AN_CEC_MAX[t]``;
+      "The compensation value of interpolation point 0 is used for all positions smaller than the
+      initial position", that of point k "for all positions larger than the end position" (p. 248);
+      between points "linear interpolation" (p. 237);
+  [I] the input is "the setpoint" of ``$AN_CEC_INPUT_AXIS`` (p. 248; 802D: "The programmed
+      (required) position setpoint is always used", p. 215), the output axis ``$AN_CEC_OUTPUT_AXIS``;
+  [D] ``$AN_CEC_DIRECTION`` 0 both, 1 "only the positive", −1 "only the negative traversing
+      direction of the basic axis" (p. 249);
+  [S] "The total compensation value is derived from the sum of the individual compensation values"
+      (802D p. 215);
+  [M] ``$AN_CEC_MULT_BY_TABLE[t] = m``: "the compensation values of any table can be multiplied by
+      those of any other table … The product is added as an additional compensation value to the
+      total compensation value" (p. 249), read as in the only worked example (p. 252, foundation
+      sag: ΔX1 = Z1·sinβ(X1), table 1 = sinβ(X1) with ``$AN_CEC_MULT_BY_TABLE[0] = 2``, table 2 =
+      Z1): the referenced table enters as the factor only — table 2 holds Z1 itself, hundreds of
+      mm, which cannot also move X1 — and the referencing table's own value stays in the sum;
+      ``referencing_own=False`` leaves the latter out (the example cannot tell: sinβ ≈ 0). Products
+      the passages do not describe (chains, a table times itself, products with a direction)
+      are refused;
+  [±] the sign: "A positive compensation value causes the corresponding machine axis to move in
+      the negative direction" (MSEC, p. 238), the compensation curve drawn on the error curve
+      (Figure 4-4, p. 237): the output axis moves by minus the total, so the error (true −
+      indicated) taken off is ``+1000·total`` µm. ``sign=-1`` applies the opposite reading.
 * TwinCAT CNC (TF5200 axis compensation, P-COMP-00001…25): ``kopf.achs_nr`` logical axis,
   ``kw.ssfk.*`` leadscrew table with ``unit`` 1 = lengths in 0.1 µm, ``interval`` spacing
   (0 = ``table[i].setpoint`` given), ``kw_startpos``, ``kw_nr_max`` points, ``bilateral``,
@@ -90,30 +107,51 @@ def read_cec(text: str) -> dict[int, CecTableRead]:
     return tables
 
 
+def _cec_table_value(
+    tab: CecTableRead, axis_of: dict[str, int], q: np.ndarray, dirs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """[T], [I], [D]: the table's value at the input axis' commanded positions, and where the
+    table applies (its direction)."""
+    a = axis_of[tab.params["INPUT_AXIS"]]
+    vals = np.array([tab.values[n] for n in range(len(tab.values))])
+    v = _interp_clamped(q[:, a], tab.positions(), vals)
+    d = int(tab.params["DIRECTION"])
+    applies = np.ones(len(q), bool) if d == 0 else (np.sign(dirs[:, a]) == d)
+    return v, applies
+
+
 def cec_error_um(
-    tables: dict[int, CecTableRead], axis_names: list[str], q: np.ndarray, dirs: np.ndarray
+    tables: dict[int, CecTableRead],
+    axis_names: list[str],
+    q: np.ndarray,
+    dirs: np.ndarray,
+    *,
+    referencing_own: bool = True,
+    sign: int = 1,
 ) -> np.ndarray:
+    """The error (N, 3) µm the tables take off at commanded positions ``q`` with travel
+    directions ``dirs``: [S] the sum per output axis, [M] products, [±] the sign."""
     axis_of = {f"({name})": i for i, name in enumerate(axis_names)}
-    comp = np.zeros((len(q), 3))
-
-    def value(t: int) -> tuple[np.ndarray, np.ndarray]:
-        tab = tables[t]
-        a = axis_of[tab.params["INPUT_AXIS"]]
-        vals = np.array([tab.values[n] for n in range(len(tab.values))])
-        v = _interp_clamped(q[:, a], tab.positions(), vals)
-        d = int(tab.params["DIRECTION"])
-        applies = np.ones(len(q), bool) if d == 0 else (np.sign(dirs[:, a]) == d)
-        return v, applies
-
+    referenced = {int(t.params["MULT_BY_TABLE"]) - 1 for t in tables.values()} - {-1}
+    total = np.zeros((len(q), 3))
     for t, tab in tables.items():
         k = axis_of[tab.params["OUTPUT_AXIS"]]
-        v, applies = value(t)
-        comp[:, k] += np.where(applies, v, 0.0)
-        other = int(tab.params["MULT_BY_TABLE"])
-        if other:
-            w, applies_w = value(other - 1)
-            comp[:, k] += np.where(applies & applies_w, v * w, 0.0)
-    return -1000.0 * comp
+        v, applies = _cec_table_value(tab, axis_of, q, dirs)
+        m = int(tab.params["MULT_BY_TABLE"]) - 1
+        if m >= 0:
+            other = tables[m]
+            assert m != t, f"table {t} times itself: not in the passages"
+            assert m not in referenced or int(other.params["MULT_BY_TABLE"]) == 0, "a chain"
+            assert t not in referenced, f"table {t} is both factor and product: not described"
+            assert tab.params["DIRECTION"] == other.params["DIRECTION"] == "0", "product+direction"
+            assert axis_of[other.params["OUTPUT_AXIS"]] == k, "[M] both tables of the output axis"
+            w, _ = _cec_table_value(other, axis_of, q, dirs)
+            total[:, k] += v * w
+            if referencing_own:
+                total[:, k] += v
+        elif t not in referenced:
+            total[:, k] += np.where(applies, v, 0.0)
+    return sign * 1000.0 * total
 
 
 # ----------------------------------------------------------------------------- TwinCAT CNC
@@ -173,8 +211,14 @@ def twincat_axis(entries: dict[str, str]) -> TwinCatAxis:
 
 
 def twincat_error_um(
-    axes: list[TwinCatAxis], axis_numbers: list[int], q: np.ndarray, dirs: np.ndarray
+    axes: list[TwinCatAxis],
+    axis_numbers: list[int],
+    q: np.ndarray,
+    dirs: np.ndarray,
+    cross_sign: int = 1,
 ) -> np.ndarray:
+    """``cross_sign`` +1: a cross ``correction`` is taken off like a leadscrew value (not stated
+    by the pages: docs/export.md, "Not verified"); −1: added."""
     col = {nr: i for i, nr in enumerate(axis_numbers)}
     out = np.zeros((len(q), 3))
     for ax in axes:
@@ -188,7 +232,7 @@ def twincat_error_um(
             assert ax.cross_pos is not None and ax.cross_val is not None
             xm = q[:, col[ax.master_nr]]
             assert xm.min() >= ax.cross_pos[0] - 1e-9 and xm.max() <= ax.cross_pos[-1] + 1e-9
-            out[:, k] += _interp_clamped(xm, ax.cross_pos, ax.cross_val) / 10.0
+            out[:, k] += cross_sign * _interp_clamped(xm, ax.cross_pos, ax.cross_val) / 10.0
     return out
 
 

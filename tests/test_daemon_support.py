@@ -11,11 +11,15 @@ import atexit
 import functools
 import shutil
 import socket
+import subprocess
+import sys
 import tempfile
+import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import can
 
@@ -23,6 +27,7 @@ from cmm_comp.compensation.grid import CorrectionGrid, generate_signing_key, sig
 from cmm_comp.compensation.machine import Machine
 from cmm_comp.daemon.config import DaemonConfig
 from cmm_comp.daemon.service import DaemonService
+from cmm_comp.protocol.codes import DaemonState
 from cmm_comp.sim_controller.controller import CanController
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,6 +112,74 @@ def daemon_and_controller(
                 yield d, ctl, bus
         finally:
             bus.shutdown()
+
+
+def write_udp_config(tmp: Path, port: int, grid: Path, mcap: Path, writer: str = "process") -> Path:
+    """``tmp/daemon.toml``: udp_multicast on the interface-local group at ``port``, heartbeat
+    every 50 ms, MCAP log ``mcap`` (flushed every 0.2 s) by ``writer``, metrics on a free port."""
+    cfg = tmp / "daemon.toml"
+    cfg.write_text(
+        f"""
+[grid]
+path = "{grid}"
+stylus_mm = {STYLUS}
+{trust_toml()}[can]
+interface = "udp_multicast"
+channel = "{MCAST_GROUP}"
+heartbeat_s = 0.05
+[can.options]
+port = {port}
+[mcap]
+path = "{mcap}"
+flush_s = 0.2
+writer = "{writer}"
+[metrics]
+port = 0
+"""
+    )
+    return cfg
+
+
+def start_daemon_cli(config: Path, log: Path) -> subprocess.Popen:
+    """``cmm-comp daemon --config CONFIG`` as a subprocess, its output (events) to ``log``."""
+    with open(log, "w") as out:
+        return subprocess.Popen(
+            [sys.executable, "-m", "cmm_comp.cli", "daemon", "--config", str(config)],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+
+
+@contextmanager
+def daemon_subprocess(
+    tmp: Path,
+    grid: Path,
+    writer: str = "process",
+    wrap_bus: Callable[[can.BusABC], Any] = lambda bus: bus,
+) -> Iterator[tuple[subprocess.Popen, CanController, Path, Path]]:
+    """The daemon as a real subprocess (its CLI) on ``udp_multicast`` (a free port) logging to
+    ``tmp/session.mcap``, and a controller on its own bus (``wrap_bus`` may wrap that bus, e.g.
+    to count what the controller sends); yields ``(process, controller, mcap, daemon log)``
+    once the daemon's heartbeat says ready. The process is killed if still running at exit."""
+    port = free_udp_port()
+    mcap = tmp / "session.mcap"
+    cfg = write_udp_config(tmp, port, grid, mcap, writer)
+    log = tmp / "daemon.log"
+    proc = start_daemon_cli(cfg, log)
+    bus = can.Bus(interface="udp_multicast", channel=MCAST_GROUP, port=port)
+    try:
+        with CanController(wrap_bus(bus), answer_timeout_s=10.0) as ctl:  # generous: load
+            t0 = time.monotonic()
+            while ctl.heartbeat is None or ctl.heartbeat.state != DaemonState.READY:
+                assert proc.poll() is None, log.read_text()
+                assert time.monotonic() - t0 < 60, f"daemon not ready: {log.read_text()}"
+                time.sleep(0.05)
+            yield proc, ctl, mcap, log
+    finally:
+        bus.shutdown()
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
 
 
 def send_temps(ctl: CanController, temp_C: float = 20.5) -> None:

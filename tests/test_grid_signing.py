@@ -212,6 +212,7 @@ def test_daemon_check_refuses_unsigned_grid_in_one_line(tmp_path: Path, keys, un
         sys.executable, "-m", "cmm_comp.cli", "daemon", "--check",
         "--grid-path", str(grid), "--grid-machine", str(NPL),
         "--grid-public-key", str(keys["ours"][1]),
+        "--can-interface", "virtual", "--metrics-port", "0",  # --check opens the bus, binds the port
     ]  # fmt: skip
     proc = subprocess.run(args, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr

@@ -7,86 +7,25 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
-import can
 import numpy as np
 import pytest
 from test_daemon_support import (
-    MCAST_GROUP,
     STYLUS,
     build_signed_grid,
-    free_udp_port,
+    daemon_subprocess,
     npl_grid_path,
     npl_machine,
-    trust_toml,
 )
 
 from cmm_comp.compensation.grid import CorrectionGrid
 from cmm_comp.daemon.sessionlog.reader import read_messages
-from cmm_comp.protocol.codes import DaemonState, grid_id_from_sha256
-from cmm_comp.sim_controller.controller import CanController, RawReading
+from cmm_comp.protocol.codes import grid_id_from_sha256
+from cmm_comp.sim_controller.controller import RawReading
 from cmm_comp.sim_controller.runner import build_program, evaluate, make_readings, run_can
 from cmm_comp.sim_controller.sim_machine import Environment, SimulatedMachine
-
-
-def _write_config(tmp: Path, port: int, grid: Path, mcap: Path, writer: str = "process") -> Path:
-    cfg = tmp / "daemon.toml"
-    cfg.write_text(
-        f"""
-[grid]
-path = "{grid}"
-stylus_mm = {STYLUS}
-{trust_toml()}[can]
-interface = "udp_multicast"
-channel = "{MCAST_GROUP}"
-heartbeat_s = 0.05
-[can.options]
-port = {port}
-[mcap]
-path = "{mcap}"
-flush_s = 0.2
-writer = "{writer}"
-[metrics]
-port = 0
-"""
-    )
-    return cfg
-
-
-@contextmanager
-def _daemon(
-    tmp: Path, grid: Path, writer: str = "process"
-) -> Iterator[tuple[subprocess.Popen, CanController, Path, Path]]:
-    port = free_udp_port()
-    mcap = tmp / "session.mcap"
-    cfg = _write_config(tmp, port, grid, mcap, writer)
-    log = tmp / "daemon.log"
-    with open(log, "w") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "cmm_comp.cli", "daemon", "--config", str(cfg)],
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
-    bus = can.Bus(interface="udp_multicast", channel=MCAST_GROUP, port=port)
-    try:
-        with CanController(bus, answer_timeout_s=10.0) as ctl:  # generous: a loaded machine
-            t0 = time.monotonic()
-            while ctl.heartbeat is None or ctl.heartbeat.state != DaemonState.READY:
-                assert proc.poll() is None, log.read_text()
-                assert time.monotonic() - t0 < 60, f"daemon not ready: {log.read_text()}"
-                time.sleep(0.05)
-            yield proc, ctl, mcap, log
-    finally:
-        bus.shutdown()
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(10)
 
 
 def _wait(pred, timeout_s: float = 30.0) -> bool:
@@ -110,7 +49,7 @@ def test_subprocess_udp_multicast_reload_and_sigterm(tmp_path) -> None:
     env = Environment()
     sim = SimulatedMachine(machine, STYLUS, None, rng)
     indicated, readings = make_readings(sim, env, program.points)
-    with _daemon(tmp_path, grid) as (proc, ctl, mcap, log):
+    with daemon_subprocess(tmp_path, grid) as (proc, ctl, mcap, log):
         assert ctl.heartbeat.grid_id == first_id
         answers = run_can(ctl, readings, env)
         result = evaluate(program, indicated, answers)
@@ -154,7 +93,7 @@ def _corrected_seqs(path: Path) -> list[int]:
 def test_kill_9_mcap_reads_back(tmp_path, writer: str) -> None:
     """kill -9 of the daemon: with the thread writer the file is cut and reads back up to the
     last finished chunk; the child-process writer (default) outlives the daemon and finishes it."""
-    with _daemon(tmp_path, npl_grid_path(), writer) as (proc, ctl, mcap, _log):
+    with daemon_subprocess(tmp_path, npl_grid_path(), writer) as (proc, ctl, mcap, _log):
         ctl.send_temperatures(Environment().samples(0.0))
         time.sleep(0.05)
         for seq in range(300):

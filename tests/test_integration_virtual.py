@@ -126,6 +126,13 @@ def test_examples_daemon_toml_checks_with_overrides(tmp_path) -> None:
             str(NPL),
             "--grid-public-key",
             str(signing_key()[1]),
+            # --check opens the bus, binds the metrics port and checks the log folder
+            "--can-interface",
+            "virtual",
+            "--metrics-port",
+            "0",
+            "--mcap-path",
+            str(tmp_path / "logs"),
             "--check",
         ],
         capture_output=True,

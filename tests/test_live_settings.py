@@ -13,7 +13,6 @@ from cmm_comp.daemon.live import (
     LiveSection,
     LiveSink,
     LiveStartError,
-    live_problems,
     live_section_from_table,
 )
 
@@ -29,7 +28,7 @@ def test_defaults_are_off_and_loopback() -> None:
         10.0,
         10.0,
     )
-    assert live_problems(s, "x") == []
+    assert list(s.rules({})) == []
 
 
 def test_a_table_from_toml() -> None:
@@ -117,7 +116,12 @@ def test_the_sink_refuses_a_remote_host_it_was_not_allowed() -> None:
         LiveSink(LiveSection(enabled=True, host="0.0.0.0"))
 
 
-def test_skip_leaves_out_keys_already_reported() -> None:
-    bad = LiveSection(port=-1, scene_rate_hz=math.nan)
-    assert len(live_problems(bad, "w")) == 2
-    assert live_problems(bad, "w", {"live.port", "live.scene_rate_hz"}) == []
+def test_a_section_built_in_code_is_checked_with_the_configuration() -> None:
+    """A section made in code (not read from a file) gets the same lines from ``check()``."""
+    from cmm_comp.daemon.config import DaemonConfig
+
+    cfg = DaemonConfig(source="w", live=LiveSection(port=-1, scene_rate_hz=math.nan))
+    assert cfg.problems() == [
+        "w: live.port = -1; allowed: 0 .. 65535",
+        "w: live.scene_rate_hz = nan; allowed: > 0 and <= 1000 Hz",
+    ]

@@ -144,23 +144,23 @@ BAD = [
     (
         MINIMAL + "[errors.dx_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 'a']\n",
         "errors.dx_x.value[1]",
-        "expected a number",
+        "'a' must be a number",
     ),
     (
         MINIMAL
         + "[errors.dx_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 2.0]\ncriterion = 'flattest'\n",
         "errors.dx_x.criterion",
-        "unknown criterion",
+        "criterion = 'flattest'; allowed: least_squares, end_points, min_zone",
     ),
     (
         MINIMAL + "[errors.dy_x]\nposition = [0.0, 1.0]\nvalue = [1.0, 2.0]\ncriterion = 'best'\n",
         "errors.dy_x.criterion",
-        "unknown criterion",
+        "criterion = 'best'; allowed: least_squares",
     ),
     (
         MINIMAL + "[errors.dx_x]\npolynomial = [" + ", ".join(["1.0"] * 12) + "]\n",
         "errors.dx_x.polynomial",
-        "order",
+        "allowed: 1 to 11 values (order ≤ 10)",
     ),
     (MINIMAL + "[errors.dx_x]\nfile = 'missing.csv'\n", "errors.dx_x.file", "cannot read"),
     (
@@ -189,6 +189,7 @@ def test_bad_files_give_one_clear_error(
     with pytest.raises(MachineFileError) as info:
         Machine.from_toml(path)
     msg = str(info.value)
+    assert info.value.lines == [msg], msg  # one problem: one line
     assert str(path) in msg
     assert where in msg
     assert problem in msg

@@ -28,9 +28,10 @@ T0_S = 1_700_000_000
     data=st.binary(min_size=0, max_size=8),
     frac_us=st.integers(0, 999_999),
     remote=st.booleans(),
+    direction=st.sampled_from(["rx", "tx", "tx_echo"]),
 )
 def test_frame_payload_matches_the_message_written_out_by_hand(
-    can_id: int, ext: bool, data: bytes, frac_us: int, remote: bool
+    can_id: int, ext: bool, data: bytes, frac_us: int, remote: bool, direction: str
 ) -> None:
     ts = T0_S + frac_us * 1e-6
     msg = can.Message(
@@ -40,7 +41,7 @@ def test_frame_payload_matches_the_message_written_out_by_hand(
         data=data,
         is_remote_frame=remote and not data,
     )
-    got = frame_payload(frame_record(msg, "vcan0"))
+    got = frame_payload(frame_record(msg, "vcan0", direction))
     stamp = got.pop("bus_stamp")
     assert got == {
         "arbitration_id": msg.arbitration_id,
@@ -51,6 +52,7 @@ def test_frame_payload_matches_the_message_written_out_by_hand(
         "is_fd": False,
         "is_remote_frame": remote and not data,
         "is_error_frame": False,
+        "direction": direction,
     }
     assert stamp["sec"] == T0_S
     assert abs(stamp["nsec"] - frac_us * 1000) <= 1000  # float seconds: within 1 µs
@@ -60,12 +62,19 @@ def test_frame_payload_matches_the_message_written_out_by_hand(
 def test_frame_record_copies_the_data_and_knows_no_timestamp() -> None:
     data = bytearray(b"\x01\x02")
     msg = can.Message(timestamp=0.0, arbitration_id=5, is_extended_id=False, data=data)
-    rec = frame_record(msg, "c")
+    rec = frame_record(msg, "c", "rx")
     msg.data[0] = 0xFF  # the record owns its bytes: later changes to the message do not leak
     p = frame_payload(rec)
     assert p["data"] == "0102" and p["bus_stamp"] == {"sec": 0, "nsec": 0}
     nan_ts = frame_payload((5, False, 2, b"\x01\x02", math.nan, "c", False, False, False))
     assert nan_ts["bus_stamp"] == {"sec": 0, "nsec": 0}
+    assert "direction" not in nan_ts  # a 9-field record (the layout before directions)
+
+
+@pytest.mark.parametrize("direction", ["RX", "echo", "", None, 1, b"rx"])
+def test_a_frame_with_an_unknown_direction_is_refused(direction: object) -> None:
+    with pytest.raises(ValueError, match="direction"):
+        frame_payload((5, False, 0, b"", 1.0, "c", False, False, False, direction))
 
 
 def test_raw_and_corrected_payloads() -> None:

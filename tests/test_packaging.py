@@ -8,7 +8,6 @@ python-daemon, which the test extras install on purpose: this whole suite runs b
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import sysconfig
@@ -17,6 +16,7 @@ import venv
 from pathlib import Path
 
 import pytest
+from source_copy import copy_sources
 
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = ("compensation", "protocol", "daemon", "sim_controller", "cli")
@@ -76,13 +76,7 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
     outer = sysconfig.get_paths()["purelib"]
     (purelib / "outer.pth").write_text(outer + "\n")
     # build from a copy: setuptools leaves build/ and *.egg-info in the folder it builds
-    src = tmp_path / "src"
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for name in (*FOLDERS, "pyproject.toml", "README.md"):
-        if (ROOT / name).is_dir():
-            shutil.copytree(ROOT / name, src / name, ignore=ignore)
-        else:
-            shutil.copy2(ROOT / name, src / name)
+    src = copy_sources(tmp_path / "src")
     wheel_dir = tmp_path / "wheel"
     subprocess.run(
         [
@@ -102,6 +96,11 @@ def test_a_built_wheel_in_a_fresh_venv_beside_python_daemon(tmp_path: Path) -> N
         timeout=300,
     )
     (wheel,) = wheel_dir.glob("cmm_comp-*.whl")
+    import zipfile
+
+    with zipfile.ZipFile(wheel) as whl:  # the licence travels with the wheel's metadata
+        licences = [n for n in whl.namelist() if ".dist-info/" in n and "LICENSE" in n]
+        assert licences and b"Apache License" in whl.read(licences[0]), whl.namelist()
     subprocess.run(
         [
             sys.executable,

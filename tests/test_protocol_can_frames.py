@@ -31,6 +31,7 @@ from cmm_comp.protocol import (
     decode_message,
     encode_message,
     grid_id_from_sha256,
+    sent_by_daemon,
 )
 
 GOLDEN = Path(__file__).parent / "data" / "protocol_golden_frames.json"
@@ -175,6 +176,27 @@ def test_dbc_shifted_to_another_node() -> None:
     # comments and value tables moved with their messages
     assert db3.get_message_by_name("HEARTBEAT").comment.startswith("Daemon heartbeat")
     assert db3.get_message_by_name("RAW_Y").get_signal_by_name("Direction").choices[1] == "positive"
+
+
+@pytest.mark.parametrize(("node_id", "base_id"), [(0, 0x200), (3, 0x200), (5, 0x100), (0, 0)])
+def test_sent_by_daemon_follows_the_dbc_transmitters(node_id: int, base_id: int) -> None:
+    """Replay's rule for logs without a frame direction: the DBC's transmitter of each message
+    (cantools), for any node and base id; every other id of the standard range, extended ids
+    and ids of other kinds are not the daemon's."""
+    db = cantools.database.load_string(
+        dbc_text(CanIds(node_id=node_id, base_id=base_id)), database_format="dbc"
+    )
+    daemon_ids = set()
+    for msg in db.messages:
+        assert msg.senders in (["Daemon"], ["Controller"])
+        assert sent_by_daemon(msg.frame_id) == (msg.senders == ["Daemon"]), msg.name
+        assert not sent_by_daemon(msg.frame_id, is_extended=True)
+        if msg.senders == ["Daemon"]:
+            daemon_ids.add(msg.frame_id)
+    block = CanIds(node_id=node_id, base_id=base_id).block_start
+    in_block = {i for i in range(block, block + 16) if sent_by_daemon(i)}
+    assert in_block == daemon_ids
+    assert not sent_by_daemon(-1) and not sent_by_daemon(0x800)
 
 
 def _golden() -> list[dict[str, Any]]:

@@ -13,8 +13,6 @@ import json
 import math
 import signal
 import struct
-import subprocess
-import sys
 import threading
 import time
 import tomllib
@@ -27,7 +25,15 @@ import numpy as np
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.pdu.mei_message import ReadDeviceInformationResponse
-from test_daemon_support import ROOT, STYLUS, base_config, channel, npl_grid_path, trust_toml
+from test_daemon_support import (
+    ROOT,
+    STYLUS,
+    base_config,
+    channel,
+    npl_grid_path,
+    start_daemon_cli,
+    trust_toml,
+)
 from test_protocol_modbus_support import RawClient, frame, wait_for
 
 from cmm_comp.daemon import DaemonService
@@ -202,12 +208,7 @@ def test_daemon_subprocess_log_stays_short_under_a_flood(tmp_path: Path) -> None
         "[metrics]\nenabled = false\n"
     )
     log = tmp_path / "daemon.log"
-    with open(log, "w") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "cmm_comp.cli", "daemon", "--config", str(cfg)],
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
+    proc = start_daemon_cli(cfg, log)
     try:
 
         def listening() -> int:

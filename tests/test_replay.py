@@ -80,7 +80,8 @@ def test_replay_to_bus_reaches_a_running_daemon(session) -> None:
             sent = replay_to_bus(session, bus, speed=0)
         finally:
             bus.shutdown()
-        assert sent >= 61 * 3 + 4
+        assert sent.sent >= 61 * 3 + 4
+        assert sent.by_can_id == 0 and sent.note is None  # every frame carries its direction
         t0 = time.monotonic()
         while d.metrics.answered < 61 and time.monotonic() - t0 < 5:
             time.sleep(0.01)

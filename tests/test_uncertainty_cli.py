@@ -146,7 +146,7 @@ def test_bad_uncertainty_section_is_one_line(
     code = cli_main(["uncertainty", str(machine), "--length", "1", "1", "1", "2", "2", "2"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1
-    assert "m.toml: uncertainty.probe_um: a standard uncertainty must be ≥ 0" in err[0]
+    assert "m.toml: uncertainty.probe_um = -1; allowed: 0 .. 1e+09 µm" in err[0]
 
 
 def test_grid_build_with_uncertainty_and_correct_columns(tmp_path: Path) -> None:

@@ -268,6 +268,116 @@ def test_adaptive_stops_when_stable_and_fixed_does_not() -> None:
         run_monte_carlo(bad, np.random.default_rng(0), MonteCarloSettings(trials=100))
 
 
+def test_assembled_errors_equal_numpys_fancy_indexed_sums() -> None:
+    """The compiled assembly of the perturbed errors (issue 25) against the numpy expression it
+    replaced, on the E0 test's probing points of the bridge: identical bits."""
+    from cmm_comp.compensation.uncertainty.chain_kernel import assemble_errors
+    from cmm_comp.compensation.uncertainty.virtual_cmm import VirtualCMM
+    from cmm_comp.sim_controller.iso10360 import length_test
+
+    machine = Machine.from_toml(NPL)
+    tests = length_test(machine.volume.lower_mm, machine.volume.upper_mm)
+    prep = VirtualCMM(machine).prepare(np.array([[t.a_mm, t.b_mm] for t in tests]).reshape(-1, 3))
+    rng = np.random.default_rng(4)
+    t = 37
+    delta_t = prep.calibration_t @ rng.standard_normal((prep.calibration.shape[0], t))
+    z = rng.standard_normal((t, prep.random_sigma.size))
+    base = prep.errors.reshape(-1)
+    expect = np.broadcast_to(base, (t, base.size)).copy()
+    expect[:, prep.target] += delta_t.T[:, prep.source]
+    expect[:, prep.random_target] += prep.random_sigma * z
+    got = assemble_errors(
+        base, t, delta_t, prep.source, prep.target, prep.random_sigma, z, prep.random_target
+    )
+    assert prep.target.size > 1000 and prep.random_target.size > 1000
+    np.testing.assert_array_equal(got, expect)
+
+
+def test_stopping_rule_watches_only_the_outputs_named() -> None:
+    """Issue 25: E0's rule watched 107 outputs to 2 digits and never stopped. Output 1 here
+    never stabilises (each run is offset by one N(0, 1000²) number: the run averages disagree
+    by ~1000 while δ is a few hundred); watching output 0 only, the run stops as a lone
+    N(0, 3²) does (2 runs of 10⁴ at 1 digit) and the unwatched output's 2s/δ is reported."""
+
+    def draw(m: int, rng: np.random.Generator) -> np.ndarray:
+        return np.c_[rng.normal(0.0, 3.0, m), rng.normal(0.0, 1000.0) + rng.normal(size=m)]
+
+    res = run_monte_carlo(
+        draw, np.random.default_rng(0), MonteCarloSettings(ndig=1, max_trials=60_000),
+        stop_on=(0,),
+    )  # fmt: skip
+    assert res.stable and res.trials == 20_000 and res.stop_on == (0,)
+    assert res.ratio is not None and np.max(res.ratio[:, 0]) == pytest.approx(res.worst)
+    assert np.max(res.ratio[:, 1]) > 1.0  # the offset column is not stable, and says so
+    both = run_monte_carlo(
+        draw, np.random.default_rng(0), MonteCarloSettings(ndig=1, max_trials=60_000)
+    )
+    assert not both.stable and both.trials == 60_000  # watching all: capped, not stable
+
+
+def test_values_kept_for_the_named_outputs_when_all_do_not_fit() -> None:
+    """Beyond ``keep_values_limit`` the kept outputs' intervals still come from all their
+    values (checked with numpy's quantile over what the draw returned), the others from the
+    mean of the runs' quantiles (computed here from the same runs)."""
+    seen: list[np.ndarray] = []
+
+    def draw(m: int, rng: np.random.Generator) -> np.ndarray:
+        y = rng.normal(size=(m, 4)) * np.array([1.0, 2.0, 3.0, 4.0])
+        seen.append(y)
+        return y
+
+    settings = MonteCarloSettings(trials=12_000, batch=3000, keep_values_limit=30_000)
+    res = run_monte_carlo(draw, np.random.default_rng(1), settings, keep=(0, 2))
+    everything = np.concatenate(seen)
+    assert res.value_columns == (0, 2) and res.values is not None
+    np.testing.assert_array_equal(res.column(2), everything[:, 2])
+    assert res.column(1) is None
+    assert res.interval_all_trials is not None
+    assert res.interval_all_trials.tolist() == [True, False, True, False]
+    q = np.quantile(everything, [0.025, 0.975], axis=0)
+    np.testing.assert_allclose([res.low[0], res.high[2]], [q[0, 0], q[1, 2]], rtol=1e-12)
+    per_run = np.array([np.quantile(y[:, 1], 0.025) for y in seen])
+    assert res.low[1] == pytest.approx(per_run.mean(), rel=1e-12)
+    assert "kept outputs" in res.interval_method
+
+
+def test_extra_ratio_holds_the_run_until_it_is_stable() -> None:
+    calls: list[int] = []
+
+    def draw(m: int, rng: np.random.Generator) -> np.ndarray:
+        return rng.normal(size=(m, 1))
+
+    def extra() -> float:  # stable only from the fourth run on
+        calls.append(1)
+        return 2.0 if len(calls) < 3 else 0.5
+
+    res = run_monte_carlo(
+        draw, np.random.default_rng(0), MonteCarloSettings(ndig=1), extra_ratio=extra
+    )
+    assert res.stable and res.runs == 4 and len(calls) == 3  # after runs 2, 3, 4
+
+
+def test_pass_probability_and_its_spread_match_the_binomial() -> None:
+    """The E0 test's pass probability is a share of trials: over R runs of M its run-to-run
+    standard deviation is √(p(1−p)/M) (binomial), so 2s of the mean is 2√(p(1−p)/(RM)); the
+    estimate from 12 runs is within ±45 % of that (χ² with 11 degrees of freedom, 99.8 %)."""
+    from cmm_comp.compensation.uncertainty import e0_uncertainty
+    from cmm_comp.sim_controller.iso10360 import length_test
+
+    machine = Machine.from_toml(NPL)
+    tests = length_test(machine.volume.lower_mm, machine.volume.upper_mm)
+    pairs = np.array([[t.a_mm, t.b_mm] for t in tests])
+    res = e0_uncertainty(
+        machine, pairs, mpe=(20.0, 150.0), rng=np.random.default_rng(5),
+        settings=MonteCarloSettings(trials=12 * 2000, batch=2000),
+    )  # fmt: skip
+    p, two_s = res.nominal["p_pass"], res.nominal["p_pass_2s"]
+    ratio = res.mc.column(1)
+    assert ratio is not None and p == pytest.approx(float(np.mean(ratio <= 1.0)), abs=1e-12)
+    binomial = 2.0 * math.sqrt(p * (1 - p) / (12 * 2000))
+    assert 0.55 * binomial < two_s < 1.45 * binomial, (two_s, binomial)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -22,34 +23,42 @@ from .words import report_markdown
 
 
 def _plot_against(
-    path: Path,
-    name: str,
-    x: np.ndarray,
-    before: np.ndarray,
-    after: np.ndarray,
-    measured: tuple[int, ...] = (0, 1, 2),
+    path: Path, name: str, x: np.ndarray, before: np.ndarray, after: np.ndarray, axes: list[int]
 ) -> None:
-    import matplotlib
+    """Residual against ``name`` for each measured axis in ``axes`` (one panel each: an axis
+    that was not measured has no residual to show)."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..reports.plots import save_png
 
-    fig, axes = plt.subplots(
-        1, len(measured), figsize=(4 * len(measured), 3.4), sharex=True, squeeze=False
-    )
-    for k, ax in zip(measured, axes[0], strict=True):
+    fig = Figure(figsize=(4 * len(axes), 3.4), layout="constrained")
+    panels = fig.subplots(1, len(axes), squeeze=False, sharex=True)[0]
+    stats = binned_statistics(x, before)
+    for ax, k in zip(panels, axes, strict=True):
         ax.plot(x, before[:, k], ".", ms=3, alpha=0.5, label="before")
         ax.plot(x, after[:, k], ".", ms=3, alpha=0.5, label="after (held out)")
-        stats = binned_statistics(x, before)
         ax.plot(stats["centre"], stats[f"mean_{'xyz'[k]}_um"], "k-", lw=1.5, label="binned mean")
         ax.set_title(f"residual {'xyz'[k]}")
         ax.set_xlabel(name)
         ax.set_ylabel("µm")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    panels[0].legend(fontsize=7)
+    save_png(fig, path)
+
+
+def display_label(label: str, machine: Any) -> str:
+    """An entry's label with its error component named as the machine file names it
+    (``parametric(component=dx_x)`` → ``parametric(component=EXX)`` for a file in ISO names)."""
+    return re.sub(r"(component=)(\w+)", lambda m: m[1] + machine.error_label(m[2]), label)
+
+
+def _shown_keys(entry: dict[str, Any], machine: Any) -> dict[str, Any]:
+    """An entry's identifying keys for the report, its component named as the file names it."""
+    hidden = ("cause", "parameters", "explained_fraction", "label", "evidence", "alternatives")
+    keys = {k: v for k, v in entry.items() if k not in hidden}
+    if isinstance(keys.get("component"), str):
+        keys["component"] = machine.error_label(keys["component"])
+    return keys
 
 
 def _slug(name: str) -> str:
@@ -64,16 +73,16 @@ def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagno
     res = diagnosis.residuals
     before = res.residual_um
     after = before - diagnosis.heldout_pred_um
-    measured = tuple("xyz".index(a) for a in diagnosis.summary["measured_axes"])
     words = report_markdown(diagnosis, title)
     (out / "report.md").write_text(words + "\n", encoding="utf-8")
     images: list[tuple[str, str]] = []
     binned: dict[str, Any] = {}
+    measured = ["xyz".index(a) for a in diagnosis.summary.get("measured_axes", "xyz")]
     for name, x in explanatory_variables(res).items():
         if np.ptp(x) == 0:
             continue
         fname = f"residual_vs_{_slug(name)}.png"
-        _plot_against(out / fname, name, x, before, after, measured)
+        _plot_against(out / fname, name, x, before, after, measured or [0, 1, 2])
         images.append((name, fname))
         binned[name] = binned_statistics(x, before)
     stats = {"before": axis_statistics(before), "after_heldout": axis_statistics(after)}
@@ -81,9 +90,10 @@ def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagno
     (out / "diagnosis.json").write_text(
         json.dumps(payload, indent=2, default=float, allow_nan=False)
     )
+    machine = res.machine
     rows = "".join(
         f"<tr><td>{html.escape(str(e.get('cause')))}</td><td>"
-        f"{html.escape(json.dumps({k: v for k, v in e.items() if k not in ('cause', 'parameters', 'explained_fraction', 'label', 'evidence', 'alternatives')}))}"
+        f"{html.escape(json.dumps(_shown_keys(e, machine)))}"
         f"</td><td>{html.escape(json.dumps(e.get('parameters', {}), default=float))}</td>"
         f"<td>{e.get('explained_fraction', 0):.3f}</td></tr>"
         for e in diagnosis.entries
@@ -102,7 +112,7 @@ def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagno
     if diagnosis.rounds:
         for r in diagnosis.rounds[0][:12]:
             cand_rows += (
-                f"<tr><td>{html.escape(r['label'])}</td><td>{r['p_adj']:.3g}</td>"
+                f"<tr><td>{html.escape(display_label(r['label'], machine))}</td><td>{r['p_adj']:.3g}</td>"
                 f"<td>{r.get('cv_gain', float('nan')):.3f}</td></tr>"
             )
     s = diagnosis.summary

@@ -267,7 +267,7 @@ def report_markdown(diagnosis: Diagnosis, title: str = "Diagnosis") -> str:
     return "\n".join(lines)
 
 
-def _short(e: dict[str, Any], eff: Effect | None) -> str:
+def _short(e: dict[str, Any], eff: Effect | None, machine: Any = None) -> str:
     cause, p = e["cause"], e.get("parameters", {})
     src = e.get("source", "machine")
     axis = e.get("axis") or (e.get("component") or "")[-1:]
@@ -287,7 +287,9 @@ def _short(e: dict[str, Any], eff: Effect | None) -> str:
     elif cause == "latency":
         what = f"latency {axis} {p.get('latency_ms', float('nan')):.3g} ms"
     elif e.get("component"):
-        what = f"{iso_name(e['component'])} {cause}"
+        c = e["component"]
+        named = machine.error_label(c) if machine is not None else c
+        what = f"{named if named != c else iso_name(c)} {cause}"  # as the machine file names it
     else:
         what = e.get("label", cause)
     return f"{what} [{src}]"
@@ -298,7 +300,8 @@ def verdict_line(diagnosis: Diagnosis) -> str:
     refused, the held-out RMS before and after."""
     effects = list(diagnosis.effects)
     parts = [
-        _short(e, effects[i] if i < len(effects) else None) for i, e in enumerate(diagnosis.entries)
+        _short(e, effects[i] if i < len(effects) else None, diagnosis.residuals.machine)
+        for i, e in enumerate(diagnosis.entries)
     ]
     refused = diagnosis.summary.get("refused_periods") or []
     if refused:

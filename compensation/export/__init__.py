@@ -4,11 +4,14 @@
 tables the format can hold to the model over the working volume, writes them (in memory) and
 measures what is left after the control's own interpolation (docs/export.md). The fit
 (:mod:`.decompose`, :mod:`.plan`) is shared; each format has its own module (:mod:`.sinumerik`,
-:mod:`.twincat`, :mod:`.linuxcnc`); :mod:`.report` writes the JSON, PNG and HTML.
+:mod:`.twincat`, :mod:`.linuxcnc`); :mod:`.report` writes the JSON, PNG and HTML;
+:mod:`.check` lists what no document settles (``unverified``) and writes the one-table sign
+check that settles it on the machine (``check_tables``).
 """
 
 from __future__ import annotations
 
+from .check import CheckResult, check_tables, unverified
 from .decompose import Decomposition, decompose, direction_axes, model_error_um
 from .export import (
     FORMATS,
@@ -19,6 +22,7 @@ from .export import (
     evaluation_points,
     export_tables,
     measure_residual,
+    validate_axes,
 )
 from .limits import ExportError
 from .plan import Plan
@@ -26,12 +30,14 @@ from .splines import Knots
 
 __all__ = [
     "FORMATS",
+    "CheckResult",
     "Decomposition",
     "ExportError",
     "ExportOptions",
     "ExportResult",
     "Knots",
     "Plan",
+    "check_tables",
     "decompose",
     "describe",
     "direction_axes",
@@ -40,4 +46,6 @@ __all__ = [
     "export_tables",
     "measure_residual",
     "model_error_um",
+    "unverified",
+    "validate_axes",
 ]

@@ -21,15 +21,23 @@ import numpy as np
 
 from ..machine import Machine
 from ..parametric_errors import AXES
+from .check import unverified
 from .decompose import Decomposition, decompose, direction_axes, model_error_um
 from .limits import POINT_LIMITS, ExportError
 from .linuxcnc import build_linuxcnc, linuxcnc_error_um, render_linuxcnc
 from .plan import Plan, left_out, own_axis_plan
 from .sinumerik import build_cec, cec_correction_mm, render_cec, total_extremes_mm
 from .splines import FloatArray, Knots, make_knots
-from .twincat import build_twincat, render_twincat, twincat_error_um
+from .twincat import build_twincat, render_startup, render_twincat, twincat_error_um
 
-__all__ = ["FORMATS", "ExportError", "ExportOptions", "ExportResult", "export_tables"]
+__all__ = [
+    "FORMATS",
+    "ExportError",
+    "ExportOptions",
+    "ExportResult",
+    "export_tables",
+    "validate_axes",
+]
 
 FORMATS = ("sinumerik-cec", "twincat-cnc", "linuxcnc")
 
@@ -48,9 +56,9 @@ class ExportOptions:
     points: int | None = None  # per table; default: about one point per 10 mm, at least 11
     max_points: int | None = None  # the control's limit per table (default: the format's)
     max_tables: int = 8  # sinumerik-cec: number of CEC tables (828D: 8)
-    products: bool = True  # sinumerik-cec: $AN_CEC_MULT_BY_TABLE for two-axis terms
+    products: bool = False  # sinumerik-cec: $AN_CEC_MULT_BY_TABLE (Siemens' example semantics)
+    invert_sign: bool = False  # the unverified sign (CEC values, TwinCAT cross) written negated
     cec_max_sum_mm: float = 1.0  # sinumerik-cec: MD32720 $MA_CEC_MAX_SUM
-    cec_resolution_um: float = 0.1  # sinumerik-cec: value resolution written (4 decimals of mm)
     cec_axis_names: tuple[str, str, str] = ("AX1", "AX2", "AX3")
     twincat_axis_numbers: tuple[int, int, int] = (1, 2, 3)
     twincat_axis_names: tuple[str, str, str] = ("X", "Y", "Z")
@@ -139,7 +147,7 @@ def _count_fits(machine: Machine, axes: Sequence[int], count: int) -> bool:
 _AXIS_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,15}")  # whole name (fullmatch: "X\n" is not one)
 
 
-def _check_axes(fmt: str, opts: ExportOptions) -> None:
+def validate_axes(fmt: str, opts: ExportOptions) -> None:
     """Axis names are identifiers (letter first, ≤ 16 letters, digits, _); TwinCAT logical axis
     numbers are distinct and ≥ 1 (0 is not allowed), LinuxCNC joints distinct and ≥ 0."""
     names = opts.cec_axis_names if fmt == "sinumerik-cec" else opts.twincat_axis_names
@@ -271,7 +279,7 @@ def _export_tables(
         tool = _check_tool(machine, machine.probe.offset_mm, "the machine's probe offset (--tool)")
     else:
         tool = _check_tool(machine, tool_mm)
-    _check_axes(fmt, opts)
+    validate_axes(fmt, opts)
     steps = _check_eval_steps(opts.eval_steps)
     n_eval = int(np.prod(steps)) * len(direction_combinations(direction_axes(machine)))
     if n_eval > _MAX_EVAL_POINTS:
@@ -314,12 +322,12 @@ def _export_tables(
             raise ExportError(
                 f"--cec-max-sum-mm must be a positive number, got {opts.cec_max_sum_mm}"
             )
-        res_mm = opts.cec_resolution_um / 1000.0
+        sign = -1 if opts.invert_sign else 1
         cec, plan = build_cec(
             d,
             max_tables=opts.max_tables,
             products=opts.products,
-            resolution_mm=res_mm,
+            sign=sign,
             min_rms_um=opts.min_rms_um,
         )
         peak, exact = total_extremes_mm(cec, d.direction_axes)
@@ -334,7 +342,8 @@ def _export_tables(
         files["NC_CEC.INI"] = render_cec(cec, opts.cec_axis_names, header)
 
         def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
-            return -1000.0 * cec_correction_mm(cec, q, dirs)
+            # the axis moves by minus the total (K3's sign statement; docs/export.md)
+            return sign * 1000.0 * cec_correction_mm(cec, q, dirs)
 
         for i, t in enumerate(cec):
             tables_info.append(
@@ -350,6 +359,10 @@ def _export_tables(
                     "max_mm": t.knots.end_mm,
                     "step_mm": t.knots.step_mm,
                     "max_abs_mm": round(float(np.max(np.abs(t.values_mm))), 7),
+                    # what the compensation asks of the output axis per mm of the input axis
+                    "max_slope_um_per_mm": round(
+                        1000.0 * float(np.max(np.abs(np.diff(t.values_mm)))) / t.knots.step_mm, 6
+                    ),
                 }
             )
         extra["limits"] = {
@@ -360,22 +373,26 @@ def _export_tables(
             "cec_max_sum_mm": opts.cec_max_sum_mm,
             "total_compensation_peak_mm": peak.tolist(),
             "total_compensation_peak_exact": exact,
-            "value_resolution_um": opts.cec_resolution_um,
+            "value_resolution_um": 0.1,
+            # what a referencing (rate) table would add on its own: the most the result changes
+            # between the two readings of "added as an additional compensation value"
+            "product_rate_own_max_um": max(
+                (1000.0 * float(np.max(np.abs(t.values_mm))) for t in cec if t.mult_by is not None),
+                default=0.0,
+            ),
         }
+        extra["unverified"] = unverified(fmt, products=bool(plan.products))
         if opts.products and plan.products:
             flat, _ = build_cec(
-                d,
-                max_tables=opts.max_tables,
-                products=False,
-                resolution_mm=res_mm,
-                min_rms_um=opts.min_rms_um,
+                d, max_tables=opts.max_tables, products=False, sign=sign, min_rms_um=opts.min_rms_um
             )
             extra["residual_without_products_um"] = measure_residual(
-                machine, tool, lambda q, s: -1000.0 * cec_correction_mm(flat, q, s), steps
+                machine, tool, lambda q, s: sign * 1000.0 * cec_correction_mm(flat, q, s), steps
             )[0]
     elif fmt == "twincat-cnc":
         plan = own_axis_plan(d, cross=opts.twincat_cross, min_rms_um=opts.min_rms_um)
-        lists = build_twincat(plan, knots)
+        cross_sign = -1 if opts.invert_sign else 1
+        lists = build_twincat(plan, knots, cross_sign)
         for entry in lists:
             nr = opts.twincat_axis_numbers[entry.axis]
             files[f"achskw{nr}.lis"] = render_twincat(
@@ -393,16 +410,17 @@ def _export_tables(
                     "cross_points": None if entry.cross_knots is None else entry.cross_knots.count,
                 }
             )
-        files["startup-snippet.txt"] = _twincat_startup(lists, opts)
+        files["startup-snippet.txt"] = render_startup(lists, opts.twincat_axis_numbers)
 
         def represented(q: FloatArray, dirs: FloatArray) -> FloatArray:
-            return twincat_error_um(lists, q, dirs)
+            return twincat_error_um(lists, q, dirs, cross_sign)
 
         extra["limits"] = {
             "max_points": limit,
             "points_source": source,
             "value_range": "SGN32 in 0.1 µm",
         }
+        extra["unverified"] = unverified(fmt, cross=any(e.cross_master is not None for e in lists))
     else:
         plan = own_axis_plan(d, cross=False, min_rms_um=opts.min_rms_um)
         joints = build_linuxcnc(plan, knots, opts.linuxcnc_file_type)
@@ -487,27 +505,6 @@ def _runtime_parts(machine: Machine) -> list[str]:
     return out
 
 
-def _twincat_startup(lists: Sequence[Any], opts: ExportOptions) -> str:
-    lines = [
-        "# TwinCAT CNC start-up list entries for these compensation lists (adapt the paths)",
-        f"zahl_kw                   {len(lists)}",
-    ]
-    for i, entry in enumerate(lists):
-        nr = opts.twincat_axis_numbers[entry.axis]
-        lines += [
-            f"achs_kw_log_ax_nr[{i}]      {nr}",
-            f"achs_kw[{i}]                achskw{nr}.lis",
-        ]
-    lines += ["#", "# axis parameter lists: activate per axis"]
-    for entry in lists:
-        nr = opts.twincat_axis_numbers[entry.axis]
-        lines.append(
-            f"#   axis {nr}: lr_param.ssfk 1"
-            + (", lr_param.crosscomp 1" if entry.cross_master is not None else "")
-        )
-    return "\n".join(lines) + "\n"
-
-
 def _linuxcnc_ini(joints: Sequence[Any], opts: ExportOptions, header: Sequence[str]) -> str:
     lines = [f"# {h}" for h in header]
     lines.append(
@@ -546,4 +543,7 @@ def describe(result: ExportResult) -> list[str]:
         lines += [f"    {p['output']}: {p['part']}: {p['rms_um']:.3f} µm" for p in big]
     for note in result.report["not_modelled_here"]:
         lines.append(f"  note: {note}")
+    for item in result.report.get("unverified", []):
+        lines.append(f"  NOT VERIFIED: {item['point']}: assumed {item['assumed']}")
+        lines.append(f"    settle it: {item['settle']}")
     return lines

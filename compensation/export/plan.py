@@ -84,10 +84,10 @@ def _candidates(d: Decomposition, products: bool, min_rms_um: float) -> dict[Any
         for t in d.interactions:
             if t.energy < floor:
                 continue
-            req: tuple[tuple[str, tuple[int, ...]], ...] = (
-                ("plain", (t.a, t.k)),
-                ("plain", (t.b, t.k)),
-            )
+            # Siemens' example semantics: the referenced (arm) table acts only as the factor and
+            # the referencing (rate) table's own value is < 1/1000 of the product: no plain
+            # table is needed to take either back
+            req: tuple[tuple[str, tuple[int, ...]], ...] = ()
             if t.rank > 1:
                 req += (("product", (t.a, t.b, t.k, t.rank - 1)),)
             key = (t.a, t.b, t.k, t.rank)
@@ -99,9 +99,9 @@ def choose_greedy(
     d: Decomposition, max_tables: int, products: bool, min_rms_um: float = 0.01
 ) -> Plan:
     """Spend at most ``max_tables`` tables (a direction pair counts 2, a product 2) on the parts
-    that remove the most mean square per table, requirements included (a product needs the plain
-    tables of both its axes to take back the tables' own values); a part smaller than
-    ``min_rms_um`` RMS is not worth a table. The mean of an output goes with its first table."""
+    that remove the most mean square per table, requirements included (a direction part needs
+    its plain table, a rank-2 product its rank-1 product); a part smaller than ``min_rms_um``
+    RMS is not worth a table. The mean of an output goes with its first table."""
     cands = _candidates(d, products, min_rms_um)
     chosen: set[Any] = set()
     budget = max_tables

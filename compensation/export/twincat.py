@@ -28,7 +28,7 @@ from .limits import SGN32, ExportError
 from .plan import Plan
 from .splines import FloatArray, Knots, evaluate
 
-__all__ = ["TwinCatList", "build_twincat", "render_twincat", "twincat_error_um"]
+__all__ = ["TwinCatList", "build_twincat", "render_startup", "render_twincat", "twincat_error_um"]
 
 NDInt = np.ndarray  # integer values in 0.1 µm
 
@@ -61,8 +61,12 @@ def _pos_01um(mm: float, what: str) -> int:
     return int(_to_01um(np.array([mm * 1000.0]), what)[0])
 
 
-def build_twincat(plan: Plan, knots: tuple[Knots, Knots, Knots]) -> list[TwinCatList]:
-    """One list per axis from an own-axis plan (with at most one cross table per axis)."""
+def build_twincat(
+    plan: Plan, knots: tuple[Knots, Knots, Knots], cross_sign: int = 1
+) -> list[TwinCatList]:
+    """One list per axis from an own-axis plan (with at most one cross table per axis); the cross
+    ``correction`` holds ``cross_sign`` × the error (+1: the leadscrew tables' meaning, −1: the
+    opposite, for a control whose ``--check-table`` showed it)."""
     lists: list[TwinCatList] = []
     for k in range(3):
         base = plan.plain.get((k, k), np.zeros(knots[k].count))
@@ -76,7 +80,7 @@ def build_twincat(plan: Plan, knots: tuple[Knots, Knots, Knots]) -> list[TwinCat
             m = masters[0]
             entry.cross_master = m
             entry.cross_knots = knots[m]
-            entry.cross_01um = _to_01um(plan.plain[(m, k)], f"the {name} cross table")
+            entry.cross_01um = _to_01um(cross_sign * plan.plain[(m, k)], f"the {name} cross table")
         for kn in (knots[k], entry.cross_knots):
             if kn is not None:
                 _pos_01um(kn.start_mm, f"the {name} table positions")
@@ -86,10 +90,11 @@ def build_twincat(plan: Plan, knots: tuple[Knots, Knots, Knots]) -> list[TwinCat
 
 
 def twincat_error_um(
-    lists: Sequence[TwinCatList], q_mm: FloatArray, dirs: FloatArray
+    lists: Sequence[TwinCatList], q_mm: FloatArray, dirs: FloatArray, cross_sign: int = 1
 ) -> FloatArray:
     """The error (N, 3) µm the lists take off at command positions ``q_mm`` with travel
-    directions ``dirs`` (N, 3) ±1: the writer's own emulation (linear interpolation)."""
+    directions ``dirs`` (N, 3) ±1: the writer's own emulation (linear interpolation); a cross
+    value is taken off like a leadscrew value (``cross_sign`` +1) or added (−1)."""
     q = np.asarray(q_mm, dtype=float)
     out = np.zeros((q.shape[0], 3))
     for entry in lists:
@@ -101,7 +106,7 @@ def twincat_error_um(
         if entry.cross_master is not None:
             assert entry.cross_knots is not None and entry.cross_01um is not None
             cross = evaluate(entry.cross_knots, entry.cross_01um, q[:, entry.cross_master])
-            out[:, k] += cross / 10.0
+            out[:, k] += cross_sign * cross / 10.0
     return out
 
 
@@ -148,4 +153,27 @@ def render_twincat(
     width = max(len(r[0]) for r in rows) + 2
     lines = [f"# {h}" if h else "#" for h in header]
     lines += [f"{name.ljust(width)}{value}" for name, value in rows]
+    return "\n".join(lines) + "\n"
+
+
+def render_startup(lists: Sequence[TwinCatList], axis_numbers: Sequence[int]) -> str:
+    """The start-up list entries (``zahl_kw``, ``achs_kw_log_ax_nr[i]``, ``achs_kw[i]``) for
+    ``lists`` and, as comments, the axis parameters that activate them."""
+    lines = [
+        "# TwinCAT CNC start-up list entries for these compensation lists (adapt the paths)",
+        f"zahl_kw                   {len(lists)}",
+    ]
+    for i, entry in enumerate(lists):
+        nr = axis_numbers[entry.axis]
+        lines += [
+            f"achs_kw_log_ax_nr[{i}]      {nr}",
+            f"achs_kw[{i}]                achskw{nr}.lis",
+        ]
+    lines += ["#", "# axis parameter lists: activate per axis"]
+    for entry in lists:
+        nr = axis_numbers[entry.axis]
+        lines.append(
+            f"#   axis {nr}: lr_param.ssfk 1"
+            + (", lr_param.crosscomp 1" if entry.cross_master is not None else "")
+        )
     return "\n".join(lines) + "\n"

@@ -4,8 +4,10 @@ Why numba: the rotation part is a tensor-product Squad (16 Squad segments along 
 1 along z, each a few quaternion log/exp) and the translation part a tricubic B-spline (64
 coefficients per component). In numpy this means dozens of temporary (N, 4) arrays per point
 batch and ~1 ms of interpreter overhead for a single point; compiled, one point costs ~2 µs and
-the batch runs in parallel. ``cache=True`` keeps the JIT cost out of later processes; the grid
-warms the kernels up when it is constructed, so the first correction is not the slow one.
+the batch runs in parallel. An on-disk cache keeps the JIT cost out of later processes where one
+is writable (:func:`..jit.njit_cached`; a read-only install without a home compiles in every
+process); the grid warms the kernels up when it is constructed, so the first correction is not
+the slow one.
 
 Quaternions are (w, x, y, z). ``_qexp``/``_qlog`` follow the paper's convention
 (``exp([0, θn]) = [cos θ, sin θ n]``) and switch to truncated series below θ = 10⁻² (or
@@ -19,7 +21,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
+
+from ..jit import kernel_cache_dir, njit_cached
 
 SERIES_LIMIT2 = 1e-4  # θ² (or (|v|/w)²) below which the series branch is used
 _FAST = {
@@ -31,7 +35,7 @@ _FAST = {
 }  # no "nnan"/"ninf": inputs are sanitised, but keep IEEE specials safe
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _qmul(aw, ax, ay, az, bw, bx, by, bz):  # type: ignore[no-untyped-def]
     return (
         aw * bw - ax * bx - ay * by - az * bz,
@@ -41,7 +45,7 @@ def _qmul(aw, ax, ay, az, bw, bx, by, bz):  # type: ignore[no-untyped-def]
     )
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _qexp(vx, vy, vz):  # type: ignore[no-untyped-def]
     t2 = vx * vx + vy * vy + vz * vz
     if t2 < SERIES_LIMIT2:
@@ -54,7 +58,7 @@ def _qexp(vx, vy, vz):  # type: ignore[no-untyped-def]
     return (c, sc * vx, sc * vy, sc * vz)
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _qlog(w, x, y, z):  # type: ignore[no-untyped-def]
     s2 = x * x + y * y + z * z
     if w > 0.0 and s2 < SERIES_LIMIT2 * w * w:
@@ -68,7 +72,7 @@ def _qlog(w, x, y, z):  # type: ignore[no-untyped-def]
     return (f * x, f * y, f * z)
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _qexp_series(vx, vy, vz):  # type: ignore[no-untyped-def]
     """``_qexp`` without the branch: valid (exact) only for θ² < SERIES_LIMIT2."""
     t2 = vx * vx + vy * vy + vz * vz
@@ -77,7 +81,7 @@ def _qexp_series(vx, vy, vz):  # type: ignore[no-untyped-def]
     return (c, sc * vx, sc * vy, sc * vz)
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _qlog_series(w, x, y, z):  # type: ignore[no-untyped-def]
     """``_qlog`` without the branch: valid (exact) only for w > 0, (|v|/w)² < SERIES_LIMIT2."""
     iw = 1.0 / w
@@ -88,7 +92,7 @@ def _qlog_series(w, x, y, z):  # type: ignore[no-untyped-def]
     return (f * x, f * y, f * z)
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _slerp(aw, ax, ay, az, bw, bx, by, bz, h):  # type: ignore[no-untyped-def]
     rw, rx, ry, rz = _qmul(aw, -ax, -ay, -az, bw, bx, by, bz)
     lx, ly, lz = _qlog(rw, rx, ry, rz)
@@ -96,7 +100,7 @@ def _slerp(aw, ax, ay, az, bw, bx, by, bz, h):  # type: ignore[no-untyped-def]
     return _qmul(aw, ax, ay, az, ew, ex, ey, ez)
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _ctrl(mw, mx, my, mz, cw, cx, cy, cz, pw, px, py, pz):  # type: ignore[no-untyped-def]
     """Shoemake/Dam inner control point s = c·exp(−(log(c⁻¹p) + log(c⁻¹m))/4)."""
     a = _qmul(cw, -cx, -cy, -cz, pw, px, py, pz)
@@ -107,7 +111,7 @@ def _ctrl(mw, mx, my, mz, cw, cx, cy, cz, pw, px, py, pz):  # type: ignore[no-un
     return _qmul(cw, cx, cy, cz, e[0], e[1], e[2], e[3])
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _squad4(buf, lo_ok, hi_ok, h):  # type: ignore[no-untyped-def]
     """Squad between buf[1] and buf[2] (rows of a (4, 4) array); neighbours buf[0], buf[3].
 
@@ -148,7 +152,7 @@ def _squad4(buf, lo_ok, hi_ok, h):  # type: ignore[no-untyped-def]
     return _slerp(a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3], 2.0 * h * (1.0 - h))
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _locate(v, lo, inv_d, n):  # type: ignore[no-untyped-def]
     u = (v - lo) * inv_d
     i = int(math.floor(u))  # noqa: RUF046 (explicit int for numba typing)
@@ -159,7 +163,7 @@ def _locate(v, lo, inv_d, n):  # type: ignore[no-untyped-def]
     return i, u - i
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _basis3(t, span, x, out, left, right):  # type: ignore[no-untyped-def]
     """The 4 non-zero cubic B-spline basis values at x in knot span ``span`` (NURBS book A2.2)."""
     out[0] = 1.0
@@ -174,7 +178,7 @@ def _basis3(t, span, x, out, left, right):  # type: ignore[no-untyped-def]
         out[j] = saved
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def _eval_range(  # type: ignore[no-untyped-def]
     start, stop, points, stylus, dev, lo, inv_d, shape,
     q, sx, wq, ws, node, small, tx, ty, tz, spanx, spany, spanz, coef, ncomp,
@@ -326,7 +330,7 @@ def _eval_range(  # type: ignore[no-untyped-def]
             out_t[n, 2] = t2
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST, parallel=True)
+@njit_cached(error_model="numpy", fastmath=_FAST, parallel=True)
 def eval_parallel(  # type: ignore[no-untyped-def]
     points, stylus, dev, lo, inv_d, shape,
     q, sx, wq, ws, node, small, tx, ty, tz, spanx, spany, spanz, coef, ncomp,
@@ -345,7 +349,7 @@ def eval_parallel(  # type: ignore[no-untyped-def]
         )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy", fastmath=_FAST)
+@njit_cached(error_model="numpy", fastmath=_FAST)
 def eval_serial(  # type: ignore[no-untyped-def]
     points, stylus, dev, lo, inv_d, shape,
     q, sx, wq, ws, node, small, tx, ty, tz, spanx, spany, spanz, coef, ncomp,
@@ -366,3 +370,9 @@ def eval_serial(  # type: ignore[no-untyped-def]
         q, sx, wq, ws, node, small, tx, ty, tz, spanx, spany, spanz, coef, ncomp,
         out, out_q, out_t, want_pose,
     )  # fmt: skip
+
+
+def kernels_cache_dir() -> str | None:
+    """Where these kernels' compiled code is cached, None when compiled anew in every process
+    (no writable cache folder: :mod:`..jit`)."""
+    return kernel_cache_dir(_qmul)

@@ -26,10 +26,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 from numpy.typing import NDArray
 from scipy.interpolate import make_interp_spline
 
+from ..jit import njit_cached
 from .kernels import _basis3, _locate
 
 __all__ = [
@@ -290,7 +291,7 @@ def variance_from_covariance(cov: FloatArray, stylus_mm: FloatArray) -> FloatArr
     return np.maximum(var, 0.0)
 
 
-@njit(cache=True, parallel=True)
+@njit_cached(parallel=True)
 def eval_spline(points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
     """Tricubic B-spline values (N, C) of ``coef`` (nx, ny, nz, C) at clamped ``points`` (N, 3)
     mm (same knots and cell spans as the grid's translation spline)."""
@@ -298,14 +299,14 @@ def eval_spline(points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef,
         _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out)
 
 
-@njit(cache=True)
+@njit_cached()
 def eval_spline_serial(points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
     """:func:`eval_spline` without threads (one reading: no thread-pool wake-up)."""
     for n in range(points.shape[0]):
         _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out)
 
 
-@njit(cache=True)
+@njit_cached()
 def _spline_row(n, points, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, out):  # type: ignore[no-untyped-def]
     nx, ny, nz = shape[0], shape[1], shape[2]
     ncomp = coef.shape[3]
@@ -439,7 +440,7 @@ class PointUncertainty:
         return float(o[0, 0]), float(o[0, 1]), float(o[0, 2])
 
 
-@njit(cache=True)
+@njit_cached()
 def _u_row(
     n, points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
 ):  # type: ignore[no-untyped-def]
@@ -481,7 +482,7 @@ def _u_row(
         out[n, k] = th[20] * math.sqrt(vk + f * lever_wp * lever_wp + th[19])
 
 
-@njit(cache=True, parallel=True)
+@njit_cached(parallel=True)
 def _u_rows(points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, out):  # type: ignore[no-untyped-def]
     cov = np.empty((points.shape[0], coef.shape[3]))
     for n in prange(points.shape[0]):
@@ -506,7 +507,7 @@ def _u_rows(points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spa
         )
 
 
-@njit(cache=True)
+@njit_cached()
 def _u_rows_serial(
     points, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, out
 ):  # type: ignore[no-untyped-def]
@@ -519,7 +520,7 @@ def _u_rows_serial(
         )  # fmt: skip
 
 
-@njit(cache=True)
+@njit_cached()
 def _point_kernel(
     point, stylus, d_t, lo, inv_d, shape, tx, ty, tz, spanx, spany, spanz, coef, th, cov, out
 ):  # type: ignore[no-untyped-def]

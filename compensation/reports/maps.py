@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..formats.atomic import atomic_output
 from ..machine import Machine
 
 FloatArray = NDArray[np.float64]
@@ -228,15 +229,8 @@ def line_report(
 
 def write_csv_atomic(path: Path, header: list[str], table: FloatArray) -> None:
     """Write a numeric CSV via a temporary file and rename: nothing partial is ever left."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        with tmp.open("w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(header)
-            for row in table:
-                w.writerow([f"{v:.6f}" if abs(v) >= 1e-3 or v == 0 else f"{v:.6e}" for v in row])
-        tmp.replace(path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_output(path) as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        for row in table:
+            w.writerow([f"{v:.6f}" if abs(v) >= 1e-3 or v == 0 else f"{v:.6e}" for v in row])

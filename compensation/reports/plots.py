@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..formats.atomic import atomic_output
 from ..machine import Machine
 from ..parametric_errors import AXES
 from .maps import LineReport, VolumetricMap, diagonal_endpoints
@@ -18,41 +19,66 @@ from .maps import LineReport, VolumetricMap, diagonal_endpoints
 
 def save_png(fig: Figure, path: str | Path) -> Path:
     """Draw ``fig`` on an Agg canvas and write it to ``path`` as PNG (110 dpi) atomically (a
-    temporary sibling renamed over it), creating the folder; returns the path."""
+    temporary sibling renamed over it, mode as the umask gives), creating the folder; returns
+    the path."""
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     FigureCanvasAgg(fig)
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    tmp.replace(out)
+    with atomic_output(out, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=110)
     return out
 
 
 def plot_parametric_errors(machine: Machine, path: str | Path, samples: int = 200) -> Path:
-    """One panel per axis and kind (linear µm / angular µrad) with every table and its 2σ band."""
-    fig = Figure(figsize=(13, 8), layout="constrained")
-    axs = fig.subplots(2, 3, squeeze=False)
-    for col, axis in enumerate(AXES):
-        k = col
+    """One panel per axis and kind (linear µm / angular µrad) that has a table, each table
+    with its 2σ band, named as the machine file names it (ISO 230-1 names when it used them);
+    no panel for an axis and kind without tables (a one-axis stage shows one panel). A machine
+    without any table gets a figure saying so."""
+    panels = [
+        (axis, kind)
+        for kind in ("d", "e")
+        for axis in AXES
+        if any(
+            t.component.axis == axis and t.component.kind == kind for t in machine.tables.values()
+        )
+    ]
+    title = f"{machine.name} ({machine.model}): parametric errors, shaded = random 2σ"
+    if not panels:
+        fig = Figure(figsize=(8, 2.2), layout="constrained")
+        fig.text(
+            0.5,
+            0.5,
+            "no parametric error tables: every one of the 21 errors is zero in this model",
+            ha="center",
+            va="center",
+        )
+        fig.suptitle(f"{machine.name} ({machine.model}): parametric errors")
+        return save_png(fig, path)
+    cols = min(3, len(panels))
+    rows = (len(panels) + cols - 1) // cols
+    fig = Figure(figsize=(4.4 * cols, 4 * rows), layout="constrained")
+    axs = fig.subplots(rows, cols, squeeze=False)
+    for i, (axis, kind) in enumerate(panels):
+        ax = axs[i // cols][i % cols]
+        k = AXES.index(axis)
         q = np.linspace(machine.volume.lower_mm[k], machine.volume.upper_mm[k], samples)
-        for row, kind in enumerate(("d", "e")):
-            ax = axs[row][col]
-            for name, table in sorted(machine.tables.items()):
-                c = table.component
-                if c.axis != axis or c.kind != kind:
-                    continue
-                v = table.evaluate(q)
-                (line,) = ax.plot(q, v, label=f"{name} (pv {np.ptp(v):.2f})")
-                if table.has_random:
-                    r = table.evaluate_random(q)
-                    ax.fill_between(q, v - r, v + r, color=line.get_color(), alpha=0.15)
-            ax.set_title(f"{'linear' if kind == 'd' else 'angular'} errors of {axis.upper()}")
-            ax.set_xlabel(f"{axis} position / mm")
-            ax.set_ylabel("µm" if kind == "d" else "µrad")
-            ax.grid(True, alpha=0.3)
-            if ax.lines:
-                ax.legend(fontsize=7)
-    fig.suptitle(f"{machine.name} ({machine.model}): parametric errors, shaded = random 2σ")
+        for name, table in sorted(machine.tables.items()):
+            c = table.component
+            if c.axis != axis or c.kind != kind:
+                continue
+            v = table.evaluate(q)
+            label = f"{machine.error_label(name)} (pv {np.ptp(v):.2f})"
+            (line,) = ax.plot(q, v, label=label)
+            if table.has_random:
+                r = table.evaluate_random(q)
+                ax.fill_between(q, v - r, v + r, color=line.get_color(), alpha=0.15)
+        ax.set_title(f"{'linear' if kind == 'd' else 'angular'} errors of {axis.upper()}")
+        ax.set_xlabel(f"{axis} position / mm")
+        ax.set_ylabel("µm" if kind == "d" else "µrad")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    for j in range(len(panels), rows * cols):
+        axs[j // cols][j % cols].set_visible(False)
+    fig.suptitle(title)
     return save_png(fig, path)
 
 
@@ -63,8 +89,9 @@ def plot_vector_map(
     Fig. 2c/3d. ``magnification`` defaults to making the largest error 6 % of the volume size."""
     pts, err = vmap.points_mm, vmap.error_um / 1000.0
     size = float(np.max(np.ptp(pts, axis=0)))
-    peak = float(np.max(np.linalg.norm(err, axis=1))) or 1.0
-    mag = magnification if magnification is not None else 0.06 * size / peak
+    peak = float(np.max(np.linalg.norm(err, axis=1)))  # mm
+    auto = 0.06 * size / peak if peak > 0 else 1.0  # no error: nothing to magnify (was shown
+    mag = magnification if magnification is not None else auto  # as a 1000 µm peak)
     nx, ny, nz = vmap.steps
     nominal = pts.reshape(nx, ny, nz, 3)
     moved = (pts + mag * err).reshape(nx, ny, nz, 3)
@@ -75,6 +102,14 @@ def plot_vector_map(
         return i in (0, n - 1)
 
     styles = ((nominal, {"color": "0.75", "lw": 0.5}), (moved, {"color": "tab:red", "lw": 0.9}))
+    ax.plot([], [], color="0.75", lw=1.5, label="nominal grid (indicated positions)")
+    ax.plot(
+        [],
+        [],
+        color="tab:red",
+        lw=1.5,
+        label=f"distorted: indicated + error × {mag:.3g} (true positions, magnified)",
+    )
     for grid, style in styles:  # grid lines on the six faces of the volume
         for i in range(nx):
             for j in range(ny):
@@ -92,8 +127,9 @@ def plot_vector_map(
     ax.set_ylabel("y / mm")
     ax.set_zlabel("z / mm")
     ax.set_title(
-        f"{title} volumetric error map, magnification ×{mag:.0f} (peak {peak * 1000:.1f} µm)"
+        f"{title} volumetric error map, magnification ×{mag:.3g} (peak {peak * 1000:.1f} µm)"
     )
+    ax.legend(loc="upper left", fontsize=8)
     return save_png(fig, path)
 
 

@@ -106,8 +106,11 @@ class McResult:
     ``mean`` y, ``u`` u(y), ``low``/``high`` the probabilistically symmetric 100p % interval,
     ``U95`` the half-width of the zero-centred 100p % interval, ``trials`` = runs × run size,
     ``stable`` whether the stopping rule was met (always False for a single run),
-    ``tolerance`` δ per output, ``worst`` max over outputs and statistics of 2s/δ.
-    ``values`` (trials, K) when kept."""
+    ``tolerance`` δ per output, ``worst`` max over the watched outputs (``stop_on``) and
+    statistics of 2s/δ; ``ratio`` (4, K) 2s/δ of y, u, y_low, y_high per output after the last
+    run (NaN before a second run). ``values`` (trials, len(value_columns)) of the outputs
+    ``value_columns`` when kept; ``interval_all_trials`` (K,) whether an output's interval comes
+    from all its values (else from the mean of the runs' quantiles)."""
 
     mean: FloatArray
     u: FloatArray
@@ -122,11 +125,21 @@ class McResult:
     probability: float
     interval_method: str
     values: FloatArray | None
+    value_columns: tuple[int, ...] = ()
+    stop_on: tuple[int, ...] = ()
+    ratio: FloatArray | None = None
+    interval_all_trials: NDArray[np.bool_] | None = None
 
     @property
     def U(self) -> FloatArray:
         """Expanded uncertainty with coverage factor k = 2."""
         return 2.0 * self.u
+
+    def column(self, output: int) -> FloatArray | None:
+        """All trials' values of output ``output`` (trials,), None when they were not kept."""
+        if self.values is None or output not in self.value_columns:
+            return None
+        return self.values[:, self.value_columns.index(output)]
 
     def info(self) -> dict[str, Any]:
         """JSON-able: trials, runs, whether stable, the worst 2s/δ (None when not finite), the
@@ -160,79 +173,145 @@ def _run_stats(y: FloatArray, p: float) -> FloatArray:
     )
 
 
+def _plan(s: MonteCarloSettings) -> list[int]:
+    """Run sizes: a fixed number split into runs as equal as possible (none tiny), or runs of
+    one size, as many as fit under ``max_trials`` (the loop stops once stable)."""
+    size = s.run_size()
+    if s.trials is not None:
+        n_runs = max(1, round(s.trials / size))
+        base, extra = divmod(s.trials, n_runs)  # np.array_split's sizes, without an arange of
+        return [base + (i < extra) for i in range(n_runs)]  # all trials (1e9: 7.45 GiB)
+    return [size] * max(1, s.max_trials // size) if s.max_trials >= size else [s.max_trials]
+
+
+def _tolerance(s: MonteCarloSettings, u: FloatArray) -> FloatArray:
+    return (
+        np.full(u.shape, s.tolerance) if s.tolerance is not None else numerical_tolerance(u, s.ndig)
+    )
+
+
+def _stability(
+    stats: list[FloatArray], sizes: list[int], s: MonteCarloSettings
+) -> tuple[FloatArray, FloatArray]:
+    """δ per output and 2s/δ (4, K) of the run averages of y, u, y_low, y_high (§7.9.4)."""
+    tol = _tolerance(s, _pooled(stats, sizes)[1])
+    arr = np.stack(stats)  # (h, 5, K)
+    sd = arr[:, :4].std(axis=0, ddof=1) / math.sqrt(arr.shape[0])  # (4, K)
+    return tol, np.where(np.isfinite(tol), 2.0 * sd / tol, 0.0)
+
+
+class _Kept:
+    """The values held for the final interval and for plots: every output while trials × K
+    fits ``limit``, then only the outputs ``keep`` (while they fit), then none."""
+
+    def __init__(self, k: int, keep: tuple[int, ...], limit: int) -> None:
+        self.columns: tuple[int, ...] = tuple(range(k))
+        self.keep, self.limit = keep, limit
+        self.parts: list[FloatArray] = []
+
+    def add(self, y: FloatArray, done: int) -> None:
+        if self.columns and done * len(self.columns) > self.limit:
+            cols = self.keep if done * len(self.keep) <= self.limit else ()
+            idx = [self.columns.index(c) for c in cols]
+            self.parts = [part[:, idx] for part in self.parts] if cols else []
+            self.columns = cols
+        if self.columns:
+            self.parts.append(y[:, list(self.columns)] if len(self.columns) < y.shape[1] else y)
+
+    def values(self) -> FloatArray | None:
+        return np.concatenate(self.parts) if self.columns and self.parts else None
+
+
 def run_monte_carlo(
     draw: Callable[[int, np.random.Generator], FloatArray],
     rng: np.random.Generator,
     settings: MonteCarloSettings | None = None,
     progress: ProgressFn | None = None,
+    *,
+    stop_on: tuple[int, ...] | None = None,
+    keep: tuple[int, ...] | None = None,
+    extra_ratio: Callable[[], float] | None = None,
 ) -> McResult:
     """Run ``draw(M, rng) → (M, K)`` output values in runs until stable (or the fixed number of
-    trials); see the module docstring. ``progress(trials_done, worst)`` after every run
-    (``worst`` = max 2s/δ, NaN before the second run). Non-finite outputs raise ValueError."""
+    trials); see the module docstring. ``stop_on``: the outputs the stopping rule watches (None:
+    all; the others are reported with the precision the watched ones needed, their 2s/δ in
+    :attr:`McResult.ratio`). ``keep``: the outputs whose values are kept when all of them do
+    not fit ``keep_values_limit`` (None: ``stop_on``). ``extra_ratio()``: a further 2s/δ the
+    rule must bring to ≤ 1, called after every run from the second (a statistic the draw keeps
+    itself, e.g. a share of trials). ``progress(trials_done, worst)`` after
+    every run (``worst`` = max 2s/δ of the watched outputs, NaN before the second run).
+    Non-finite outputs raise ValueError."""
     s = settings or MonteCarloSettings()
-    size = s.run_size()
-    if s.trials is not None:  # a fixed number in runs as equal as possible (none tiny)
-        n_runs = max(1, round(s.trials / size))
-        base, extra = divmod(s.trials, n_runs)  # np.array_split's sizes, without an arange of
-        plan = [base + (i < extra) for i in range(n_runs)]  # all trials (1e9: a 7.45 GiB array)
-    else:  # adaptive: runs of one size, as many as fit under max_trials
-        plan = [size] * max(1, s.max_trials // size) if s.max_trials >= size else [s.max_trials]
     stats: list[FloatArray] = []
     sizes: list[int] = []
-    kept: list[FloatArray] = []
-    keep = True
+    kept: _Kept | None = None
+    watch: list[int] = []
     done = 0
     worst = math.nan
     stable = False
-    tol = np.zeros(0)
-    for m in plan:
+    ratio: FloatArray | None = None
+    for m in _plan(s):
         y = np.asarray(draw(m, rng), dtype=float)
         if y.ndim != 2 or y.shape[0] != m:
             raise ValueError(f"a run must give ({m}, K) values, got {y.shape}")
         if not np.all(np.isfinite(y)):
             raise ValueError("the Monte Carlo model gave non-finite values")
+        if kept is None:
+            watch = list(range(y.shape[1])) if stop_on is None else sorted(set(stop_on))
+            if any(not 0 <= i < y.shape[1] for i in watch):
+                raise ValueError(f"stop_on {stop_on} names outputs beyond the {y.shape[1]} given")
+            cols = tuple(watch) if keep is None else tuple(sorted(set(keep)))
+            kept = _Kept(y.shape[1], cols, s.keep_values_limit)
         stats.append(_run_stats(y, s.probability))
         sizes.append(m)
         done += m
-        if keep and (done * y.shape[1] <= s.keep_values_limit):
-            kept.append(y)
-        else:
-            keep, kept = False, []
+        kept.add(y, done)
         if len(stats) >= 2:
-            u_all = _pooled(stats, sizes)[1]
-            tol = (
-                np.full(u_all.shape, s.tolerance)
-                if s.tolerance is not None
-                else numerical_tolerance(u_all, s.ndig)
-            )
-            arr = np.stack(stats)  # (h, 5, K)
-            h = arr.shape[0]
-            sd = arr[:, :4].std(axis=0, ddof=1) / math.sqrt(h)  # (4, K)
-            ratio = np.where(np.isfinite(tol), 2.0 * sd / tol, 0.0)
-            worst = float(ratio.max()) if ratio.size else 0.0
+            _, ratio = _stability(stats, sizes, s)
+            worst = float(ratio[:, watch].max()) if watch else 0.0
+            if extra_ratio is not None:
+                worst = max(worst, float(extra_ratio()))
             stable = worst <= 1.0
         if progress is not None:
             progress(done, worst)
         if stable and s.trials is None:
             break
-    if not stats:
+    if not stats or kept is None:
         raise ValueError("no trials were run")
+    return _result(stats, sizes, s, kept, done, stable, worst, ratio, tuple(watch))
+
+
+def _result(
+    stats: list[FloatArray],
+    sizes: list[int],
+    s: MonteCarloSettings,
+    kept: _Kept,
+    done: int,
+    stable: bool,
+    worst: float,
+    ratio: FloatArray | None,
+    watch: tuple[int, ...],
+) -> McResult:
+    """The summary of all runs: pooled y and u; the interval of each output from all its values
+    when they were kept, else from the mean of the runs' quantiles."""
     arr = np.stack(stats)
+    k = arr.shape[2]
     mean, u = _pooled(stats, sizes)
-    if kept:
-        values = np.concatenate(kept)
+    low, high, u95 = arr[:, 2].mean(axis=0), arr[:, 3].mean(axis=0), arr[:, 4].mean(axis=0)
+    values = kept.values()
+    from_all = np.zeros(k, dtype=bool)
+    if values is not None:
         st = _run_stats(values, s.probability)
-        low, high, u95, method = st[2], st[3], st[4], "all trials"
+        cols = list(kept.columns)
+        low[cols], high[cols], u95[cols] = st[2], st[3], st[4]
+        from_all[cols] = True
+    if from_all.all():
+        method = "all trials"
+    elif from_all.any():
+        method = "all trials for the kept outputs, mean of the runs' quantiles for the others"
     else:
-        values = None
-        low, high, u95 = arr[:, 2].mean(axis=0), arr[:, 3].mean(axis=0), arr[:, 4].mean(axis=0)
         method = "mean of the runs' quantiles"
-    if tol.size == 0:
-        tol = (
-            np.full(mean.shape, s.tolerance)
-            if s.tolerance is not None
-            else numerical_tolerance(u, s.ndig)
-        )
+    tol = _tolerance(s, u) if len(stats) < 2 else _stability(stats, sizes, s)[0]
     return McResult(
         mean=mean,
         u=u,
@@ -247,6 +326,10 @@ def run_monte_carlo(
         probability=s.probability,
         interval_method=method,
         values=values,
+        value_columns=kept.columns if values is not None else (),
+        stop_on=watch,
+        ratio=ratio if ratio is not None else np.full((4, k), np.nan),
+        interval_all_trials=from_all,
     )
 
 

@@ -13,13 +13,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 from numpy.typing import NDArray
 
+from ..jit import njit_cached
 from ..kinematics import Chain
 from ..parametric_errors import AXIS_INDEX
 
-__all__ = ["chain_axes", "exact_pose_compiled", "residual_compiled"]
+__all__ = ["assemble_errors", "chain_axes", "exact_pose_compiled", "residual_compiled"]
 
 FloatArray = NDArray[np.float64]
 
@@ -31,7 +32,7 @@ def chain_axes(chain: Chain) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     return tool, work
 
 
-@njit(cache=True)
+@njit_cached()
 def _rotation(ex, ey, ez, r):  # type: ignore[no-untyped-def]
     """r[:] = Rx(ex)·Ry(ey)·Rz(ez), angles rad."""
     cx, cy, cz = math.cos(ex), math.cos(ey), math.cos(ez)
@@ -47,10 +48,13 @@ def _rotation(ex, ey, ez, r):  # type: ignore[no-untyped-def]
     r[2, 2] = cx * cy
 
 
-@njit(cache=True)
-def _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, slot):  # type: ignore[no-untyped-def]
-    """The exact error pose of one row into ``out_rot[slot]``, ``out_t[slot]`` (µm)."""
-    d = np.zeros((3, 3))  # d[k] = direction of travel of axis k
+@njit_cached()
+def _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, slot, buf):  # type: ignore[no-untyped-def]
+    """The exact error pose of one row into ``out_rot[slot]``, ``out_t[slot]`` (µm). ``buf``
+    (5, 3, 3) scratch space (a heap allocation per row cost more than the chain itself)."""
+    d, rk, acc, tmp, vw = buf[0], buf[1], buf[2], buf[3], buf[4]
+    v, w = vw[0], vw[1]
+    d[:, :] = 0.0  # d[k] = direction of travel of axis k
     alpha, beta1, beta2 = sq[row, 0] * 1e-6, sq[row, 1] * 1e-6, sq[row, 2] * 1e-6
     d[0, 0] = math.cos(alpha)
     d[0, 1] = -math.sin(alpha)
@@ -58,11 +62,10 @@ def _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, slot):  # type: ig
     d[2, 0] = -math.sin(beta1) * math.cos(beta2)
     d[2, 1] = -math.sin(beta2)
     d[2, 2] = math.cos(beta1) * math.cos(beta2)
-    rk = np.empty((3, 3))
-    acc = np.eye(3)
-    tmp = np.empty((3, 3))
-    v = np.zeros(3)
-    w = np.empty(3)
+    acc[:, :] = 0.0
+    for i in range(3):
+        acc[i, i] = 1.0
+        v[i] = 0.0
     for j in range(tool.shape[0] - 1, -1, -1):  # stylus side first
         k = tool[j]
         _rotation(errors[row, k, 3] * 1e-6, errors[row, k, 4] * 1e-6, errors[row, k, 5] * 1e-6, rk)
@@ -99,10 +102,16 @@ def _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, slot):  # type: ig
             out_rot[slot, i, c] = acc[i, c]
 
 
-@njit(cache=True, parallel=True)
+_BLOCK_ROWS = 512  # rows per parallel task (one scratch allocation each)
+
+
+@njit_cached(parallel=True)
 def _exact_rows(tool, work, u, errors, sq, out_rot, out_t):  # type: ignore[no-untyped-def]
-    for row in prange(u.shape[0]):
-        _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, row)
+    n = u.shape[0]
+    for b in prange((n + _BLOCK_ROWS - 1) // _BLOCK_ROWS):
+        buf = np.empty((5, 3, 3))
+        for row in range(b * _BLOCK_ROWS, min(n, (b + 1) * _BLOCK_ROWS)):
+            _pose_row(tool, work, u, errors, sq, row, out_rot, out_t, row, buf)
 
 
 def exact_pose_compiled(
@@ -126,21 +135,59 @@ def exact_pose_compiled(
     return rot, t
 
 
-@njit(cache=True, parallel=True)
+@njit_cached(parallel=True)
 def _residual_rows(tool, work, u, errors, sq, rot0, t0, stylus, out):  # type: ignore[no-untyped-def]
     """Residual (µm) = t − t0 + 1000·(R − R0)·p of every row; row r belongs to point r mod N."""
     n_pts = rot0.shape[0]
     n = u.shape[0]
-    for row in prange(n):
+    for b in prange((n + _BLOCK_ROWS - 1) // _BLOCK_ROWS):
+        buf = np.empty((5, 3, 3))
         rot = np.empty((1, 3, 3))
         t = np.empty((1, 3))
-        _pose_row(tool, work, u, errors, sq, row, rot, t, 0)
-        p = row % n_pts
-        for i in range(3):
-            acc = t[0, i] - t0[p, i]
-            for c in range(3):
-                acc += 1000.0 * (rot[0, i, c] - rot0[p, i, c]) * stylus[p, c]
-            out[row, i] = acc
+        for row in range(b * _BLOCK_ROWS, min(n, (b + 1) * _BLOCK_ROWS)):
+            _pose_row(tool, work, u, errors, sq, row, rot, t, 0, buf)
+            p = row % n_pts
+            for i in range(3):
+                acc = t[0, i] - t0[p, i]
+                for c in range(3):
+                    acc += 1000.0 * (rot[0, i, c] - rot0[p, i, c]) * stylus[p, c]
+                out[row, i] = acc
+
+
+@njit_cached(parallel=True)
+def _assemble_rows(base, delta_t, source, target, sigma, z, random_target, out):  # type: ignore[no-untyped-def]
+    """out[i] = base + calibration errors + random parts of trial i (see :func:`assemble_errors`)."""
+    for i in prange(out.shape[0]):
+        for j in range(base.shape[0]):
+            out[i, j] = base[j]
+        for p in range(source.shape[0]):
+            out[i, target[p]] += delta_t[source[p], i]
+        for r in range(random_target.shape[0]):
+            out[i, random_target[r]] += sigma[r] * z[i, r]
+
+
+def assemble_errors(
+    base: FloatArray,
+    trials: int,
+    delta_t: FloatArray,
+    source: NDArray[np.intp],
+    target: NDArray[np.intp],
+    sigma: FloatArray,
+    z: FloatArray,
+    random_target: NDArray[np.intp],
+) -> FloatArray:
+    """The flat parametric errors of T = ``trials`` trials, (T, F) µm/µrad: ``base`` (F,) plus, for every
+    pair p, the calibration error ``delta_t[source[p], i]`` ((S, T)) at ``target[p]``, plus the
+    random part ``sigma[r]·z[i, r]`` ((T, R) standard normal numbers) at ``random_target[r]``.
+    Targets are distinct within each of the two lists. (The same sums as numpy's fancy-indexed
+    ``+=`` along the second axis, which cost 5× the chain evaluation.)"""
+    out = np.empty((trials, base.shape[0]))
+    b, d, sg, zz = (np.ascontiguousarray(a, dtype=np.float64) for a in (base, delta_t, sigma, z))
+    src, tgt, rtg = (
+        np.ascontiguousarray(a, dtype=np.intp) for a in (source, target, random_target)
+    )
+    _assemble_rows(b, d, src, tgt, sg, zz, rtg, out)
+    return out
 
 
 def residual_compiled(

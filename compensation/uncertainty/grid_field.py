@@ -183,6 +183,7 @@ def grid_uncertainty(
             "machine_sha256": machine.identity_sha256(),
             **info,
             "defaulted": list(mdl.defaulted),
+            "taken_as_zero": list(mdl.zero),
             "notes": list(mdl.notes),
         },
     )

@@ -1,5 +1,7 @@
 """The uncertainty model of a machine: the ``[uncertainty]`` section of ``machine.toml``
-(docs/formats.md §1.11, docs/uncertainty.md), validated and with every default resolved.
+(docs/formats.md §1.11, docs/uncertainty.md): its keys and rules (:class:`UncertaintySection`,
+checked with the rest of the file, :mod:`..formats.machine_schema`) and the model with every
+default resolved (:func:`resolve_uncertainty`).
 
 Every value is a **standard** uncertainty (k = 1). Units: linear tables µm, angular tables and
 squareness µrad, temperatures °C, expansion coefficients µm/(m·°C), positions mm.
@@ -25,13 +27,20 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..parametric_errors import AXES, SQUARENESS, TABLE_COMPONENTS, parse_component
-from ..toml_checks import TomlChecks
+from ..parametric_errors import (
+    AXES,
+    SQUARENESS,
+    TABLE_COMPONENTS,
+    bad_component_keys,
+    canonical_name,
+    parse_component,
+)
+from ..toml_schema import Num, Rule, Spread, Table
 
 __all__ = [
     "EXPANSION_DEFAULT_FRACTION",
@@ -44,7 +53,8 @@ __all__ = [
     "WORKPIECE_TEMPERATURE_DEFAULT_C",
     "TableUncertainty",
     "UncertaintyModel",
-    "parse_uncertainty",
+    "UncertaintySection",
+    "resolve_uncertainty",
     "table_class",
 ]
 
@@ -68,16 +78,76 @@ SCALE_TEMPERATURE_DEFAULT_C = 0.1  # a calibrated Pt100 on the scale
 EXPANSION_DEFAULT_FRACTION = 0.10  # u of an expansion coefficient: 10 % of its value
 WORKPIECE_TEMPERATURE_DEFAULT_C = 0.2  # a contact sensor on the workpiece
 PROBE_DEFAULT_UM = 0.5  # one probing, per component, when [probe] random_um is not given
-_SECTION_KEYS = {
-    "probe_um",
-    "squareness",
-    "scale_temperature_C",
-    "expansion",
-    "workpiece_temperature_C",
-    "workpiece_expansion",
-    "errors",
-    *TABLE_CLASSES,
-}
+
+#: A standard uncertainty: finite, ≥ 0 and at most 1e9 (1e300 overflowed the covariance).
+STANDARD_U = Num(0.0, 1e9, note="a standard uncertainty, k = 1: check the unit")
+
+
+def _u(unit: str) -> Num:
+    """:data:`STANDARD_U` in ``unit``."""
+    return Num(STANDARD_U.lo, STANDARD_U.hi, unit, note=STANDARD_U.note)
+
+
+@dataclass
+class TableUncertaintySection(Table):
+    """``[uncertainty.errors.<name>]`` or ``[uncertainty.<class>]``: one table's (or every table
+    of a class's) calibration uncertainty, in the table's unit (µm or µrad)."""
+
+    u: Annotated[float, STANDARD_U] | None = None
+    """Constant part (unit of the table)."""
+    u_per_m: Annotated[float, STANDARD_U] | None = None
+    """Scale part per m from the reference."""
+    u_relative: Annotated[float, STANDARD_U] | None = None
+    """Gain part: a fraction of the table's value."""
+    correlation_mm: Annotated[float, Num(0.0, 1e9, "mm", lo_open=True)] | None = None
+    """Over how many mm the constant part stays alike."""
+
+
+@dataclass
+class SquarenessUncertainty(Table):
+    """u of α, β1, β2 (µrad), one number for all three or by name."""
+
+    alpha: Annotated[float, _u("µrad")] | None = None
+    beta1: Annotated[float, _u("µrad")] | None = None
+    beta2: Annotated[float, _u("µrad")] | None = None
+
+
+@dataclass
+class AxisUncertainty(Table):
+    """A value per axis (x, y, z), one number for all three or by axis."""
+
+    x: Annotated[float, STANDARD_U] | None = None
+    y: Annotated[float, STANDARD_U] | None = None
+    z: Annotated[float, STANDARD_U] | None = None
+
+
+@dataclass
+class UncertaintySection(Table):
+    """``[uncertainty]`` of ``machine.toml``: standard uncertainties (k = 1) of the machine's
+    inputs; a value not given is defaulted (:func:`resolve_uncertainty`)."""
+
+    probe_um: Annotated[float, _u("µm")] | None = None
+    """Probing error of one point, each component (σ), µm."""
+    squareness: Annotated[SquarenessUncertainty, Spread(SQUARENESS, _u("µrad"))] | None = None
+    """u of α, β1, β2, µrad: a number or ``{alpha, beta1, beta2}``."""
+    scale_temperature_C: Annotated[AxisUncertainty, Spread(AXES, _u("°C"))] | None = None
+    """u of the temperature each scale sensor reads, °C: a number or ``{x, y, z}``."""
+    expansion: Annotated[AxisUncertainty, Spread(AXES, _u("µm/(m·°C)"))] | None = None
+    """u of each scale's expansion coefficient, µm/(m·°C): a number or ``{x, y, z}``."""
+    workpiece_temperature_C: Annotated[float, _u("°C")] | None = None
+    """u of the workpiece sensor, °C."""
+    workpiece_expansion: Annotated[float, _u("µm/(m·°C)")] | None = None
+    """u of the workpiece coefficient, µm/(m·°C)."""
+    errors: Annotated[dict[str, TableUncertaintySection], Rule(bad_component_keys, raw=True)] = (
+        field(default_factory=dict)
+    )
+    """Per table (our names or ISO 230-1 aliases)."""
+    positional: TableUncertaintySection | None = None
+    """For every positional table without its own entry."""
+    straightness: TableUncertaintySection | None = None
+    """For every straightness table without its own entry."""
+    angular: TableUncertaintySection | None = None
+    """For every angular table without its own entry."""
 
 
 def table_class(component: str) -> str:
@@ -138,7 +208,8 @@ class UncertaintyModel:
     without a table that the file gives an uncertainty for); ``squareness_urad`` (α, β1, β2);
     ``scale_temperature_C`` and ``expansion`` per axis (sensor reading, expansion coefficient
     µm/(m·°C)); ``workpiece_*`` likewise; ``probe_um`` one probing, per component.
-    ``defaulted`` names every value that was not in the file; ``notes`` what is left out.
+    ``defaulted`` names every value that was not in the file; ``zero`` the components taken
+    as exactly zero (no table, no uncertainty); ``notes`` what is left out.
     """
 
     tables: dict[str, TableUncertainty]
@@ -151,6 +222,8 @@ class UncertaintyModel:
     defaulted: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     given: dict[str, Any] = field(default_factory=dict)
+    zero: tuple[str, ...] = ()
+    """Components with neither a table nor an uncertainty: taken as exactly zero."""
 
     def describe(self) -> dict[str, Any]:
         """JSON-able summary: every value used, the defaulted ones and the notes."""
@@ -177,53 +250,14 @@ class UncertaintyModel:
                 "probe_um": self.probe_um,
             },
             "defaulted": list(self.defaulted),
+            "taken_as_zero": list(self.zero),
             "notes": list(self.notes),
         }
 
 
-class _Reader(TomlChecks):
-    """Validation of the ``[uncertainty]`` table: one :class:`MachineFileError` per problem."""
-
-    def __init__(self, source: str) -> None:
-        super().__init__(source)
-        self.defaulted: list[str] = []
-
-    def number(self, value: Any, where: str, *, positive: bool = False) -> float:
-        """A finite number ≥ 0 (a standard uncertainty); ``positive``: > 0."""
-        out = super().number(value, where, positive=positive)
-        if out < 0:
-            raise self.fail(where, f"a standard uncertainty must be ≥ 0, got {value!r}")
-        if out > 1e9:  # 1e300 overflowed the covariance into a traceback (OverflowError)
-            raise self.fail(
-                where, f"{value!r} is beyond 1e9: no standard uncertainty (check the unit)"
-            )
-        return out
-
-    def table(self, value: Any, where: str, allowed: set[str]) -> Mapping[str, Any]:
-        if not isinstance(value, Mapping):
-            raise self.fail(where, f"expected a table, got {value!r}")
-        self.check_keys(value, where, allowed)
-        return value
-
-    def per_name(
-        self, tbl: Mapping[str, Any], key: str, names: tuple[str, ...]
-    ) -> dict[str, float] | None:
-        """A number for all names, an inline table by name (missing names: None), or absent."""
-        if key not in tbl:
-            return None
-        where = f"uncertainty.{key}"
-        value = tbl[key]
-        if isinstance(value, Mapping):
-            inner = self.table(value, where, set(names))
-            return {n: self.number(inner[n], f"{where}.{n}") for n in names if n in inner}
-        number = self.number(value, where)
-        return dict.fromkeys(names, number)
-
-
-def parse_uncertainty(
-    data: Mapping[str, Any] | None,
+def resolve_uncertainty(
+    section: UncertaintySection | None,
     *,
-    source: str,
     tables: Mapping[str, Any],
     lower_mm: FloatArray,
     upper_mm: FloatArray,
@@ -231,73 +265,50 @@ def parse_uncertainty(
     expansion: FloatArray,
     workpiece_expansion: float | None,
     probe_random_um: float,
+    given: Mapping[str, Any] | None = None,
 ) -> UncertaintyModel:
-    """Validate the ``[uncertainty]`` table ``data`` (None: absent) of a machine with these
-    ``tables`` (component → :class:`..tables.ErrorTable`), volume, thermal data and probe;
-    resolve the defaults and record which values were defaulted. :class:`MachineFileError`
-    (naming ``source`` and the key) on any problem."""
-    r = _Reader(source)
-    sec = r.table(data or {}, "uncertainty", _SECTION_KEYS)
+    """The uncertainty model of a machine with these ``tables`` (component →
+    :class:`..tables.ErrorTable`), volume, thermal data and probe, from its checked
+    ``[uncertainty]`` section (None: absent): every value not given defaulted and recorded."""
+    sec = section or UncertaintySection()
+    defaulted: list[str] = []
     notes: list[str] = []
 
     # ---- per-table calibration uncertainty
-    classes: dict[str, Mapping[str, Any]] = {}
-    for cls in TABLE_CLASSES:
-        if cls in sec:
-            classes[cls] = r.table(sec[cls], f"uncertainty.{cls}", set(TABLE_KEYS))
-    explicit: dict[str, Mapping[str, Any]] = {}
-    errors_tbl = sec.get("errors", {})
-    if not isinstance(errors_tbl, Mapping):
-        raise r.fail(
-            "uncertainty.errors", f"expected tables [uncertainty.errors.<name>], got {errors_tbl!r}"
-        )
-    for key, value in errors_tbl.items():
-        where = f"uncertainty.errors.{key}"
-        canon = r.error_component(key, where, explicit)
-        explicit[canon] = r.table(value, where, set(TABLE_KEYS))
+    explicit = {str(canonical_name(k)): v for k, v in sec.errors.items()}
     out_tables: dict[str, TableUncertainty] = {}
     for comp in TABLE_COMPONENTS:
         table = tables.get(comp)
         if table is None and comp not in explicit:
             continue
         cls = table_class(comp)
+        by_class: TableUncertaintySection | None = getattr(sec, cls)
         axis = comp[-1]
         k = AXES.index(axis)
         span = getattr(table, "span_mm", None) if table is not None else None
         if span is None or span[1] <= span[0]:
             span = (float(lower_mm[k]), float(upper_mm[k]))
-        own = explicit.get(comp, {})
+        own = explicit.get(comp)
         values: dict[str, float] = {}
-        for key in ("u", "u_per_m", "u_relative"):
-            where = f"uncertainty.errors.{comp}.{key}"
-            if key in own:
-                values[key] = r.number(own[key], where)
-            elif key in classes.get(cls, {}):
-                values[key] = r.number(classes[cls][key], f"uncertainty.{cls}.{key}")
-            elif table is None:
-                values[key] = 0.0  # an unmeasured error: only what the file says
-            else:
-                values[key] = TABLE_DEFAULTS[cls][key]
-                r.defaulted.append(where)
-        where = f"uncertainty.errors.{comp}.correlation_mm"
-        if "correlation_mm" in own:
-            corr = r.number(own["correlation_mm"], where, positive=True)
-        elif "correlation_mm" in classes.get(cls, {}):
-            corr = r.number(
-                classes[cls]["correlation_mm"], f"uncertainty.{cls}.correlation_mm", positive=True
-            )
-        else:
-            corr = _default_correlation_mm(table, span)
-            r.defaulted.append(where)
+        for key in TABLE_KEYS:
+            value = getattr(own, key) if own is not None else None
+            if value is None and by_class is not None:
+                value = getattr(by_class, key)
+            if value is None and key == "correlation_mm":
+                value = _default_correlation_mm(table, span)
+                defaulted.append(f"uncertainty.errors.{comp}.{key}")
+            elif value is None and table is None:
+                value = 0.0  # an unmeasured error: only what the file says
+            elif value is None:
+                value = TABLE_DEFAULTS[cls][key]
+                defaulted.append(f"uncertainty.errors.{comp}.{key}")
+            values[key] = float(value)
         out_tables[comp] = TableUncertainty(
             component=comp,
             axis=axis,
-            u=values["u"],
-            u_per_m=values["u_per_m"],
-            u_relative=values["u_relative"],
-            correlation_mm=corr,
             span_mm=(float(span[0]), float(span[1])),
             reference_mm=float(reference_mm[k]),
+            **values,
         )
     missing = [c for c in TABLE_COMPONENTS if c not in out_tables]
     if missing:
@@ -307,47 +318,49 @@ def parse_uncertainty(
         )
 
     # ---- squareness
-    sq_given = r.per_name(sec, "squareness", SQUARENESS) or {}
     squareness = np.zeros(3)
     for j, name in enumerate(SQUARENESS):
-        if name in sq_given:
-            squareness[j] = sq_given[name]
-        else:
-            squareness[j] = SQUARENESS_DEFAULT_URAD
-            r.defaulted.append(f"uncertainty.squareness.{name}")
+        value = getattr(sec.squareness, name) if sec.squareness is not None else None
+        if value is None:
+            value = SQUARENESS_DEFAULT_URAD
+            defaulted.append(f"uncertainty.squareness.{name}")
+        squareness[j] = value
 
     # ---- thermal: scales (only axes with a thermal term need defaults)
-    temp_given = r.per_name(sec, "scale_temperature_C", AXES) or {}
-    exp_given = r.per_name(sec, "expansion", AXES) or {}
     u_temp, u_exp = np.zeros(3), np.zeros(3)
     for k, axis in enumerate(AXES):
         has_term = float(expansion[k]) != 0.0
-        if axis in temp_given:
-            u_temp[k] = temp_given[axis]
+        temp = getattr(sec.scale_temperature_C, axis) if sec.scale_temperature_C else None
+        if temp is not None:
+            u_temp[k] = temp
         elif has_term:
             u_temp[k] = SCALE_TEMPERATURE_DEFAULT_C
-            r.defaulted.append(f"uncertainty.scale_temperature_C.{axis}")
-        if axis in exp_given:
-            u_exp[k] = exp_given[axis]
+            defaulted.append(f"uncertainty.scale_temperature_C.{axis}")
+        alpha = getattr(sec.expansion, axis) if sec.expansion else None
+        if alpha is not None:
+            u_exp[k] = alpha
         elif has_term:
             u_exp[k] = EXPANSION_DEFAULT_FRACTION * abs(float(expansion[k]))
-            r.defaulted.append(f"uncertainty.expansion.{axis}")
+            defaulted.append(f"uncertainty.expansion.{axis}")
+    exp_given = sec.expansion is not None and any(
+        getattr(sec.expansion, a) is not None for a in AXES
+    )
     if not np.any(np.asarray(expansion) != 0.0) and not exp_given:
         notes.append("the machine has no scale expansion terms: scale temperatures not used")
 
     # ---- thermal: workpiece
     wp_temp = wp_exp = 0.0
     has_wp = bool(workpiece_expansion)
-    if "workpiece_temperature_C" in sec:
-        wp_temp = r.number(sec["workpiece_temperature_C"], "uncertainty.workpiece_temperature_C")
+    if sec.workpiece_temperature_C is not None:
+        wp_temp = sec.workpiece_temperature_C
     elif has_wp:
         wp_temp = WORKPIECE_TEMPERATURE_DEFAULT_C
-        r.defaulted.append("uncertainty.workpiece_temperature_C")
-    if "workpiece_expansion" in sec:
-        wp_exp = r.number(sec["workpiece_expansion"], "uncertainty.workpiece_expansion")
+        defaulted.append("uncertainty.workpiece_temperature_C")
+    if sec.workpiece_expansion is not None:
+        wp_exp = sec.workpiece_expansion
     elif has_wp:
         wp_exp = EXPANSION_DEFAULT_FRACTION * abs(float(workpiece_expansion or 0.0))
-        r.defaulted.append("uncertainty.workpiece_expansion")
+        defaulted.append("uncertainty.workpiece_expansion")
     if not has_wp:
         notes.append(
             "the machine has no workpiece expansion term: the workpiece's expansion is not "
@@ -355,14 +368,14 @@ def parse_uncertainty(
         )
 
     # ---- probing
-    if "probe_um" in sec:
-        probe = r.number(sec["probe_um"], "uncertainty.probe_um")
+    if sec.probe_um is not None:
+        probe = sec.probe_um
     elif probe_random_um > 0:
         probe = probe_random_um / 2.0
         notes.append("probe_um from [probe] random_um (a 2σ value): σ = random_um / 2")
     else:
         probe = PROBE_DEFAULT_UM
-        r.defaulted.append("uncertainty.probe_um")
+        defaulted.append("uncertainty.probe_um")
     notes.append(
         "the random parts of the tables ([errors.*] random, random_band: 2σ bands) are "
         "independent at every probing"
@@ -375,9 +388,10 @@ def parse_uncertainty(
         workpiece_temperature_C=wp_temp,
         workpiece_expansion=wp_exp,
         probe_um=probe,
-        defaulted=tuple(r.defaulted),
+        defaulted=tuple(defaulted),
         notes=tuple(notes),
-        given=dict(sec),
+        given=dict(given or {}),
+        zero=tuple(missing),
     )
 
 

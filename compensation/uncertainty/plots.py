@@ -84,9 +84,10 @@ def plot_histogram(
     *,
     title: str = "",
     limit_label: str = "MPE",
+    probability: float = 0.95,
 ) -> Path:
     """Histograms of Monte Carlo outputs, one panel each: ``(label, values, (low, high)
-    coverage interval, GUM u or None, limit or None)``; the GUM Gaussian (mean 0) is drawn over
+    coverage interval (coverage ``probability``), GUM u or None, limit or None)``; the GUM Gaussian (mean 0) is drawn over
     it and a limit (e.g. an E0 MPE) as a vertical dashed line."""
     n = len(panels)
     cols = min(n, 3)
@@ -97,7 +98,12 @@ def plot_histogram(
         ax = axs[i // cols][i % cols]
         v = np.asarray(values, dtype=float)
         ax.hist(v, bins=80, density=True, color="tab:blue", alpha=0.55, label=f"{len(v)} trials")
-        ax.axvline(low, color="tab:red", lw=1.2, label=f"95 % interval [{low:.3g}, {high:.3g}]")
+        ax.axvline(
+            low,
+            color="tab:red",
+            lw=1.2,
+            label=f"{100 * probability:g} % interval [{low:.3g}, {high:.3g}]",
+        )
         ax.axvline(high, color="tab:red", lw=1.2)
         if u_gum is not None and u_gum > 0:
             x = np.linspace(v.min(), v.max(), 300)

@@ -33,6 +33,8 @@ if TYPE_CHECKING:
     from ..machine import Machine
 
 __all__ = [
+    "E0_NDIG",
+    "P_PASS_TOLERANCE",
     "PointUncertainty",
     "TaskUncertainty",
     "e0_uncertainty",
@@ -47,6 +49,11 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 ProgressFn = Callable[[int, float], None]
 STATUS_DTYPE = "<U22"
+#: default significant digits of u(E0): the 97.5 % point of a maximum over 105 lengths needs
+#: ~640,000 trials for 2 digits on the NPL-like bridge (≈ 200 s on 2 cores), 1 digit ~20,000
+E0_NDIG = 1
+#: the pass probability is also stable when twice its run-to-run standard deviation is ≤ this
+P_PASS_TOLERANCE = 0.005
 
 
 @dataclass(frozen=True)
@@ -91,6 +98,8 @@ class TaskUncertainty:
     def summary(self) -> dict[str, Any]:
         """JSON-able: per output y, u, U (k = 2), the coverage interval, U95; trials, stability."""
         mc = self.mc
+        ratio = mc.ratio if mc.ratio is not None else np.full((4, len(self.outputs)), np.nan)
+        stability = np.max(ratio, axis=0)  # worst of y, u, y_low, y_high per output
         return {
             "task": self.task,
             "nominal": self.nominal,
@@ -102,15 +111,23 @@ class TaskUncertainty:
                     "interval": [float(mc.low[i]), float(mc.high[i])],
                     "U95_zero_centred": float(mc.U95[i]),
                     "tolerance": float(mc.tolerance[i]) if np.isfinite(mc.tolerance[i]) else None,
+                    "stability_2s_over_tolerance": _finite_or_none(stability[i]),
                 }
                 for i, name in enumerate(self.outputs)
             },
-            "monte_carlo": _mc_info(mc),
+            "monte_carlo": {
+                **_mc_info(mc),
+                "stopping_rule_outputs": [self.outputs[i] for i in mc.stop_on],
+            },
             "gum_first_order": self.gum
             if self.gum is not None
             else "not applicable: the measurand is not linear in the residuals",
             "uncertainty_model": self.model,
         }
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
 
 
 def _mc_info(mc: McResult) -> dict[str, Any]:
@@ -317,8 +334,13 @@ def e0_uncertainty(
     every measured length (each probed once: repetitions are separate pairs). Outputs
     ``E0_um`` = max over the P lengths of |length error| and, with ``mpe = (A_um, K)``
     (E0,MPE = A + L/K µm, L in mm), ``E0_over_MPE`` = max |error| / MPE(L); then the trial
-    fraction with ratio ≤ 1 is the probability of passing (``nominal["p_pass"]``); then the
-    P length errors ``length_error_um[i]``."""
+    fraction with ratio ≤ 1 is the probability of passing (``nominal["p_pass"]``, with
+    ``p_pass_2s`` its numerical uncertainty); then the P length errors ``length_error_um[i]``.
+
+    The adaptive stopping rule watches E0 (and E0/MPE) to ``settings.ndig`` significant digits
+    (default :data:`E0_NDIG`) and the pass probability to ±:data:`P_PASS_TOLERANCE`; the
+    per-length outputs are reported with the precision that gave (their 2s/δ in the summary).
+    Their values are not kept beyond ``keep_values_limit``: E0 and E0/MPE always are."""
     pairs = np.asarray(pairs_mm, dtype=float)
     if pairs.ndim != 3 or pairs.shape[1:] != (2, 3) or pairs.shape[0] == 0:
         raise ValueError(f"pairs must be a (P, 2, 3) array of mm, got shape {pairs.shape}")
@@ -334,16 +356,26 @@ def e0_uncertainty(
             raise ValueError(f"MPE A + L/K needs A ≥ 0 µm and K > 0, got A={a_um}, K={k}")
         mpe_um = a_um + lengths / k
     vcmm, prep, runner = _virtual_task(machine, model, temps_C, inputs, pts, stylus_mm)
+    passes: list[tuple[int, int]] = []  # (passed, trials) per run
 
     def draw(m: int, g: np.random.Generator) -> FloatArray:
         err = _length_errors_um(pts, runner(m, g))
         cols = [np.abs(err).max(axis=1, keepdims=True)]
         if mpe_um is not None:
             cols.append((np.abs(err) / mpe_um[None, :]).max(axis=1, keepdims=True))
+            passes.append((int(np.count_nonzero(cols[-1] <= 1.0)), m))
         return np.concatenate([*cols, err], axis=1)
 
-    base = settings or MonteCarloSettings()
-    mc = run_monte_carlo(draw, rng, base.with_batch_for(prep.n), progress)
+    base = settings or MonteCarloSettings(ndig=E0_NDIG)
+    main = (0,) if mpe_um is None else (0, 1)  # the stopping rule watches E0 (and E0/MPE)
+
+    def pass_ratio() -> float:  # 2s/δ of the pass probability, δ = P_PASS_TOLERANCE
+        two_s = _pass_probability(passes)["p_pass_2s"] if mpe_um is not None else None
+        return 0.0 if two_s is None else two_s / P_PASS_TOLERANCE
+
+    mc = run_monte_carlo(
+        draw, rng, base.with_batch_for(prep.n), progress, stop_on=main, extra_ratio=pass_ratio
+    )
     names = ["E0_um", *(["E0_over_MPE"] if mpe_um is not None else [])]
     names += [f"length_error_um[{i}]" for i in range(len(lengths))]
     nominal: dict[str, Any] = {
@@ -352,8 +384,7 @@ def e0_uncertainty(
     }
     if mpe_um is not None:
         nominal["mpe"] = {"A_um": float(mpe[0]), "K": float(mpe[1])}  # type: ignore[index]
-        if mc.values is not None:
-            nominal["p_pass"] = float(np.mean(mc.values[:, 1] <= 1.0))
+        nominal.update(_pass_probability(passes))
     return TaskUncertainty(
         task="e0",
         outputs=tuple(names),
@@ -361,6 +392,18 @@ def e0_uncertainty(
         nominal=nominal,
         model=vcmm.model.describe(),
     )
+
+
+def _pass_probability(passes: list[tuple[int, int]]) -> dict[str, Any]:
+    """The share of trials that passed (``p_pass``) and twice the standard deviation of its run
+    average (``p_pass_2s``, the Monte Carlo's own numerical uncertainty as in JCGM 101 §7.9.4;
+    None after a single run)."""
+    passed, trials = (np.array(c, dtype=float) for c in zip(*passes, strict=True))
+    out: dict[str, Any] = {"p_pass": float(passed.sum() / trials.sum()), "p_pass_2s": None}
+    if len(passes) >= 2:
+        share = passed / trials
+        out["p_pass_2s"] = float(2.0 * share.std(ddof=1) / np.sqrt(len(passes)))
+    return out
 
 
 # ---------------------------------------------------------------------------- sphere

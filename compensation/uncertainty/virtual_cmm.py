@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..parametric_errors import AXIS_INDEX, parse_component
 from ..thermal.roles import WORKPIECE, scale_role
-from .chain_kernel import chain_axes, exact_pose_compiled, residual_compiled
+from .chain_kernel import assemble_errors, chain_axes, exact_pose_compiled, residual_compiled
 from .fields import squared_exponential_basis
 from .model import UncertaintyModel
 
@@ -233,15 +233,23 @@ class VirtualCMM:
 
     def _chunk(self, prep: Prepared, t: int, rng: np.random.Generator, pose: bool) -> FloatArray:
         n = prep.n
-        errors = np.broadcast_to(prep.errors.reshape(1, -1), (t, n * 18)).copy()
+        delta_t = np.zeros((prep.calibration.shape[1], t))  # (S, t) at the distinct positions
         if prep.calibration.shape[0]:
             xi = rng.standard_normal((prep.calibration.shape[0], t))
-            delta = (prep.calibration_t @ xi).T  # (t, S)
-            errors[:, prep.target] += delta[:, prep.source]
+            delta_t = prep.calibration_t @ xi
+        z = np.zeros((t, 0))
         if prep.random_sigma.size:
-            errors[:, prep.random_target] += prep.random_sigma * rng.standard_normal(
-                (t, prep.random_sigma.size)
-            )
+            z = rng.standard_normal((t, prep.random_sigma.size))
+        errors = assemble_errors(
+            prep.errors.reshape(-1),
+            t,
+            delta_t,
+            prep.source,
+            prep.target,
+            prep.random_sigma,
+            z,
+            prep.random_target,
+        )
         sq = prep.squareness_urad[None, :, :] + (
             self.model.squareness_urad * rng.standard_normal((t, 1, 3))
         )

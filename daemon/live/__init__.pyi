@@ -4,12 +4,10 @@ from .fanout import LiveFanOut
 from .process import LiveChildError, LiveDownError, LiveProcessSink, live_sink
 from .server import SUBPROTOCOL, LiveServer, LiveStartError, open_live_server
 from .settings import (
-    LIVE_RULES,
     SENDERS,
     LiveConfigError,
     LiveSection,
     host_problem,
-    live_problems,
     live_section_from_table,
 )
 from .sink import (
@@ -22,7 +20,6 @@ from .sink import (
 
 __all__ = [
     "LATCHED_TOPICS",
-    "LIVE_RULES",
     "SCENE_TOPIC",
     "SENDERS",
     "STREAMED_TOPICS",
@@ -38,7 +35,6 @@ __all__ = [
     "LiveStartError",
     "LiveStats",
     "host_problem",
-    "live_problems",
     "live_section_from_table",
     "live_sink",
     "open_live_server",

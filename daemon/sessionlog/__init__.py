@@ -5,13 +5,16 @@
 * :mod:`.logger` - :class:`SessionLogger`, the protocol both writers implement, their shared
   :class:`LogSettings`, :class:`LoggerStats` and never-blocking queue;
 * :mod:`.encoding` - one message to strict JSON, or the error record that replaces it;
-* :mod:`.writer` - one MCAP file: naming (and rotating an existing name), opening, finishing;
+* :mod:`.writer` - one session file: naming (and rotating an existing name), opening, finishing;
+* :mod:`.mcapfile` - :class:`McapFileWriter`, a chunked MCAP file with every index, written from
+  the format's specification (:mod:`.mcapwire`: the records as bytes; :mod:`.summary`: the chunk
+  index spooled to disk, the summary section);
 * :mod:`.thread_writer` - :class:`McapLogger`, a writer thread in the daemon's process;
 * :mod:`.process_writer` - :class:`McapProcessLogger`, the writing in a child process
   (:mod:`.writer_child` is that child's side);
 * :mod:`.reader` - read sessions back (rolled sets, files cut by a crash);
 * :mod:`.recover` - rewrite a file cut by a crash as a complete, indexed file;
-* :mod:`.replay` - re-correct a session offline or re-send it to a daemon.
+* :mod:`.replay` - re-correct a session offline, or re-send what the controller sent to a bus.
 
 See docs/mcap.md.
 """

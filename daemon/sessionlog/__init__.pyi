@@ -2,11 +2,12 @@
 
 from .encoding import ERROR_TOPIC
 from .logger import LOW_PRIORITY_TOPICS, LoggerStats, LogSettings, SessionLogger
+from .mcapfile import McapFileWriter
 from .process_writer import McapProcessLogger, McapWriterProcessError
 from .reader import LoggedMessage, Session, load_session, read_messages, session_files
 from .records import CorrectedRecord, FrameRecord, RawRecord
 from .recover import RecoverReport, recover
-from .replay import ReplayError, ReplayReport, replay_offline, replay_to_bus
+from .replay import BusReplayReport, ReplayError, ReplayReport, replay_offline, replay_to_bus
 from .schemas import (
     TOPIC_SCHEMAS,
     TopicSchema,
@@ -21,11 +22,13 @@ __all__ = [
     "ERROR_TOPIC",
     "LOW_PRIORITY_TOPICS",
     "TOPIC_SCHEMAS",
+    "BusReplayReport",
     "CorrectedRecord",
     "FrameRecord",
     "LogSettings",
     "LoggedMessage",
     "LoggerStats",
+    "McapFileWriter",
     "McapLogger",
     "McapProcessLogger",
     "McapWriterProcessError",

@@ -21,7 +21,7 @@ import json
 from collections.abc import Callable
 from typing import Any
 
-from .schemas import NS_PER_S
+from .schemas import FRAME_DIRECTIONS, NS_PER_S
 
 __all__ = ["FAST_JSON"]
 
@@ -50,18 +50,32 @@ def _finite(x: Any) -> bool:
     return type(x) is float and x - x == 0.0
 
 
-_FRAME = (
+_FRAME_HEAD = (
     '{"arbitration_id":%d,"is_extended":%s,"dlc":%d,"data":"%s",'
     '"bus_stamp":{"sec":%d,"nsec":%d},"channel":%s,"is_fd":%s,"is_remote_frame":%s,'
-    '"is_error_frame":%s,"stamp":{"sec":%d,"nsec":%d}}'
+    '"is_error_frame":%s,'
 )
+_FRAME_TAIL = '"stamp":{"sec":%d,"nsec":%d}}'
+# by the record's direction field (None: a 9-field record, no direction key)
+_FRAME: dict[str | None, str] = {
+    None: _FRAME_HEAD + _FRAME_TAIL,
+    **{d: _FRAME_HEAD + f'"direction":"{d}",' + _FRAME_TAIL for d in FRAME_DIRECTIONS},
+}
 
 
 def frame_json(rec: tuple[Any, ...], t_ns: int) -> bytes | None:
     """The ``/cmm/can_rx`` / ``/cmm/can_tx`` message of a ``FrameRecord``, or None."""
-    if len(rec) != 9:
+    n = len(rec)
+    if n == 10:
+        can_id, ext, dlc, data, ts, channel, fd, remote, error, direction = rec
+        fmt = _FRAME.get(direction) if type(direction) is str else None
+        if fmt is None:
+            return None
+    elif n == 9:
+        can_id, ext, dlc, data, ts, channel, fd, remote, error = rec
+        fmt = _FRAME[None]
+    else:
         return None
-    can_id, ext, dlc, data, ts, channel, fd, remote, error = rec
     if not (
         type(can_id) is int
         and 0 <= can_id <= 0x1FFFFFFF
@@ -83,7 +97,7 @@ def frame_json(rec: tuple[Any, ...], t_ns: int) -> bytes | None:
     ssec, snsec = divmod(t_ns, NS_PER_S)
     b = _BOOL
     return (
-        _FRAME
+        fmt
         % (
             can_id,
             b[ext],

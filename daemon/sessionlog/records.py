@@ -22,12 +22,15 @@ from typing import Any
 
 from cmm_comp.protocol.codes import mm3_from_nm
 
-from .schemas import ns_from_can_timestamp, stamp_from_ns
+from .schemas import FRAME_DIRECTIONS, ns_from_can_timestamp, stamp_from_ns
 
-FrameRecord = tuple[int, bool, int, bytes, float, str, bool, bool, bool]
+FrameRecord = tuple[int, bool, int, bytes, float, str, bool, bool, bool, str]
 """``(arbitration_id, is_extended, dlc, data, timestamp_s, channel, is_fd, is_remote,
-is_error)``; ``timestamp_s`` is python-can's float seconds (0.0 when unknown). The CAN
-endpoint builds it from a ``can.Message`` (:func:`cmm_comp.daemon.can_endpoint.frame_record`)."""
+is_error, direction)``; ``timestamp_s`` is python-can's float seconds (0.0 when unknown),
+``direction`` one of :data:`FRAME_DIRECTIONS` (a 9-field record without it is taken too and
+writes no ``direction`` key). The CAN endpoint builds it from a ``can.Message``
+(:func:`cmm_comp.daemon.can_endpoint.frame_record`)."""
+
 
 RawRecord = tuple[
     int,
@@ -107,14 +110,16 @@ def _channel(value: Any) -> str:
     raise TypeError(f"channel: {type(value).__name__} {value!r:.40} is not a str or int")
 
 
-def frame_payload(rec: FrameRecord) -> dict[str, Any]:
+def frame_payload(rec: FrameRecord | tuple[Any, ...]) -> dict[str, Any]:
     """The ``/cmm/can_rx`` / ``/cmm/can_tx`` payload of a :data:`FrameRecord`."""
-    can_id, ext, dlc, data, ts, channel, fd, remote, error = rec
+    if len(rec) not in (9, 10):
+        raise ValueError(f"a CAN frame record has 9 or 10 fields, not {len(rec)}")
+    can_id, ext, dlc, data, ts, channel, fd, remote, error = rec[:9]
     if not isinstance(data, bytes | bytearray | memoryview):
         raise TypeError(f"data: {type(data).__name__} is not bytes")
     ts = _real(ts, "timestamp_s") if ts is not None else 0.0
     ts = ts if ts and ts == ts else 0.0  # None, 0 or NaN: unknown (inf: refused below)
-    return {
+    out = {
         "arbitration_id": _int(can_id, "arbitration_id", 0, 2**29 - 1),
         "is_extended": _bool(ext, "is_extended"),
         "dlc": _int(dlc, "dlc", 0, 64),
@@ -125,6 +130,12 @@ def frame_payload(rec: FrameRecord) -> dict[str, Any]:
         "is_remote_frame": _bool(remote, "is_remote_frame"),
         "is_error_frame": _bool(error, "is_error_frame"),
     }
+    if len(rec) == 10:
+        direction = rec[9]
+        if direction not in FRAME_DIRECTIONS or type(direction) is not str:
+            raise ValueError(f"direction: {direction!r:.40} is not one of {FRAME_DIRECTIONS}")
+        out["direction"] = direction
+    return out
 
 
 def raw_payload(rec: RawRecord) -> dict[str, Any]:

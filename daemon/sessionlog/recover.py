@@ -18,12 +18,15 @@ from pathlib import Path
 
 from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
-from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
+from mcap.writer import CompressionType
 
+from .mcapfile import McapFileWriter
+from .mcapwire import MAGIC
 from .reader import TRUNCATION_ERRORS
-from .summary import close_spool, finish_writer, spool_chunk_index
 
 RECOVER_LIBRARY = "cmm-comp mcap recover"
+RECOVER_CHUNK_SIZE = 1024 * 1024
+"""Chunk size of the recovered file, bytes (uncompressed)."""
 
 
 @dataclass
@@ -89,22 +92,24 @@ def _copy(
     compression: CompressionType,
 ) -> RecoverReport:
     size = os.fstat(f.fileno()).st_size
-    if f.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
+    if f.read(len(MAGIC)) != MAGIC:
         raise ValueError(f"{src}: not an MCAP file (no MCAP magic at the start)")
     f.seek(0)
     report = RecoverReport(src, dst, size, complete=False, cut_at=None, error=None)
-    writer = Writer(out, compression=compression)
-    spool_chunk_index(writer, dst.parent)  # memory stays flat whatever the file's length
+    # every index; the chunk index spooled next to the output: memory stays flat
+    writer = McapFileWriter(
+        out, chunk_size=RECOVER_CHUNK_SIZE, compression=compression, spool_dir=dst.parent
+    )
     try:
         _copy_records(f, writer, size, src, report)
-        finish_writer(writer)
+        writer.finish()
     finally:
-        close_spool(writer)
+        writer.release()
     return report
 
 
 def _copy_records(
-    f: io.BufferedReader, writer: Writer, size: int, src: Path, report: RecoverReport
+    f: io.BufferedReader, writer: McapFileWriter, size: int, src: Path, report: RecoverReport
 ) -> None:
     started = False
     schema_ids: dict[int, int] = {0: 0}

@@ -9,8 +9,15 @@ files cut by a crash read up to the break), pairs every ``/cmm/raw`` reading wit
 (``ux_um``/``uy_um``/``uz_um``) where both the session and the replay know it, with the count
 of readings where only one of them does.
 
-:func:`replay_to_bus` re-sends the received CAN frames (``/cmm/can_rx``: readings and
-temperatures, byte-exact) at the recorded pace (or faster) to a daemon on any python-can bus.
+:func:`replay_to_bus` re-sends the frames the controller sent (``/cmm/can_rx`` frames with
+``direction`` ``rx``: readings, probing directions and temperatures, byte-exact) at the
+recorded pace (or faster) to a daemon on any python-can bus. The daemon's own frames are never
+re-sent: on ``udp_multicast`` every node receives its own frames back, so ``/cmm/can_rx`` also
+holds the daemon's answers, statuses and heartbeats (``direction`` ``tx_echo``), and a
+controller on the replay's bus would take those stale answers for live ones. A log written
+before frames carried their direction is sorted by CAN id ownership instead (the DBC's
+transmitter of each message, :func:`cmm_comp.protocol.can_ids.sent_by_daemon`), and the report
+says so.
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ import numpy as np
 from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.grid import CorrectionGrid
 from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
+from cmm_comp.protocol.can_ids import sent_by_daemon
 
 from .reader import read_messages
 from .schemas import ns_from_stamp
@@ -253,21 +261,87 @@ def _counts(values: np.ndarray) -> dict[str, int]:
     return {str(k): int(c) for k, c in zip(keys, counts, strict=True)}
 
 
+@dataclass
+class BusReplayReport:
+    """What :func:`replay_to_bus` sent and left out."""
+
+    session: list[str]
+    sent: int
+    """Frames re-sent (the controller's)."""
+    skipped_own: int
+    """The daemon's own frames found in ``/cmm/can_rx`` (echoed back by the bus): not sent."""
+    skipped_error_frames: int
+    """Error frames: not sent."""
+    by_direction: int
+    """Frames sorted by their logged ``direction`` field."""
+    by_can_id: int
+    """Frames without a usable ``direction`` (a log written before it): sorted by CAN id
+    ownership per the DBC (:func:`cmm_comp.protocol.can_ids.sent_by_daemon`)."""
+    truncated: bool = False
+    read_error: str | None = None
+
+    @property
+    def note(self) -> str | None:
+        """One line when frames were sorted by CAN id (an older log), else None."""
+        if not self.by_can_id:
+            return None
+        return (
+            f"{self.by_can_id} frame(s) carry no direction (a log written before frames were "
+            "tagged): the daemon's own recognised by CAN id (DBC transmitter Daemon: offsets "
+            "0x8-0xC and 0xF of a node's 16-id block), the rest re-sent as the controller's"
+        )
+
+
+def _is_controller_frame(payload: dict[str, Any]) -> tuple[bool, bool]:
+    """``(sent by the controller, decided by the logged direction)`` of one ``/cmm/can_rx``
+    payload: its ``direction`` when it has a valid one, else CAN id ownership."""
+    direction = payload.get("direction")
+    if direction == "rx":
+        return True, True
+    if direction in ("tx", "tx_echo"):
+        return False, True
+    own = sent_by_daemon(int(payload["arbitration_id"]), bool(payload.get("is_extended")))
+    return not own, False
+
+
 def replay_to_bus(
     source: str | Path, bus: can.BusABC, speed: float = 1.0, max_frames: int | None = None
-) -> int:
-    """Re-send the session's received CAN frames on ``bus`` at ``speed`` × the recorded pace
-    (0 = as fast as possible). Returns the number of frames sent."""
+) -> BusReplayReport:
+    """Re-send the frames the controller sent in the session on ``bus`` at ``speed`` × the
+    recorded pace (0 = as fast as possible); never the daemon's own (module docstring)."""
     try:
         res = read_messages(source, ("/cmm/can_rx",))
     except FileNotFoundError as exc:
         raise ReplayError(str(exc)) from None
-    frames = [m for m in res.messages if not m.payload.get("is_error_frame")]
+    report = BusReplayReport(
+        session=[str(f) for f in res.files],
+        sent=0,
+        skipped_own=0,
+        skipped_error_frames=0,
+        by_direction=0,
+        by_can_id=0,
+        truncated=res.truncated,
+        read_error=res.error,
+    )
+    frames = []
+    for m in res.messages:
+        if m.payload.get("is_error_frame"):
+            report.skipped_error_frames += 1
+            continue
+        controller, by_direction = _is_controller_frame(m.payload)
+        report.by_direction += by_direction
+        report.by_can_id += not by_direction
+        if controller:
+            frames.append(m)
+        else:
+            report.skipped_own += 1
     if not frames:
-        raise ReplayError(f"{source}: no /cmm/can_rx frames logged (was can.log_frames off?)")
+        raise ReplayError(
+            f"{source}: no frames from the controller in /cmm/can_rx "
+            f"({report.skipped_own} of the daemon's own; was can.log_frames off?)"
+        )
     t0_ns = frames[0].log_time_ns
     start = time.perf_counter()
-    sent = 0
     for m in frames[:max_frames]:
         if speed > 0:
             due = start + (m.log_time_ns - t0_ns) / 1e9 / speed
@@ -284,5 +358,5 @@ def replay_to_bus(
             ),
             timeout=1.0,
         )
-        sent += 1
-    return sent
+        report.sent += 1
+    return report

@@ -100,6 +100,12 @@ def _d(base: Mapping[str, Any], description: str) -> dict[str, Any]:
     return {**base, "description": description}
 
 
+FRAME_DIRECTIONS = ("rx", "tx", "tx_echo")
+"""A logged CAN frame's ``direction``: ``rx`` received, sent by another node (the
+controller); ``tx`` sent by the daemon (``/cmm/can_tx``); ``tx_echo`` received, but on an id
+the daemon itself transmits: its own frame returned by the bus (``udp_multicast`` does that)."""
+
+
 _CAN_FRAME = _obj(
     "cmm_comp.CanFrame",
     "One raw CAN frame as seen on the bus.",
@@ -113,6 +119,13 @@ _CAN_FRAME = _obj(
         "is_fd": _BOOL,
         "is_remote_frame": _BOOL,
         "is_error_frame": _BOOL,
+        "direction": {
+            "type": "string",
+            "enum": list(FRAME_DIRECTIONS),
+            "description": "rx: received, sent by another node (the controller); tx: sent by "
+            "the daemon; tx_echo: received, but on an id the daemon transmits (its own frame "
+            "returned by the bus, as udp_multicast does). Absent in logs written before it.",
+        },
         "stamp": _STAMP,
     },
     ["arbitration_id", "is_extended", "dlc", "data", "bus_stamp", "stamp"],

@@ -22,15 +22,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO
 
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
 from ..osthread import name_os_thread
 from .encoding import ERROR_TOPIC, encode_message, error_payload, json_encoder, safe_str
 from .fastjson import FAST_JSON
 from .logger import HotPathQueue, LoggerStats, LogSettings
+from .mcapfile import McapFileWriter
 from .schemas import TOPIC_SCHEMAS, TopicSchema, stamp_from_ns
 from .writer import (
-    MessageAppender,
     finish_session_file,
     free_path,
     open_exclusive,
@@ -142,8 +142,7 @@ class McapLogger(HotPathQueue):
             settings.target.mkdir(parents=True, exist_ok=True)
         # open the first file here so a bad target fails loudly in the caller's thread
         self._stream: IO[bytes] | None = None
-        self._writer: Writer | None = None
-        self._append: MessageAppender | None = None
+        self._writer: McapFileWriter | None = None
         self._channels: dict[str, int] = {}
         self._opened_at = 0.0
         self._open_next()
@@ -274,7 +273,6 @@ class McapLogger(HotPathQueue):
                     schemas=self._schemas,
                     metadata=meta,
                 )
-                self._append = MessageAppender(self._writer)
                 break
             except FileExistsError:  # created between our check and our open: next name
                 if attempt == 99:
@@ -285,7 +283,6 @@ class McapLogger(HotPathQueue):
     def _finish_current(self) -> None:
         writer, stream = self._writer, self._stream
         self._writer = self._stream = None
-        self._append = None
         if writer is None or stream is None:
             return
         stats = self.stats()
@@ -305,8 +302,8 @@ class McapLogger(HotPathQueue):
 
     def _write_batch(self) -> int:
         n = 0
-        append = self._append
-        assert self._writer is not None and append is not None
+        assert self._writer is not None
+        append = self._writer.add_message
         queue = self._queue
         channels = self._channels
         schemas = self._schemas
@@ -332,7 +329,7 @@ class McapLogger(HotPathQueue):
             except Exception as exc:  # any bad payload: an error record, never a stop
                 self._encode_error(topic, payload, t_ns, exc, dumps)
                 continue
-            append(channel, t_ns, data)
+            append(channel, t_ns, data, t_ns)
             self._written += 1
             written_by[topic] = written_by.get(topic, 0) + 1
         return n
