@@ -174,7 +174,12 @@ def _first_harmonic(coef: FloatArray, envelope: int, s: float) -> tuple[float, f
 def _fit_subset(
     problem: Problem, term: Term, k: int, y: FloatArray, rows: Any, s_at: float
 ) -> dict[str, Any]:
-    """Period (re-profiled within ±1 cycle over the travel), amplitude and phase on ``rows``."""
+    """Period (re-profiled within ±1 cycle over the travel), amplitude and phase on ``rows``.
+
+    Amplitude and phase are fitted at the term's own period law: phases fitted at two subsets'
+    own periods would differ by the period difference times the distance from the phase origin
+    (a half of the travel a quarter-travel off centre turns 30° for 0.3 cycles) — a period
+    difference the period test judges on its own resolution."""
     n_cyc = cycles(problem, k, term.theta)
     best: tuple[float, float, Any] | None = None
     for dk in np.linspace(-1.0, 1.0, 21):
@@ -183,10 +188,10 @@ def _fit_subset(
         if best is None or g > best[0]:
             best = (g, float(dk), th)
     assert best is not None
-    _, dk, th = best
+    _, dk, _ = best
     t = problem.res.data.t_s
     _, coef, sigma = _gain(
-        _columns(problem, term, th, k, rows), y[rows], None if t is None else t[rows]
+        _columns(problem, term, term.theta, k, rows), y[rows], None if t is None else t[rows]
     )
     amp, phase = _first_harmonic(coef, term.candidate.envelope, s_at)
     n = len(rows)
