@@ -129,14 +129,26 @@ def _keys(cand: Candidate) -> dict[str, Any]:
 def _twin_alternatives(
     f: Finding, call: SourceCall, cause: str, coefs_of: Callable[[Term], Effect]
 ) -> tuple[list[dict[str, Any]], Effect | None]:
-    """The twins within the band as alternatives; the machine's version of a reference term."""
+    """The twins within the band as alternatives, each with its identifying keys and fitted
+    parameters (a period, a ripple's law: what names it); the machine's version of a
+    reference term."""
     out: list[dict[str, Any]] = []
     machine: Effect | None = None
     for t, delta in call.alternatives:
         advice = SEPARATE_BY.get(frozenset({cause, t.candidate.cause}), "")
-        out.append({**_keys(t.candidate), "delta_chi2": delta, "separated_by": advice})
+        twin = coefs_of(t)
+        described = twin.describe()
+        out.append(
+            {
+                **described,
+                **_keys(t.candidate),
+                "parameters": described.get("parameters", {}),
+                "delta_chi2": delta,
+                "separated_by": advice,
+            }
+        )
         if t.candidate.source == "machine" and machine is None:
-            machine = coefs_of(t)
+            machine = twin
     return out, machine
 
 

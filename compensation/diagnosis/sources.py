@@ -16,9 +16,10 @@ Two figures per twin, both in units of that σ²: Δχ², how much worse the twi
 *separability*, how badly the twin (the other terms free) can imitate the named term's fitted
 contribution — what the session could at best show. With ``band = χ²₁(1 − α)``:
 
-* separable (beyond the band, and missing at least 1 % of the term's energy — a cyclic error
-  moved by ~5 % of its period between the directions: below that the difference is the map's
-  own imperfection in a quiet session, not a physical one) and Δχ² > band: the twin is refuted; the term's own source and coordinate stand;
+* separable (beyond the band, and — for a twin in the other coordinate, through the map between
+  position and reading — missing at least 1 % of the term's energy — a cyclic error moved by
+  ~5 % of its period between the directions: below that the difference is the map's own
+  imperfection in a quiet session, not a physical one) and Δχ² > band: the twin is refuted; the term's own source and coordinate stand;
 * separable and Δχ² < −band: the twin replaces the term (the data say which object it is) and
   is then tested against its own twins — except a smooth function of the reading
   (:data:`READING_SHAPES`), which is never named in place of a machine term;
@@ -213,7 +214,10 @@ def decide_sources(
                 # separable only by a difference that is a sizeable part of the term itself
                 # (≥ 1 % of its energy: a cyclic error moved by ~0.05 period between the
                 # directions), not by the imperfections of the map in a quiet session
-                if misfit < SEPARATION_FLOOR * float(target @ target):
+                # (the floor is for twins through the map between position and reading: a
+                # reversal and a latency, or two drifts, differ by their own columns)
+                mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
+                if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
                     apart = min(apart, band)
                 call.twins.append(
                     {
