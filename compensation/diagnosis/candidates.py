@@ -351,7 +351,7 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                 )
             )
     out += thermal_candidates(res, moved)
-    out += forward_candidates(res, moved)
+    out += forward_candidates(res, moved, {a: periodic_scans(res, a) for a in AXES if moved[a]})
     if res.has("nx", "ny", "nz"):
         out.append(
             Candidate(

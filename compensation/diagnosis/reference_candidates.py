@@ -210,6 +210,15 @@ def _chirp_candidates(res: Residuals, axis: str) -> list[Candidate]:
     return [_chirp_candidate(res, axis, chirp, c, centre, span) for c in ("reference", "position")]
 
 
+def _dense_bidirectional(res: Residuals, axis: str) -> bool:
+    """A dense record (the chirp search's rule) with each direction on ≥ 10 % of the points."""
+    moved = sum(float(np.ptp(res.q_mm[:, j])) > 1e-6 for j in range(3))
+    if not (res.n >= CHIRP_POINTS or (moved == 1 and res.n >= CHIRP_ONE_AXIS)):
+        return False
+    d = res.signals.get(f"dir_{axis}")
+    return d is not None and 0.1 <= float(np.mean(d > 0)) <= 0.9
+
+
 def _latency_candidate(res: Residuals, axis: str) -> Candidate | None:
     v = res.signals.get(f"v_{axis}")
     if v is None or float(np.ptp(v)) <= 0:
@@ -257,13 +266,26 @@ def _smooth_drift(res: Residuals, axis: str) -> Candidate | None:
     ).with_rich(n_params=n1, build=b1)
 
 
-def forward_candidates(res: Residuals, moved: dict[str, bool]) -> list[Candidate]:
-    """The reference's terms (and their position-locked versions) that compete in selection."""
+def forward_candidates(
+    res: Residuals,
+    moved: dict[str, bool],
+    periodic_scans: dict[str, list[tuple[Any, float]]] | None = None,
+) -> list[Candidate]:
+    """The reference's terms (and their position-locked versions) that compete in selection:
+    the chirped ripples, the latency, the position-shaped drift, and — on a dense record run in
+    both directions, where a constant-period ripple of the reading is smeared in position
+    coordinates by the reversal (a fifth of a period moves it by 72°) and the machine's scan
+    would miss it — the reading's constant-period scan (``periodic_scans``: the machine's
+    period grids, the same look-elsewhere charge)."""
     out: list[Candidate] = []
     for a in AXES:
         if not moved[a]:
             continue
         out += _chirp_candidates(res, a)
+        if periodic_scans and _dense_bidirectional(res, a):
+            for periods, n_eff in periodic_scans.get(a, []):
+                if periods:
+                    out.append(_ripple_twin(res, a, periods, n_eff))
         latency = _latency_candidate(res, a)
         if latency is not None:
             out.append(latency)
@@ -459,7 +481,9 @@ def through_map(cand: Candidate, res: Residuals) -> Candidate:
             groups[(float(g), int(c))] = (own[sel][order], err[sel][order])
     dirs = np.unique(direction)
 
-    def ebar(q: FloatArray, times: FloatArray | None) -> FloatArray:
+    def ebar(
+        q: FloatArray, times: FloatArray | None, own_err: FloatArray, own_dir: FloatArray
+    ) -> FloatArray:
         if window is None or times is None:
             qc = np.zeros(len(q), dtype=int)
         else:
@@ -468,8 +492,13 @@ def through_map(cand: Candidate, res: Residuals) -> Candidate:
         out = np.zeros(len(q))
         for c in np.unique(qc):
             sel = qc == c
+            # a point's own direction gives its own error (interpolating among the passes of
+            # a window would mix in other passes' noise and drift: the map would no longer
+            # be exact where a position has one reading); the other directions interpolated
             means = [
-                np.interp(q[sel], *groups[(float(g), int(c))])
+                np.where(
+                    own_dir[sel] == g, own_err[sel], np.interp(q[sel], *groups[(float(g), int(c))])
+                )
                 for g in dirs
                 if len(groups[(float(g), int(c))][0])
             ]
@@ -481,7 +510,9 @@ def through_map(cand: Candidate, res: Residuals) -> Candidate:
     def mapped(r: Residuals) -> Residuals:
         data = r.data.subset(slice(None))
         col = (data.indicated_mm if locked == "position" else data.reference_mm).copy()
-        col[:, k] = col[:, k] + sign * ebar(col[:, k], data.t_s) / 1000.0
+        own_err = (data.reference_mm[:, k] - data.indicated_mm[:, k]) * 1000.0
+        own_dir = r.signals.get(f"dir_{'xyz'[k]}", np.zeros(r.n))
+        col[:, k] = col[:, k] + sign * ebar(col[:, k], data.t_s, own_err, own_dir) / 1000.0
         if locked == "position":
             data.indicated_mm = col
         else:
