@@ -320,9 +320,22 @@ def _ripple_twin(res: Residuals, axis: str, periods: Sequence[float], n_eff: flo
         thetas=tuple(periods),
         look_elsewhere=n_eff,
         design_fn=design_for(1),
+        design_many=_reading_scan(k),
+        design_component=k,
         source="reference",
         locked_to="reference",
     ).with_rich(n_params=6, build=builder(3), design_fn=design_for(3))
+
+
+def _reading_scan(k: int) -> Callable[[Residuals, Sequence[Any]], FloatArray]:
+    """(N, T, 2) cos/sin of the reading for T periods at once (the scan's profile: the same
+    span as :func:`ripple_columns` of a constant law, whose phase origin only rotates them)."""
+
+    def design(r: Residuals, periods: Sequence[Any]) -> FloatArray:
+        ph = np.outer(r.ref_mm[:, k], 2.0 * np.pi / np.asarray([float(p) for p in periods]))
+        return np.stack([np.cos(ph), np.sin(ph)], axis=2)
+
+    return design
 
 
 def _nonlinearity_twin(res: Residuals, axis: str) -> Candidate:
