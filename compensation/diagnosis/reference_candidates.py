@@ -275,14 +275,17 @@ def forward_candidates(
     the chirped ripples, the latency, the position-shaped drift, and — on a dense record run in
     both directions, where a constant-period ripple of the reading is smeared in position
     coordinates by the reversal (a fifth of a period moves it by 72°) and the machine's scan
-    would miss it — the reading's constant-period scan (``periodic_scans``: the machine's
+    would miss it, unless the chirp search proposed the reading's ripple with its law — the
+    reading's constant-period scan (``periodic_scans``: the machine's
     period grids, the same look-elsewhere charge)."""
     out: list[Candidate] = []
     for a in AXES:
         if not moved[a]:
             continue
-        out += _chirp_candidates(res, a)
-        if periodic_scans and _dense_bidirectional(res, a):
+        chirps = _chirp_candidates(res, a)
+        out += chirps
+        # (a chirp found: the reading's ripple is proposed with its law already)
+        if not chirps and periodic_scans and _dense_bidirectional(res, a):
             for periods, n_eff in periodic_scans.get(a, []):
                 if periods:
                     out.append(_ripple_twin(res, a, periods, n_eff))
