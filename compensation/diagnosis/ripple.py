@@ -3,7 +3,9 @@ which law does its period follow?
 
 A dense record (thousands of samples along an axis) shows a cyclic error's *local* period: the
 strongest cyclic error of the whole record is found first, then the travel is cut into up to 10
-windows holding at least 3.5 of its cycles each (4 windows at least), the smooth part of the error (a curve per direction of travel, a slow
+windows holding at least 3.5 of its cycles each (4 windows at least; when these show no law, the
+windows are sized again by the median of the strongest periods of 10 equal windows: a chirped
+error is strong locally but spread in the whole record, where a weaker constant one outshines it), the smooth part of the error (a curve per direction of travel, a slow
 drift) is removed, and in each window the period of the strongest sine is found (a least-squares
 periodogram, refined between grid values), with its Cramér–Rao uncertainty
 σ_f = √12·σ/(2π·A·L_w·√N_w) inflated by the scatter the law leaves. Windows whose period is far off a
@@ -167,11 +169,21 @@ def local_periods(
     whole = _window_peak(r, z, 1.0 / p_max, 1.0 / max(p_min_mm, p_pass))
     if whole is None:
         return []
-    n_win = int(min(windows, length / (WINDOW_CYCLES * whole.period_mm)))
+    return _windows_about(r, z, whole.period_mm, p_min_mm, windows)
+
+
+def _windows_about(
+    r: FloatArray, z: FloatArray, period_mm: float, p_min_mm: float, windows: int
+) -> list[LocalPeriod]:
+    """The strongest local period of each window, the windows holding ≥ ``WINDOW_CYCLES`` of
+    ``period_mm`` each and searching a factor ``PERIOD_RANGE`` either side of it."""
+    lo, hi = float(np.min(r)), float(np.max(r))
+    length = hi - lo
+    n_win = int(min(windows, length / (WINDOW_CYCLES * period_mm)))
     if n_win < MIN_WINDOWS:
         return []
-    f_lo = max(1.0 / (whole.period_mm * PERIOD_RANGE), WINDOW_CYCLES / 2 * n_win / length)
-    f_hi = min(PERIOD_RANGE / whole.period_mm, 1.0 / p_min_mm)
+    f_lo = max(1.0 / (period_mm * PERIOD_RANGE), WINDOW_CYCLES / 2 * n_win / length)
+    f_hi = min(PERIOD_RANGE / period_mm, 1.0 / p_min_mm)
     edges = np.linspace(lo, hi, n_win + 1)
     out: list[LocalPeriod] = []
     for a, b in itertools.pairwise(edges):
@@ -180,6 +192,24 @@ def local_periods(
         if peak is not None:
             out.append(peak)
     return out
+
+
+def _local_seed_mm(r: FloatArray, z: FloatArray, p_min_mm: float) -> float | None:
+    """The median of the strongest periods of ``WINDOWS`` equal windows, searched over the
+    whole range (a chirped cyclic error is strong locally but spread over many frequencies in
+    the whole record, where a weaker constant one can outshine it), or None."""
+    lo, hi = float(np.min(r)), float(np.max(r))
+    length = hi - lo
+    p_max = length / MIN_CYCLES_PER_TRAVEL
+    if p_max <= p_min_mm or length <= 0:
+        return None
+    periods = []
+    for a, b in itertools.pairwise(np.linspace(lo, hi, WINDOWS + 1)):
+        m = (r >= a) & (r <= b)
+        peak = _window_peak(r[m], z[m], 1.0 / p_max, 1.0 / p_min_mm)
+        if peak is not None:
+            periods.append(peak.period_mm)
+    return float(np.median(periods)) if len(periods) >= MIN_WINDOWS else None
 
 
 def _wls_line(x: FloatArray, y: FloatArray, w: FloatArray, deg: int) -> tuple[FloatArray, float]:
@@ -249,8 +279,22 @@ def find_chirp(
     p_min_mm: float,
     alpha: float = 1e-3,
 ) -> Chirp | None:
-    """A chirped cyclic error along ``r`` (module docstring), or None."""
-    win = _without_outliers(local_periods(r, y, groups, t, p_min_mm))
+    """A chirped cyclic error along ``r`` (module docstring), or None: the windows about the
+    record's strongest cyclic error first, then — when they show no law — those about the
+    strongest *local* one (a chirp outshone in the whole record by a constant cyclic error)."""
+    chirp = _chirp_of(r, local_periods(r, y, groups, t, p_min_mm), alpha)
+    if chirp is not None:
+        return chirp
+    z = _detrend(r, y, groups, t)
+    seed = _local_seed_mm(r, z, p_min_mm)
+    if seed is None:
+        return None
+    return _chirp_of(r, _windows_about(r, z, seed, p_min_mm, WINDOWS), alpha)
+
+
+def _chirp_of(r: FloatArray, windows: list[LocalPeriod], alpha: float) -> Chirp | None:
+    """The period law the local periods ``windows`` follow along ``r``, or None."""
+    win = _without_outliers(windows)
     if len(win) < 4:
         return None
     x = np.array([w.centre_mm for w in win])
