@@ -74,10 +74,21 @@ def test_bidirectional_ripple_is_the_reference_s_with_its_law(bidirectional) -> 
             assert m["parameters"]["period_mm"] > 1.0, m
 
 
-def test_bidirectional_screw_is_the_machine_s(bidirectional) -> None:
+def test_bidirectional_screw_moved_too_little_to_tell(bidirectional) -> None:
+    """The backlash moves the screw's cyclic error by r/p = 0.04 mm / 2 mm = 0.02 of its period
+    between the directions (7°): the contract (docs/formats.md §4; tests/reference_generator's
+    truth, its "ESS case") calls a cyclic error separable only when r/p is ≥ 0.2 from an integer,
+    so this session cannot say which instrument carries it — either, with the reading's ripple
+    as the alternative; the locking figures still show the small shift the data hold."""
     d, truth, _, _ = bidirectional
+    ratio = truth.reversal_um / 1000.0 / truth.screw_mm
+    assert abs(ratio - round(ratio)) < 0.2  # the premise: not separable by the contract
     e = _one(d, "periodic")
-    assert e["source"] == "machine" and e["locked_to"] == "position"
+    assert e["source"] == "either" and e["locked_to"] == "undetermined"
+    assert ("reference_ripple", "reference") in _alt_causes(e)
+    lock = e["evidence"]["locking"]  # physics: a position-locked error moves by r in the reading
+    assert abs(lock["shift_in_position_coordinates_um"]) < 6
+    assert lock["shift_in_reference_coordinates_um"] == pytest.approx(truth.reversal_um, abs=6)
     assert e["parameters"]["period_mm"] == pytest.approx(truth.screw_mm, rel=0.01)
     assert e["parameters"]["amplitude_um"] == pytest.approx(truth.screw_um, rel=0.15)
     check = e["evidence"]
@@ -156,13 +167,16 @@ def test_reference_drift_the_same_everywhere_is_either(tmp_path: Path) -> None:
 def test_extend_adds_only_the_machine_s(bidirectional, tmp_path: Path) -> None:
     d, truth, _, _ = bidirectional
     plain = [e.cause for e in d.machine_effects()]
-    # the machine's (screw, reversal) are added; the reference's never; a drift is not
-    # compensable; the smooth curve is either's: only on request
-    assert "periodic" in plain and "reversal" in plain
-    assert not {"parametric", "drift", "reference_ripple", "latency"} & set(plain)
-    assert "parametric" in [e.cause for e in d.machine_effects(include_either=True)]
+    # the machine's (reversal) are added; the reference's never; a drift is not compensable;
+    # the smooth curve and the screw (moved 0.02 period by the reversal) are either's: only on
+    # request
+    assert "reversal" in plain
+    assert not {"parametric", "periodic", "drift", "reference_ripple", "latency"} & set(plain)
+    either = [e.cause for e in d.machine_effects(include_either=True)]
+    assert "parametric" in either and "periodic" in either and "reference_ripple" not in either
     # the extended machine's screw is the simulated one (physics: 4 µm at 2 mm, a harmonic)
-    screw = next(e for e in d.extended_machine().effects if e.cause == "periodic")
+    ext = d.extended_machine(include_either=True)
+    screw = next(e for e in ext.effects if e.cause == "periodic")
     q = np.linspace(-15, 15, 301)
     w = 2 * math.pi / truth.screw_mm
     want = truth.screw_um * (np.cos(w * q + 0.4) + 0.3 * np.cos(2 * w * q + 1.1))

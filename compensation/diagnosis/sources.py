@@ -18,7 +18,7 @@ contribution — what the session could at best show. With ``band = χ²₁(1 �
 
 * separable (beyond the band, and — for a twin in the other coordinate, through the map between
   position and reading — missing at least 1 % of the term's energy — a cyclic error moved by
-  ~5 % of its period between the directions: below that the difference is the map's own
+  ~3 % of its period (misfit sin²(π·shift)) between the directions: below that the difference is the map's own
   imperfection in a quiet session, not a physical one) and Δχ² > band: the twin is refuted; the term's own source and coordinate stand;
 * separable and Δχ² < −band: the twin replaces the term (the data say which object it is) and
   is then tested against its own twins — except a smooth function of the reading
@@ -212,7 +212,7 @@ def decide_sources(
                 misfit = _imitation_misfit(problem, others, t_term, target)
                 apart = misfit / sigma2
                 # separable only by a difference that is a sizeable part of the term itself
-                # (≥ 1 % of its energy: a cyclic error moved by ~0.05 period between the
+                # (≥ 1 % of its energy: a cyclic error moved by ~0.03 period between the
                 # directions), not by the imperfections of the map in a quiet session
                 # (the floor is for twins through the map between position and reading: a
                 # reversal and a latency, or two drifts, differ by their own columns)
