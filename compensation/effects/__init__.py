@@ -3,8 +3,7 @@
 * :mod:`.base` — :class:`Effect`, :class:`EvalContext`, the cause registry and the helpers every
   effect shares;
 * :mod:`.parametric` — corrections of the parametric errors (``parametric``, ``coupling``,
-  ``reversal``); :mod:`.periodic` — cyclic errors (``periodic``), their period laws in
-  :mod:`.period_law`;
+  ``reversal``, ``periodic``);
 * :mod:`.probe` — probe lobing;
 * :mod:`.drift` — an axis' error drifting with time (``drift``: diagnosis only).
 
@@ -20,13 +19,12 @@ from .drift import DriftEffect
 from .parametric import (
     CouplingEffect,
     ParametricEffect,
+    PeriodicEffect,
     ReversalEffect,
     default_orders,
     legendre_shape,
     normalised,
 )
-from .period_law import PeriodLaw
-from .periodic import PeriodicEffect, ripple_columns, ripple_terms
 from .probe import ProbeLobingEffect, lobing_signals
 from .static_image import StaticImageEffect
 
@@ -36,7 +34,6 @@ __all__ = [
     "Effect",
     "EvalContext",
     "ParametricEffect",
-    "PeriodLaw",
     "PeriodicEffect",
     "ProbeLobingEffect",
     "ReversalEffect",
@@ -48,6 +45,4 @@ __all__ = [
     "lobing_signals",
     "normalised",
     "register_effect",
-    "ripple_columns",
-    "ripple_terms",
 ]
