@@ -39,6 +39,13 @@ def _commands() -> list[str]:
 @pytest.mark.timeout(900)
 def test_worked_example_runs_as_printed(tmp_path: Path) -> None:
     shutil.copytree(ROOT / "examples", tmp_path / "examples")
+    # the one change to what the page runs: the copied daemon.toml's metrics port 9108 becomes
+    # 0 (any free port), so another test's daemon on this host cannot make --check fail with
+    # "Address already in use" (tests run in parallel: tests/README.md)
+    cfg = tmp_path / "examples" / "daemon.toml"
+    text = cfg.read_text(encoding="utf-8")
+    assert "\nport = 9108\n" in text
+    cfg.write_text(text.replace("\nport = 9108\n", "\nport = 0\n"), encoding="utf-8")
     commands = _commands()
     assert commands[0].startswith("cmm-comp calibrate examples/calibration/calibration.toml")
     for line in commands:

@@ -305,6 +305,7 @@ def test_scene_decimates_and_cycles_its_slots() -> None:
             sink.tick()
             first = cls.FromString(client.receive(1)[0].payload)
             sink.log_many("/cmm/corrected", batch[:4], T0_NS + 1)
+            time.sleep(2.0 / 1000.0)  # past the 1 ms scene period (scene_rate_hz = 1000)
             sink.tick()
             second = cls.FromString(client.receive(1)[0].payload)
         s = sink.stats()
