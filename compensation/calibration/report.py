@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import CalibrationError
+from ..json_values import finite_json
 from .plots import errors_png, residuals_png, volumetric_png
 
 if TYPE_CHECKING:
@@ -27,17 +28,12 @@ REPORT_FORMAT = "cmm-calibration-report/1"
 
 
 def _finite(obj: Any, where: str) -> Any:
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, np.ndarray):
-        obj = obj.tolist()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        raise CalibrationError(f"calibration.json: {where} is {obj}; nothing written")
-    if isinstance(obj, dict):
-        return {k: _finite(v, f"{where}.{k}") for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v, f"{where}[{i}]") for i, v in enumerate(obj)]
-    return obj
+    """``obj`` as JSON values; :class:`CalibrationError` naming the first non-finite number."""
+    return finite_json(
+        obj,
+        where,
+        lambda at, v: CalibrationError(f"calibration.json: {at} is {v}; nothing written"),
+    )
 
 
 def _gauge_list(gauge: dict[str, Any]) -> list[dict[str, Any]]:

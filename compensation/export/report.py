@@ -10,7 +10,6 @@ import base64
 import html
 import io
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +17,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..json_values import finite_json
 from ..parametric_errors import AXES
 from .decompose import model_error_um
 from .export import ExportResult
@@ -30,15 +30,13 @@ __all__ = ["export_figure_png", "export_html", "report_json"]
 def _finite(obj: Any, where: str = "report") -> Any:
     """``obj`` with numpy scalars as Python numbers; :class:`ExportError` naming the first
     number that is not finite (was written as null: a figure silently missing)."""
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        raise ExportError(f"export.json: {where} is {obj} (not a finite number); nothing written")
-    if isinstance(obj, dict):
-        return {k: _finite(v, f"{where}.{k}") for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v, f"{where}[{i}]") for i, v in enumerate(obj)]
-    return obj
+    return finite_json(
+        obj,
+        where,
+        lambda at, v: ExportError(
+            f"export.json: {at} is {v} (not a finite number); nothing written"
+        ),
+    )
 
 
 def report_json(result: ExportResult) -> str:
