@@ -6,8 +6,9 @@ coefficients per component). In numpy this means dozens of temporary (N, 4) arra
 batch and ~1 ms of interpreter overhead for a single point; compiled, one point costs ~2 µs and
 the batch runs in parallel. An on-disk cache keeps the JIT cost out of later processes where one
 is writable (:func:`..jit.njit_cached`; a read-only install without a home compiles in every
-process); the grid warms the kernels up when it is constructed, so the first correction is not
-the slow one.
+process); the grid warms the serial kernel up when it is constructed, so the first reading is
+not the slow one (the thread-pool kernel, for batches of ``PARALLEL_MIN`` points or more, on
+its first batch: the daemon never calls it).
 
 The kernels take their tables as two structured arguments, :class:`KernelTables` (with its
 :class:`SplineTables`), built once per grid (:mod:`.interpolation`), and the outputs as one
