@@ -37,7 +37,15 @@ from ..errors import CalibrationError
 from .model import MachineModel
 from .observation import Block
 
-__all__ = ["GroupFit", "Problem", "Solution", "residuals_without_errors", "solve"]
+__all__ = [
+    "EffectGroup",
+    "GroupFit",
+    "Problem",
+    "Solution",
+    "residuals_without_errors",
+    "smoothness_spread",
+    "solve",
+]
 
 FloatArray = NDArray[np.float64]
 LAMBDA_RANGE = (1e-8, 1e6)  # τ = 1e4 … 1e-3 µm (µrad): beyond, the data have nothing to add
@@ -55,6 +63,7 @@ HYPER_TAU0_MIN = 0.1  # µm or µrad: the smallest τ0
 CLASS_WEIGHT = 1.0  # degrees of freedom of the class' smoothness in each function's estimate
 COST_NOISE = 1e-4  # χ²: below this a cost change is numerical noise
 STRAIGHTNESS_SLOPE_WEIGHT = 1e2  # the weak prior on a straightness slope: 10× tighter
+EFFECT_SIGMA_MIN = 1e-3  # µm: the smallest σ of a random effect (per-point offsets)
 DECREASE_TOL = 1e-6  # χ² (plus 1e-9 of the cost): a step promising less ends the iteration
 
 
@@ -70,6 +79,20 @@ class GroupFit:
     sigma0: float
     sigma: float
     redundancy: float = 0.0
+    estimated: bool = False
+
+
+@dataclass
+class EffectGroup:
+    """Random-effect nuisance parameters (global indices ``index``) sharing a prior N(0, σ²),
+    σ estimated like a variance group (``estimated`` False while too few are seen)."""
+
+    block: int
+    name: str
+    index: NDArray[np.intp]
+    sigma0: float
+    sigma: float
+    used: float = 0.0
     estimated: bool = False
 
 
@@ -124,6 +147,11 @@ class Problem:
                 n = int(np.sum(b.groups == li))
                 self.groups.append(GroupFit(bi, li, n, float(removed[li]), vg.sigma0, vg.sigma0))
             self.group_index.append(base + b.groups)
+        self.effects = [
+            EffectGroup(bi, name, self.offsets[bi] + idx, sigma0, sigma0)
+            for bi, b in enumerate(blocks)
+            for idx, name, sigma0 in b.random_effects()
+        ]
 
     def _transform(self, model: MachineModel) -> None:
         """θ = T·θ_int per function: [straight lines | shapes scaled to unit roughness]."""
@@ -257,6 +285,8 @@ class Problem:
         out = self.base_precision.copy()
         for f, idx in self.shape_index.items():
             out[idx] += lam[f]
+        for e in self.effects:
+            out[e.index] = 1.0 / e.sigma**2
         return out
 
     def absolute(self, theta_int: FloatArray, states: list[Any]) -> FloatArray:
@@ -265,7 +295,7 @@ class Problem:
         x = np.zeros(self.n)
         x[: self.p] = theta_int
         for bi, (b, st) in enumerate(zip(self.blocks, states, strict=True)):
-            ball = getattr(st, "ball_um", None)
+            ball = getattr(st, "ball_um", getattr(st, "point_um", None))
             if ball is not None:
                 start = self.offsets[bi] + b.n_nuisance - ball.size
                 x[start : self.offsets[bi + 1]] = ball.reshape(-1)
@@ -452,6 +482,16 @@ def _hyper_step(
             change = max(change, abs(new / g.sigma - 1.0))
             g.sigma = new
             g.estimated = True
+    for e in problem.effects:
+        # σ of a random effect: the MacKay update, like a variance group's (γ = the effects
+        # the data determine); floored, so a vanishing effect stays a (tight) prior
+        c = x_abs[e.index] + delta[e.index]
+        e.used = e.index.size - float(np.sum(np.diag(cov)[e.index])) / e.sigma**2
+        if e.used >= 1.0:
+            new = max(float(np.sqrt(float(c @ c) / e.used)), EFFECT_SIGMA_MIN)
+            change = max(change, abs(new / e.sigma - 1.0))
+            e.sigma = new
+            e.estimated = True
     new_lam = dict(lam)
     if estimate_lambda:
         theta = x_abs[: problem.p] + delta[: problem.p]
@@ -529,7 +569,10 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
     res, jac = problem.linearize(theta, states)
     stats = problem.group_stats(res, jac)
     x_abs = problem.absolute(theta, states)
-    cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()
+    normal = _Normal(problem, stats, x_abs, lam, pinned=False)
+    cov = normal.inverse()
+    if estimate:  # the smoothness was estimated, not known: its uncertainty goes into U
+        cov = cov + smoothness_spread(problem, stats, x_abs, lam, cov, normal.step())
     pinned = _Normal(problem, stats, x_abs, lam).inverse()[: problem.p, : problem.p]
     return Solution(
         theta=problem.theta(theta),
@@ -552,6 +595,36 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         history=history,
         stats=stats,
     )
+
+
+def smoothness_spread(
+    problem: Problem,
+    stats: list[tuple[FloatArray, FloatArray, float]],
+    x_abs: FloatArray,
+    lam: dict[str, float],
+    cov: FloatArray,
+    step: FloatArray,
+) -> FloatArray:
+    """(n, n) what the smoothness' own uncertainty adds to the posterior covariance ``cov``.
+
+    Each class' λ_f is an estimate: its evidence gives log λ_f a posterior of standard deviation
+    ``√(2/ν_f)`` (MacKay), ν_f the degrees of freedom behind it (γ_f of the data plus the
+    :data:`CLASS_WEIGHT` the class lends). The covariance marginalised over λ is
+    ``E[H(λ)⁻¹] + Var[θ̂(λ)]``; both are integrated by 3-point Gauss–Hermite in log λ_f, one class
+    at a time (nodes ±√3·s, weight 1/6 each): a rougher λ widens what the data leave to the
+    prior (where the data end: the volume's corners), and a solution that moves with λ adds its
+    move. Additive over classes (first order in the cross terms)."""
+    out = np.zeros_like(cov)
+    for f in problem.classes:
+        dof = max(problem.gamma.get(f, 0.0), 0.0) + CLASS_WEIGHT
+        s = float(np.sqrt(2.0 / dof))
+        for sign in (-1.0, 1.0):
+            moved = dict(lam)
+            moved[f] = float(np.clip(lam[f] * np.exp(sign * np.sqrt(3.0) * s), *LAMBDA_RANGE))
+            normal = _Normal(problem, stats, x_abs, moved, pinned=False)
+            shift = normal.step() - step  # θ̂(λ') − θ̂(λ) of the linearised problem
+            out += (normal.inverse() - cov + np.outer(shift, shift)) / 6.0
+    return out
 
 
 def residuals_without_errors(problem: Problem) -> list[FloatArray]:
