@@ -26,7 +26,7 @@ Residuals are exact (the project's chain), the Jacobian first order in the error
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -45,6 +45,7 @@ __all__ = [
     "residuals_without_errors",
     "smoothness_spread",
     "solve",
+    "with_smoothness_spread",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -569,10 +570,7 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
     res, jac = problem.linearize(theta, states)
     stats = problem.group_stats(res, jac)
     x_abs = problem.absolute(theta, states)
-    normal = _Normal(problem, stats, x_abs, lam, pinned=False)
-    cov = normal.inverse()
-    if estimate:  # the smoothness was estimated, not known: its uncertainty goes into U
-        cov = cov + smoothness_spread(problem, stats, x_abs, lam, cov, normal.step())
+    cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()
     pinned = _Normal(problem, stats, x_abs, lam).inverse()[: problem.p, : problem.p]
     return Solution(
         theta=problem.theta(theta),
@@ -595,6 +593,18 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         history=history,
         stats=stats,
     )
+
+
+def with_smoothness_spread(problem: Problem, sol: Solution) -> Solution:
+    """``sol`` with :attr:`Solution.covariance_theta` widened by what the smoothness' own
+    uncertainty adds (:func:`smoothness_spread`); unchanged when the smoothness was fixed."""
+    if problem.fixed_smoothness is not None or not problem.classes:
+        return sol
+    x_abs = problem.absolute(sol.theta_internal, sol.states)
+    normal = _Normal(problem, sol.stats, x_abs, sol.lam, pinned=False)
+    cov = normal.inverse()
+    cov = cov + smoothness_spread(problem, sol.stats, x_abs, sol.lam, cov, normal.step())
+    return replace(sol, covariance_theta=problem.theta_covariance(cov[: problem.p, : problem.p]))
 
 
 def smoothness_spread(
