@@ -96,6 +96,9 @@ def simulate_laser(
     runs = []
     for run in data.runs:
         values = run_values(machine, run) + _noise(rng, sigma[run.kind], (run.n,))
+        if run.kind == "linear":  # the run's own scale error (air compensation), ppm
+            scale = float(_noise(rng, u["u_scale_ppm"], (1,))[0])
+            values = values + scale * 1e-3 * (run.position_mm - run.position_mm[0])
         runs.append(replace(run, value=values))
     return replace(data, runs=tuple(runs))
 

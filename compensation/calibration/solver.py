@@ -296,6 +296,9 @@ class Problem:
         x = np.zeros(self.n)
         x[: self.p] = theta_int
         for bi, (b, st) in enumerate(zip(self.blocks, states, strict=True)):
+            if isinstance(st, np.ndarray):  # a block whose whole state has a prior (scales)
+                x[self.offsets[bi] : self.offsets[bi + 1]] = st
+                continue
             ball = getattr(st, "ball_um", getattr(st, "point_um", None))
             if ball is not None:
                 start = self.offsets[bi] + b.n_nuisance - ball.size
