@@ -489,10 +489,10 @@ def _hyper_step(
     for e in problem.effects:
         # σ of a random effect: the MacKay update, like a variance group's (γ = the effects
         # the data determine); floored, so a vanishing effect stays a (tight) prior
-        c = x_abs[e.index] + delta[e.index]
+        effect = x_abs[e.index] + delta[e.index]
         e.used = e.index.size - float(np.sum(np.diag(cov)[e.index])) / e.sigma**2
         if e.used >= 1.0:
-            new = max(float(np.sqrt(float(c @ c) / e.used)), EFFECT_SIGMA_MIN)
+            new = max(float(np.sqrt(float(effect @ effect) / e.used)), EFFECT_SIGMA_MIN)
             change = max(change, abs(new / e.sigma - 1.0))
             e.sigma = new
             e.estimated = True
