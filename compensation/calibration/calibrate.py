@@ -30,13 +30,8 @@ from .covariance import (
 from .datasets import Dataset, build_problem, load_datasets
 from .gauge import analyse_gauge
 from .plan import Plan
-from .solver import (
-    Problem,
-    Solution,
-    residuals_without_errors,
-    solve,
-    with_smoothness_spread,
-)
+from .posterior import residuals_without_errors, with_smoothness_spread
+from .solver import Problem, Solution, solve
 from .writer import build_machine, machine_description
 
 if TYPE_CHECKING:
