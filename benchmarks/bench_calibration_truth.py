@@ -131,8 +131,9 @@ def verdict(p: dict[str, Any]) -> str:
     return "PASS" if ok else "FAIL"
 
 
-def report(scores: list[CaseScore], kinds: list[str]) -> dict[str, Any]:
-    """Print one table per kind; return the JSON summary."""
+def report(scores: list[CaseScore], kinds: list[str], echo: bool = True) -> dict[str, Any]:
+    """Print one table per kind (unless ``echo`` is False); return the JSON summary."""
+    say = print if echo else (lambda *_a, **_k: None)
     header = (
         f"  {'model':<6} {'n':>4} {'failed':>6} {'cover. %':>9} {'RMS med%':>8} "
         f"{'max %':>7} {'≤ 20 %':>8} {'med U µm':>9} {'s/case':>8}"
@@ -140,20 +141,20 @@ def report(scores: list[CaseScore], kinds: list[str]) -> dict[str, Any]:
     summary: dict[str, Any] = {}
     for kind in kinds:
         mine = [s for s in scores if s.kind == kind]
-        print(
+        say(
             f"\n{kind}  (bars: coverage {COVERAGE_BAR[0]:.0%}–{COVERAGE_BAR[1]:.0%} pooled, "
             f"RMS ≤ {RMS_RATIO_BAR:.0%} each)"
         )
-        print(header)
+        say(header)
         per_model = {}
         for model in MODELS:
             rows = [s for s in mine if s.model == model]
             if rows:
                 text, per_model[model] = _row(model, rows)
-                print(text)
+                say(text)
         text, total = _row("all", mine)
         total["verdict"] = verdict(total)
-        print(text + f"  {total['verdict']}")
+        say(text + f"  {total['verdict']}")
         summary[kind] = {"all": total, "models": per_model}
     return summary
 
@@ -205,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     scores: list[CaseScore] = []
     t0 = time.perf_counter()
+    out = Path(args.out)
+    partial = out.with_name(out.stem + "_partial.json")
+    meta = {"argv": argv, "seeds": seeds, "fresh": fresh, "kinds": kinds, "baseline": baseline}
     with (
         tempfile.TemporaryDirectory(prefix="calib_truth_") as tmp,
         ThreadPoolExecutor(args.jobs) as ex,
@@ -222,6 +226,9 @@ def main(argv: list[str] | None = None) -> int:
                 f"[{i}/{len(jobs)}] {s.kind} {s.model} seed {s.seed}: {state} ({s.seconds:.1f} s)",
                 flush=True,
             )
+            # what finished so far, rewritten after every case (a run stopped early keeps it)
+            doc = _document(meta, args, scores, report(scores, kinds, echo=False), t0, len(jobs))
+            _write_json(partial, doc)
     wall = time.perf_counter() - t0
     summary = report(scores, kinds)
     secs = np.array([s.seconds for s in scores])
@@ -229,28 +236,48 @@ def main(argv: list[str] | None = None) -> int:
         f"\ncalibrate wall time per case: median {np.median(secs):.1f} s = "
         f"{np.median(secs) / baseline:.1f} × cmm-comp start-up; total {wall:.0f} s"
     )
-    doc = {
+    _write_json(out, _document(meta, args, scores, summary, t0, len(jobs)))
+    print(f"wrote {out}")
+    return 0 if all(v["all"]["verdict"] == "PASS" for v in summary.values()) else 1
+
+
+def _write_json(path: Path, doc: dict[str, Any]) -> None:
+    """Write ``doc`` atomically (a reader never sees half a file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(_json_safe(doc), indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    tmp.replace(path)
+
+
+def _document(
+    meta: dict[str, Any],
+    args: argparse.Namespace,
+    scores: list[CaseScore],
+    summary: dict[str, Any],
+    t0: float,
+    planned: int,
+) -> dict[str, Any]:
+    argv = meta["argv"]
+    return {
         "benchmark": "calibration_truth",
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
         "command": " ".join(
             [Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]
         ),
         "oracle": args.oracle,
-        "fresh_seeds": fresh,
-        "seeds": seeds,
-        "kinds": kinds,
+        "fresh_seeds": meta["fresh"],
+        "seeds": meta["seeds"],
+        "kinds": meta["kinds"],
         "bars": {"coverage": list(COVERAGE_BAR), "rms_ratio": RMS_RATIO_BAR},
-        "cli_startup_s": baseline,
-        "wall_s": wall,
+        "cli_startup_s": meta["baseline"],
+        "wall_s": time.perf_counter() - t0,
+        "cases_planned": planned,
+        "cases_finished": len(scores),
         "machine_note": "2 cores shared with other work; times are indicative",
+        "load_average_1_5_15": list(os.getloadavg()),
         "summary": summary,
         "cases": [s.as_dict() for s in sorted(scores, key=lambda c: (c.kind, c.model, c.seed))],
     }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(_json_safe(doc), indent=1, allow_nan=False) + "\n", encoding="utf-8")
-    print(f"wrote {out}")
-    return 0 if all(v["all"]["verdict"] == "PASS" for v in summary.values()) else 1
 
 
 if __name__ == "__main__":

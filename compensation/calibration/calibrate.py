@@ -30,7 +30,8 @@ from .covariance import (
 from .datasets import Dataset, build_problem, load_datasets
 from .gauge import analyse_gauge
 from .plan import Plan
-from .solver import Problem, Solution, residuals_without_errors, solve
+from .posterior import residuals_without_errors, with_smoothness_spread
+from .solver import Problem, Solution, solve
 from .writer import build_machine, machine_description
 
 if TYPE_CHECKING:
@@ -146,6 +147,8 @@ def _calibrate(
         say("no significant reversal on " + ", ".join(dropped) + ": fitted again without")
         problem = build_problem(plan, datasets, reversal=kept)
         sol = solve(problem, progress=say)
+    # the smoothness was estimated, not known: its uncertainty widens the volumetric U
+    sol = with_smoothness_spread(problem, sol)
     layout = problem.model.layout
     cov = sol.covariance_theta
     kinds = [b.kind for b in problem.blocks]

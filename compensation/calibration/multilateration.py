@@ -30,7 +30,9 @@ MIN_STATIONS = 4
 @dataclass(frozen=True)
 class MultilaterationData(PointsFile):
     """One ``[[multilateration]]`` entry: ``stations`` (names, order of first appearance),
-    ``station`` index per row, ``q_mm`` (N, 3) indicated points, ``length_mm`` (N,)."""
+    ``station`` index per row, ``q_mm`` (N, 3) indicated points, ``length_mm`` (N,), ``point``
+    per row the index of its shared point (the same ``point`` label at the same indicated
+    position, measured from ≥ 2 stations; −1 for a point one station alone measured)."""
 
     spec: MultilaterationSpec
     stations: tuple[str, ...]
@@ -39,6 +41,27 @@ class MultilaterationData(PointsFile):
     length_mm: FloatArray
     lines: tuple[int, ...]
     temps_C: dict[str, FloatArray] = field(default_factory=dict)
+    point: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+
+    @property
+    def n_points(self) -> int:
+        """Shared points (measured from ≥ 2 stations)."""
+        return int(self.point.max(initial=-1)) + 1
+
+
+def shared_points(labels: list[str], q_mm: FloatArray) -> IntArray:
+    """Per row the index of its point among those measured more than once (same label, same
+    indicated position to 1 µm), −1 for a point measured once."""
+    keys = [(lab, *np.round(q, 3).tolist()) for lab, q in zip(labels, q_mm, strict=True)]
+    count: dict[tuple[object, ...], int] = {}
+    for k in keys:
+        count[k] = count.get(k, 0) + 1
+    index: dict[tuple[object, ...], int] = {}
+    out = np.full(len(keys), -1, dtype=np.intp)
+    for i, k in enumerate(keys):
+        if count[k] > 1:
+            out[i] = index.setdefault(k, len(index))
+    return out
 
 
 def read_multilateration(
@@ -59,7 +82,7 @@ def read_multilateration(
     q = np.column_stack([table.numbers(a) for a in AXES])
     length = table.numbers("length_mm", allow_empty=not need_values)
     names = table.text("station")
-    table.text("point")  # required, any label
+    labels = list(table.text("point"))  # any label: the same label = the same point
     stations: list[str] = []
     first: list[int] = []
     idx = np.empty(len(table), dtype=np.intp)
@@ -100,4 +123,5 @@ def read_multilateration(
         length_mm=length,
         lines=table.lines,
         temps_C=temps,
+        point=shared_points(labels, q),
     )

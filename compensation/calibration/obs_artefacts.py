@@ -8,7 +8,11 @@ Nuisance per placement: a small rotation (µrad, composed onto R) and a translat
 
 Multilateration: ``length = |p − s| + d`` with p the reflector's true position, s the station
 (mm) and d its dead path. Residual ``1000·(|p − s| + d − length)`` µm. Nuisance per station:
-its position (µm) and dead path (µm).
+its position (µm) and dead path (µm); per point measured from several stations a random offset
+c (µm, prior N(0, σ_point²), σ_point estimated): what the machine's state at that stop adds for
+every station alike (its reversal after the program's last moves, a settling error) is one
+error shared by all the stations' lengths, not independent noise — taken as noise it would
+overstate what the lengths say about θ.
 """
 
 from __future__ import annotations
@@ -130,10 +134,11 @@ class PlateBlock(Block):
 
 @dataclass(frozen=True)
 class StationState:
-    """Station centres (S, 3) mm and dead paths (S,) mm."""
+    """Station centres (S, 3) mm, dead paths (S,) mm and the shared points' offsets (P, 3) µm."""
 
     position_mm: FloatArray
     dead_path_mm: FloatArray
+    point_um: FloatArray
 
 
 class MultilaterationBlock(Block):
@@ -147,11 +152,17 @@ class MultilaterationBlock(Block):
         self.lines = data.lines
         self.pts = model.points(data.q_mm, data.spec.stylus_mm, None, data.temps_C or None)
         self.s = len(data.stations)
+        self.np = data.n_points
         self._jac: FloatArray | None = None
 
     @property
     def n_nuisance(self) -> int:
-        return 4 * self.s
+        return 4 * self.s + 3 * self.np
+
+    def random_effects(self) -> list[tuple[NDArray[np.intp], str, float]]:
+        if not self.np:
+            return []
+        return [(4 * self.s + np.arange(3 * self.np), "point_um", self.data.spec.u_um)]
 
     def initial_state(self, model: MachineModel, theta: FloatArray) -> StationState:
         d = self.data
@@ -162,7 +173,7 @@ class MultilaterationBlock(Block):
             dead[k] = float(
                 np.median(d.length_mm[rows] - np.linalg.norm(d.q_mm[rows] - pos[k], axis=1))
             )
-        return StationState(pos, dead)
+        return StationState(pos, dead, np.zeros((self.np, 3)))
 
     def linearize(self, model: MachineModel, theta: FloatArray, state: Any) -> Linearization:
         d = self.data
@@ -181,12 +192,18 @@ class MultilaterationBlock(Block):
         for i in range(3):
             jn[rows, 4 * d.station + i] = -unit[:, i]
         jn[rows, 4 * d.station + 3] = 1.0
+        shared = np.flatnonzero(d.point >= 0)
+        if shared.size:
+            resid[shared] += np.einsum("ni,ni->n", unit[shared], st.point_um[d.point[shared]])
+            for i in range(3):
+                jn[shared, 4 * self.s + 3 * d.point[shared] + i] = unit[shared, i]
         return Linearization(resid, jm, jn)
 
     def advance(self, state: Any, delta: FloatArray) -> StationState:
         st: StationState = state
-        step = delta.reshape(self.s, 4) / 1000.0
-        return StationState(st.position_mm + step[:, :3], st.dead_path_mm + step[:, 3])
+        step = delta[: 4 * self.s].reshape(self.s, 4) / 1000.0
+        point = st.point_um + delta[4 * self.s :].reshape(self.np, 3)
+        return StationState(st.position_mm + step[:, :3], st.dead_path_mm + step[:, 3], point)
 
     def describe_state(self, state: Any, covariance: FloatArray | None) -> dict[str, Any]:
         st: StationState = state
@@ -203,4 +220,8 @@ class MultilaterationBlock(Block):
                 entry["u_position_um"] = sd[4 * k : 4 * k + 3].tolist()
                 entry["u_dead_path_um"] = float(sd[4 * k + 3])
             out.append(entry)
-        return {"stations": out}
+        return {"stations": out, "point_offsets_rms_um": _rms3(st.point_um)}
+
+
+def _rms3(values: FloatArray) -> float | None:
+    return float(np.sqrt(np.mean(values**2))) if values.size else None

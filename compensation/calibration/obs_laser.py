@@ -3,6 +3,9 @@ exact chain (:class:`.model.MachineModel`):
 
 * ``linear_um``: the moving axis' component of the volumetric error at the optic (a stylus
   offset) on the line; a run's zero is unknown (its constant is removed from data and model);
+  each run's scale κ (ppm, the air-refraction compensation's error) is a nuisance parameter with
+  the prior N(0, ``u_scale_ppm``²): the reading is the error plus κ·10⁻³·position µm. One run per
+  axis cannot tell κ from the axis' own scale error, so that scale keeps κ's uncertainty;
 * ``straightness_<d>_um``: the d component at the optic; each pass' least-squares line removed;
 * ``pitch/yaw/roll_urad``: the carriage's own angular error as the optic on it sees it, with the
   sign of its ``eI_J`` table (the contract): on a tool axis the component about the mapped axis
@@ -85,6 +88,14 @@ class LaserBlock(Block):
         self.groups = np.concatenate(groups) if groups else np.zeros(0, dtype=np.intp)
         self.lines = tuple(lines)
         self.projections = projections
+        self.scale_rows = [
+            (start_i, r)
+            for start_i, r in zip(
+                np.cumsum([0] + [r.n for r in self.row_runs])[:-1], self.row_runs, strict=True
+            )
+            if r.kind == "linear"
+        ]
+        self.u_scale_ppm = float(data.spec.u["u_scale_ppm"])
         self._rows = self._row_points(model)
         self._square = [self._square_points(model, r) for r in self.square_runs]
         self._jac: FloatArray | None = None
@@ -189,10 +200,47 @@ class LaserBlock(Block):
         self._jac = np.concatenate(parts) if parts else np.zeros((0, model.layout.n))
         return self._jac
 
+    @property
+    def n_nuisance(self) -> int:
+        return len(self.scale_rows)
+
+    def nuisance_precision(self) -> FloatArray:
+        return np.full(self.n_nuisance, 1.0 / self.u_scale_ppm**2)
+
+    def initial_state(self, model: MachineModel, theta: FloatArray) -> FloatArray:
+        return np.zeros(self.n_nuisance)  # the linear runs' scales, ppm
+
+    def advance(self, state: Any, delta: FloatArray) -> FloatArray:
+        return np.asarray(state) + delta
+
+    def _scale_jacobian(self) -> FloatArray:
+        """(rows, runs) µm per ppm of each linear run's scale."""
+        out = np.zeros((self.value.shape[0], self.n_nuisance))
+        for j, (start, r) in enumerate(self.scale_rows):
+            out[start : start + r.n, j] = 1e-3 * r.position_mm
+        return out
+
     def linearize(self, model: MachineModel, theta: FloatArray, state: Any) -> Linearization:
-        resid = project(self.predict(model, theta) - self.value, self.projections)
+        scale = self._scale_jacobian()
+        model_values = self.predict(model, theta) + scale @ np.asarray(state)
+        resid = project(model_values - self.value, self.projections)
         jac = project(self.jacobian(model), self.projections)
-        return Linearization(resid, jac, np.zeros((resid.shape[0], 0)))
+        return Linearization(resid, jac, project(scale, self.projections))
+
+    def describe_state(self, state: Any, covariance: FloatArray | None) -> dict[str, Any]:
+        if not self.n_nuisance:
+            return {}
+        sd = np.sqrt(np.diag(covariance)) if covariance is not None else None
+        return {
+            "run_scale_ppm": {
+                r.run: {
+                    "value": float(state[j]),
+                    "u": None if sd is None else float(sd[j]),
+                    "prior_u": self.u_scale_ppm,
+                }
+                for j, (_, r) in enumerate(self.scale_rows)
+            }
+        }
 
     def removed_dof(self) -> FloatArray:
         """(groups,) rows' degrees of freedom taken by the removed constants and lines."""

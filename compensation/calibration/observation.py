@@ -77,6 +77,11 @@ class Block:
         """(Q,) prior precision of the nuisance parameters (0 = flat)."""
         return np.zeros(self.n_nuisance)
 
+    def random_effects(self) -> list[tuple[IntArray, str, float]]:
+        """Nuisance parameters that are random effects: (their indices within the block's
+        nuisance, a name, the a-priori σ); their prior N(0, σ²) has its σ estimated by the fit."""
+        return []
+
     def initial_state(self, model: MachineModel, theta: FloatArray) -> Any:
         return None
 

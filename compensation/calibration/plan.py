@@ -51,6 +51,9 @@ LASER_DEFAULTS = {
     "u_straightness_um": 0.3,
     "u_angle_urad": 0.3,
     "u_squareness_urad": 1.0,
+    # a linear run's scale (air-refraction compensation): a compensated laser's ±0.5 ppm as a
+    # rectangular bound, 0.5/√3; one unknown scale per run, this its prior (not re-estimated)
+    "u_scale_ppm": 0.3,
 }
 PLATE_PROBE_DEFAULT_UM = 0.3
 TRACKER_DEFAULT_UM = 0.3

@@ -83,10 +83,16 @@ def _squareness(machine: Machine, run: LaserRun, i: int) -> float:
 
 
 def simulate_laser(
-    machine: Machine, data: LaserData, rng: np.random.Generator | None = None
+    machine: Machine,
+    data: LaserData,
+    rng: np.random.Generator | None = None,
+    *,
+    scale_ppm: float | None = None,
 ) -> LaserData:
-    """``data`` with the readings ``machine`` gives (plus noise of the plan's a-priori σ)."""
+    """``data`` with the readings ``machine`` gives (plus noise of the plan's a-priori σ and a
+    scale error per linear run of σ ``scale_ppm``, default the plan's ``u_scale_ppm``; 0: none)."""
     u = data.spec.u
+    u_scale = u["u_scale_ppm"] if scale_ppm is None else scale_ppm
     sigma = {
         "linear": u["u_linear_um"],
         "straightness": u["u_straightness_um"],
@@ -96,6 +102,9 @@ def simulate_laser(
     runs = []
     for run in data.runs:
         values = run_values(machine, run) + _noise(rng, sigma[run.kind], (run.n,))
+        if run.kind == "linear" and u_scale > 0:  # the run's scale error (air compensation)
+            scale = float(_noise(rng, u_scale, (1,))[0])
+            values = values + scale * 1e-3 * (run.position_mm - run.position_mm[0])
         runs.append(replace(run, value=values))
     return replace(data, runs=tuple(runs))
 

@@ -37,7 +37,13 @@ from ..errors import CalibrationError
 from .model import MachineModel
 from .observation import Block
 
-__all__ = ["GroupFit", "Problem", "Solution", "residuals_without_errors", "solve"]
+__all__ = [
+    "EffectGroup",
+    "GroupFit",
+    "Problem",
+    "Solution",
+    "solve",
+]
 
 FloatArray = NDArray[np.float64]
 LAMBDA_RANGE = (1e-8, 1e6)  # τ = 1e4 … 1e-3 µm (µrad): beyond, the data have nothing to add
@@ -55,6 +61,7 @@ HYPER_TAU0_MIN = 0.1  # µm or µrad: the smallest τ0
 CLASS_WEIGHT = 1.0  # degrees of freedom of the class' smoothness in each function's estimate
 COST_NOISE = 1e-4  # χ²: below this a cost change is numerical noise
 STRAIGHTNESS_SLOPE_WEIGHT = 1e2  # the weak prior on a straightness slope: 10× tighter
+EFFECT_SIGMA_MIN = 1e-3  # µm: the smallest σ of a random effect (per-point offsets)
 DECREASE_TOL = 1e-6  # χ² (plus 1e-9 of the cost): a step promising less ends the iteration
 
 
@@ -70,6 +77,20 @@ class GroupFit:
     sigma0: float
     sigma: float
     redundancy: float = 0.0
+    estimated: bool = False
+
+
+@dataclass
+class EffectGroup:
+    """Random-effect nuisance parameters (global indices ``index``) sharing a prior N(0, σ²),
+    σ estimated like a variance group (``estimated`` False while too few are seen)."""
+
+    block: int
+    name: str
+    index: NDArray[np.intp]
+    sigma0: float
+    sigma: float
+    used: float = 0.0
     estimated: bool = False
 
 
@@ -124,6 +145,11 @@ class Problem:
                 n = int(np.sum(b.groups == li))
                 self.groups.append(GroupFit(bi, li, n, float(removed[li]), vg.sigma0, vg.sigma0))
             self.group_index.append(base + b.groups)
+        self.effects = [
+            EffectGroup(bi, name, self.offsets[bi] + idx, sigma0, sigma0)
+            for bi, b in enumerate(blocks)
+            for idx, name, sigma0 in b.random_effects()
+        ]
 
     def _transform(self, model: MachineModel) -> None:
         """θ = T·θ_int per function: [straight lines | shapes scaled to unit roughness]."""
@@ -257,6 +283,8 @@ class Problem:
         out = self.base_precision.copy()
         for f, idx in self.shape_index.items():
             out[idx] += lam[f]
+        for e in self.effects:
+            out[e.index] = 1.0 / e.sigma**2
         return out
 
     def absolute(self, theta_int: FloatArray, states: list[Any]) -> FloatArray:
@@ -265,7 +293,10 @@ class Problem:
         x = np.zeros(self.n)
         x[: self.p] = theta_int
         for bi, (b, st) in enumerate(zip(self.blocks, states, strict=True)):
-            ball = getattr(st, "ball_um", None)
+            if isinstance(st, np.ndarray):  # a block whose whole state has a prior (scales)
+                x[self.offsets[bi] : self.offsets[bi + 1]] = st
+                continue
+            ball = getattr(st, "ball_um", getattr(st, "point_um", None))
             if ball is not None:
                 start = self.offsets[bi] + b.n_nuisance - ball.size
                 x[start : self.offsets[bi + 1]] = ball.reshape(-1)
@@ -452,6 +483,16 @@ def _hyper_step(
             change = max(change, abs(new / g.sigma - 1.0))
             g.sigma = new
             g.estimated = True
+    for e in problem.effects:
+        # σ of a random effect: the MacKay update, like a variance group's (γ = the effects
+        # the data determine); floored, so a vanishing effect stays a (tight) prior
+        effect = x_abs[e.index] + delta[e.index]
+        e.used = e.index.size - float(np.sum(np.diag(cov)[e.index])) / e.sigma**2
+        if e.used >= 1.0:
+            new = max(float(np.sqrt(float(effect @ effect) / e.used)), EFFECT_SIGMA_MIN)
+            change = max(change, abs(new / e.sigma - 1.0))
+            e.sigma = new
+            e.estimated = True
     new_lam = dict(lam)
     if estimate_lambda:
         theta = x_abs[: problem.p] + delta[: problem.p]
@@ -552,17 +593,3 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         history=history,
         stats=stats,
     )
-
-
-def residuals_without_errors(problem: Problem) -> list[FloatArray]:
-    """Each block's residuals with θ = 0 and only the nuisance fitted: what the data show
-    before any error is identified (the report's "before")."""
-    theta = np.zeros(problem.p)
-    states = [b.initial_state(problem.model, theta) for b in problem.blocks]
-    if problem.n > problem.p:
-        frozen = np.zeros(problem.n, dtype=bool)
-        frozen[: problem.p] = True
-        lam = {c: 1.0 for c in problem.classes}
-        theta, states, _, _ = _lm(problem, theta, states, lam, 60, frozen)
-    res, _ = problem.linearize(theta, states)
-    return res

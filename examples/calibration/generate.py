@@ -257,7 +257,8 @@ def main(out: Path) -> None:
 
     plan = read_plan(out / "calibration.toml")
     data = load_datasets(plan, need_values=False)
-    laser = simulate_laser(truth, data[0].data, rng)  # type: ignore[arg-type]
+    # perfect air compensation (no per-run scale error): the data as first published
+    laser = simulate_laser(truth, data[0].data, rng, scale_ppm=0.0)  # type: ignore[arg-type]
     plate = simulate_plate(truth, data[1].data, poses, rng)  # type: ignore[arg-type]
     dead = rng.uniform(-300.0, 300.0, len(STATIONS))
     trac = simulate_multilateration(truth, data[2].data, STATIONS, dead, rng)  # type: ignore[arg-type]
