@@ -188,6 +188,14 @@ def find_alternatives(
             if v is not None
         }
         text, miss = separating_measurement(problem.res, effect, cand, theta)
-        alternatives.append({**keys, "separated_by": text, "misfit_there": round(miss, 3)})
+        alternatives.append(
+            {
+                **keys,
+                "source": cand.source,
+                "locked_to": cand.locked_to,
+                "separated_by": text,
+                "misfit_there": round(miss, 3),
+            }
+        )
         advice.append(f"{cand.label}: {text}")
     return {"alternatives": alternatives, "separate_by": "; ".join(advice)}
