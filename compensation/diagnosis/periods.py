@@ -11,14 +11,19 @@ only when two tests pass, given the other terms at their joint fit:
   the residual it explains *plus* the smooth tables of its axis (a smooth curve's spectrum falls
   with frequency: a sine on its flank gains less than the same sine a few cycles lower), with
   constant amplitudes (an envelope could follow the shifted phase). The ratio must reach
-  :data:`PEAK_RATIO`; a shoulder below one cycle over the travel is not used.
+  :data:`PEAK_RATIO`; a shoulder below one cycle over the travel, or within half a cycle of the
+  error's own 2nd or 3rd harmonic (:data:`HARMONIC_CLEARANCE`), is not used.
 * **the same period, amplitude and phase in every subset**: the term refitted (amplitudes, and
   the period re-profiled within ±1 cycle over the travel) on each half of the session in time,
   each direction of travel, and each half of the travel (only when each half holds ≥ 2 cycles;
   the period alone where the term has an envelope, an amplitude and phase that may change along
   the travel). Two subsets
   disagree when their periods differ by more than half the subsets' resolution (and 3σ), their
-  amplitudes by more than a factor 2 (and 3σ), or their phases by more than 45° (and 3σ).
+  amplitudes by more than a factor 2 (and 3σ), or their phases by more than 45° (and 3σ) — the
+  last two only when the two first harmonics also differ beyond their joint covariance
+  (:data:`CHI2_DISTINCT`; σ's from each subset's fit covariance, so a subset whose points crowd
+  into a small part of a long period does not pass off a poorly determined phase as a precise
+  one).
 
 The figures (peak ratio, per subset n, period, amplitude, phase, σ's) go into the effect's
 ``evidence``; a refused period's figures go into the entry that took its shape (a smooth
@@ -58,6 +63,10 @@ SHOULDERS = (-4, -3, -2, 2, 3, 4)
 AMPLITUDE_RATIO = 2.0
 PHASE_DEG = 45.0
 PERIOD_RESOLUTION = 0.5
+#: χ² (2 degrees of freedom, p = 0.001) above which two subsets' first harmonics differ.
+CHI2_DISTINCT = 13.8
+#: A shoulder closer than this (cycles over the travel) to the error's own harmonic is not used.
+HARMONIC_CLEARANCE = 0.5
 #: Cycles each half of the travel must hold to be a subset.
 MIN_HALF_CYCLES = 2.0
 
@@ -171,6 +180,20 @@ def _first_harmonic(coef: FloatArray, envelope: int, s: float) -> tuple[float, f
     return float(np.hypot(a, b)), float(np.arctan2(b, a))
 
 
+def _harmonic_cov(x: FloatArray, sigma: float, envelope: int, s: float) -> FloatArray:
+    """2 × 2 covariance (µm²) of the first harmonic's quadratures at ``s`` from the fit's
+    covariance (columns ``[1, x]``, residual σ ``sigma``): a subset whose points crowd into a
+    small part of a long period determines its amplitude and phase poorly, whatever its number
+    of points."""
+    a = np.column_stack([np.ones(len(x)), x])
+    cov = np.linalg.pinv(a.T @ a)[1:, 1:] * sigma**2
+    pj = np.polynomial.legendre.legvander(np.array([s]), envelope)[0]
+    rows = np.zeros((2, cov.shape[0]))
+    rows[0, 0 : 2 * (envelope + 1) : 2] = pj
+    rows[1, 1 : 2 * (envelope + 1) : 2] = pj
+    return np.asarray(rows @ cov @ rows.T, float)
+
+
 def _fit_subset(
     problem: Problem, term: Term, k: int, y: FloatArray, rows: Any, s_at: float
 ) -> dict[str, Any]:
@@ -190,12 +213,12 @@ def _fit_subset(
     assert best is not None
     _, dk, _ = best
     t = problem.res.data.t_s
-    _, coef, sigma = _gain(
-        _columns(problem, term, term.theta, k, rows), y[rows], None if t is None else t[rows]
-    )
+    x = _columns(problem, term, term.theta, k, rows)
+    _, coef, sigma = _gain(x, y[rows], None if t is None else t[rows])
     amp, phase = _first_harmonic(coef, term.candidate.envelope, s_at)
     n = len(rows)
-    sigma_a = sigma * np.sqrt(2.0 / max(n, 1))
+    cov = _harmonic_cov(x, sigma, term.candidate.envelope, s_at)
+    sigma_a = max(sigma * np.sqrt(2.0 / max(n, 1)), float(np.sqrt(np.max(np.diag(cov)))))
     period = scaled(term.theta, n_cyc / (n_cyc + dk))
     return {
         "n": int(n),
@@ -205,6 +228,7 @@ def _fit_subset(
         "phase_deg": float(np.degrees(phase)),
         "sigma_amplitude_um": float(sigma_a),
         "sigma_phase_deg": float(np.degrees(sigma_a / max(amp, 1e-12))),
+        "_harmonic": (amp * np.array([np.cos(phase), np.sin(phase)]), cov),
     }
 
 
@@ -226,21 +250,52 @@ def _subsets(problem: Problem, k: int, term: Term) -> list[tuple[str, list[tuple
     return out
 
 
+def _distinct(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    """The two subsets' first harmonics (both quadratures) differ beyond their joint
+    uncertainty (χ² with 2 degrees of freedom above :data:`CHI2_DISTINCT`)."""
+    (va, ca), (vb, cb) = a["_harmonic"], b["_harmonic"]
+    d = va - vb
+    return float(d @ np.linalg.pinv(ca + cb) @ d) > CHI2_DISTINCT
+
+
 def _disagree(kind: str, a: dict[str, Any], b: dict[str, Any], envelope: int) -> list[str]:
     out = []
+    distinct = _distinct(a, b)
     resolution = 2.0 if kind == "travel" else 1.0  # cycles over the travel a subset resolves
     if abs(a["cycles_offset"] - b["cycles_offset"]) > PERIOD_RESOLUTION * resolution:
         out.append(f"{kind}: period {a['period_mm']:.4g} vs {b['period_mm']:.4g} mm")
     sa = np.hypot(a["sigma_amplitude_um"], b["sigma_amplitude_um"])
     hi, lo = max(a["amplitude_um"], b["amplitude_um"]), min(a["amplitude_um"], b["amplitude_um"])
-    if (kind != "travel" or envelope == 0) and hi > AMPLITUDE_RATIO * lo and hi - lo > 3 * sa:
+    if (
+        (kind != "travel" or envelope == 0)
+        and distinct
+        and hi > AMPLITUDE_RATIO * lo
+        and hi - lo > 3 * sa
+    ):
         out.append(f"{kind}: amplitude {a['amplitude_um']:.3g} vs {b['amplitude_um']:.3g} µm")
     dphi = abs((a["phase_deg"] - b["phase_deg"] + 180.0) % 360.0 - 180.0)
     sphi = np.hypot(a["sigma_phase_deg"], b["sigma_phase_deg"])
     # (an envelope lets the phase drift along the travel: halves of it are not compared)
-    if (kind != "travel" or envelope == 0) and dphi > PHASE_DEG and dphi > 3 * sphi:
+    if (kind != "travel" or envelope == 0) and distinct and dphi > PHASE_DEG and dphi > 3 * sphi:
         out.append(f"{kind}: phase {a['phase_deg']:.0f}° vs {b['phase_deg']:.0f}°")
     return out
+
+
+def _shoulders(n_cyc: float, envelope: int) -> list[float]:
+    """The phase changes (cycles over the travel) whose gains are the peak's shoulders: an
+    envelope of order E spreads the line over ~E/2 cycles each side, so shoulders lie beyond it;
+    none below one cycle over the travel; none within half a cycle of the error's own 2nd or
+    3rd harmonic (a cyclic error with harmonics is one object: its harmonic is a peak of its
+    own, not a flank of the first — a period of 2.2 cycles has its 2nd harmonic where the
+    shoulder 2 cycles up would sit). If that leaves none, every usable shoulder is kept."""
+    away = [dk + np.sign(dk) * envelope for dk in SHOULDERS]
+    usable = [dk for dk in away if n_cyc + dk >= 1.0]
+    clear = [
+        dk
+        for dk in usable
+        if all(abs(n_cyc + dk - h * n_cyc) >= HARMONIC_CLEARANCE for h in (2, 3))
+    ]
+    return clear or usable
 
 
 def check_period(
@@ -263,15 +318,12 @@ def check_period(
     y_peak = partial_residual(problem, terms, beta, {index} | _smooth_tables(terms, axis))[:, k]
     n_cyc = cycles(problem, k, term.theta)
     g0, _, _ = _gain(_columns(problem, term, term.theta, k, plain=True), y_peak)
-    # an envelope of order E spreads the line over ~E/2 cycles each side: shoulders beyond it
-    away = [dk + np.sign(dk) * term.candidate.envelope for dk in SHOULDERS]
     shoulders = [
         _gain(
             _columns(problem, term, scaled(term.theta, n_cyc / (n_cyc + dk)), k, plain=True),
             y_peak,
         )[0]
-        for dk in away
-        if n_cyc + dk >= 1.0
+        for dk in _shoulders(n_cyc, term.candidate.envelope)
     ]
     ratio = float(g0 / max(max(shoulders, default=0.0), 1e-300))
     lo, hi = _span(problem, k)
@@ -291,7 +343,8 @@ def check_period(
                 s_at = float(2.0 * (np.mean(q[rows]) - lo) / (hi - lo) - 1.0)
             f = _fit_subset(problem, term, k, y_term, rows, s_at)
             fits.append(f)
-            out.subsets.append({"subset": kind, "part": name, **f})
+            public = {key: v for key, v in f.items() if not key.startswith("_")}
+            out.subsets.append({"subset": kind, "part": name, **public})
         bad = _disagree(kind, fits[0], fits[1], envelope)
         out.disagreements += bad
         out.ok = out.ok and not bad
