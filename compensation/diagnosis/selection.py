@@ -129,6 +129,8 @@ def _round(
         best_cv = min(r["cv_mse"] for r in eligible)
         close = [r for r in eligible if r["cv_mse"] <= best_cv * (1.0 + SIMPLER_WITHIN)]
         pick = min(close, key=lambda r: (r["candidate"].n_params, r["cv_mse"]))
+        if not is_local(pick["candidate"]):
+            pick = _leaner_family(problem, current, eligible, pick, folds) or pick
         term = Term(pick["candidate"], pick["theta"])
         if is_local(term.candidate):
             family = _family_rather_than_bump(problem, current, eligible, pick["cv_mse"], folds)
@@ -165,6 +167,42 @@ def _refusal(term: Term, evidence: dict[str, Any]) -> dict[str, Any]:
 
 #: How many of the best global families are tried at their rich shape against a local bump.
 RICH_CHALLENGERS = 3
+
+
+def _leaner_family(
+    problem: Problem,
+    current: list[Term],
+    eligible: list[dict[str, Any]],
+    pick: dict[str, Any],
+    folds: Sequence[NDArray[np.intp]] | None,
+) -> dict[str, Any] | None:
+    """A pick wins by its shape, not by its number of parameters: the best few families leaner
+    at their default shape than the pick whose rich shape has no more parameters than it (a
+    table of order 8 against a bend with its slope, 14 parameters) are tried at that rich shape;
+    where one predicts held-out points as well as the pick (within :data:`SIMPLER_WITHIN`), it
+    is taken instead — the leanest such (its default candidate: the variant is chosen later with
+    the others)."""
+    n_pick = pick["candidate"].n_params
+    leaner = sorted(
+        (
+            r
+            for r in eligible
+            if r is not pick
+            and not is_local(r["candidate"])
+            and r["candidate"].rich is not None
+            and r["candidate"].n_params < n_pick
+            and r["candidate"].rich.n_params <= n_pick
+        ),
+        key=lambda r: r["cv_mse"],
+    )[:RICH_CHALLENGERS]
+    good = [
+        r
+        for r in leaner
+        if cv_mse(problem, [*current, Term(r["candidate"].rich, r["theta"])], folds=folds)
+        <= pick["cv_mse"] * (1.0 + SIMPLER_WITHIN)
+    ]
+    # the leanest of them, as the pick itself is chosen among the close ones
+    return min(good, key=lambda r: (r["candidate"].n_params, r["cv_mse"]), default=None)
 
 
 def _family_rather_than_bump(
