@@ -7,6 +7,7 @@ message naming the file, line and column on stderr, write nothing and return exi
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -67,40 +68,80 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     """``diagnose MACHINE MEASUREMENTS --json OUT [--report DIR]``: exit 0 found or not."""
 
     def action(diagnosis: Any) -> int:
+        from cmm_comp.compensation.diagnosis.words import verdict_line
+
         write_json_atomic(Path(args.json), diagnosis.to_json())  # standard JSON, else refused
-        from cmm_comp.compensation.diagnosis.report import display_label, write_report
+        from cmm_comp.compensation.diagnosis.report import write_report
 
         if args.report:
             write_report(diagnosis, args.report, title=f"Diagnosis of {args.machine}")
-        machine = diagnosis.residuals.machine
-        print(
-            f"verdict: {diagnosis.verdict}; "
-            + ", ".join(
-                display_label(e.get("label", e["cause"]), machine) for e in diagnosis.entries
-            )
-            + f"; held-out RMS {diagnosis.summary['heldout_rms_um']['before']:.3f} → "
-            f"{diagnosis.summary['heldout_rms_um']['after']:.3f} µm"
-        )
+        print(verdict_line(diagnosis))
         return 0
 
     return _run(args, action)
 
 
+def _annotated_toml(machine: Any, notes: dict[int, str]) -> str:
+    """The machine's TOML with a comment line before the ``[[effects]]`` tables in ``notes``
+    (index among the machine's effects → text)."""
+    import tomli_w
+
+    text = tomli_w.dumps(json.loads(json.dumps(machine.description)))
+    out: list[str] = []
+    k = -1
+    for line in text.splitlines(keepends=True):
+        if line.strip() == "[[effects]]":
+            k += 1
+            if k in notes:
+                out.append(f"# {notes[k]}\n")
+        out.append(line)
+    return "".join(out)
+
+
 def cmd_extend(args: argparse.Namespace) -> int:
-    """``extend MACHINE MEASUREMENTS -o EXTENDED.toml``: the machine with the effects found."""
+    """``extend MACHINE MEASUREMENTS -o EXTENDED.toml [--include-either]``: the machine with the
+    machine's effects found (``source: machine``); ``either`` ones only on request, with a
+    comment; the reference instrument's never."""
 
     def action(diagnosis: Any) -> int:
-        extended = diagnosis.extended_machine()
+        from cmm_comp.compensation.formats.atomic import write_text_atomic
+
+        added = diagnosis.machine_effects(args.include_either)
+        extended = diagnosis.residuals.machine.with_effects(added)
+        either = {id(e) for e in diagnosis.either_machine}
+        either |= {
+            id(e)
+            for e, s in zip(diagnosis.effects, diagnosis.sources, strict=True)
+            if s == "either"
+        }
+        first = len(extended.effects) - len(added)
+        notes = {
+            first + i: (
+                f"{e.cause} ({e.describe().get('axis') or e.describe().get('component', '')}): "
+                "either the machine's or the reference instrument's — this session cannot tell "
+                "which; added by --include-either"
+            )
+            for i, e in enumerate(added)
+            if id(e) in either
+        }
         out = Path(args.output)
-        extended.to_toml(out)  # atomic: nothing is written on failure
-        added = [e for e in diagnosis.effects if e.compensable]
+        write_text_atomic(out, _annotated_toml(extended, notes))  # nothing written on failure
         print(f"{out}: {len(added)} effect(s) added")
-        for e in diagnosis.effects:
-            if not e.compensable:
+        for e, source in zip(diagnosis.effects, diagnosis.sources, strict=True):
+            what = f"{e.cause} ({e.describe().get('axis') or e.describe().get('component', '')})"
+            if e in added:
+                continue
+            if source == "reference":
+                print(f"  not added: {what}: the reference instrument's, not the machine's")
+            elif source == "either" and not args.include_either:
                 print(
-                    f"  not added: {e.cause} ({e.describe().get('axis', '')}): it describes this "
-                    "session but cannot be predicted at run time; log the temperature that "
-                    "drives it and diagnose again"
+                    f"  not added: {what}: the session cannot tell whether the machine or the "
+                    "reference carries it (--include-either adds it)"
+                )
+            elif not e.compensable:
+                print(
+                    f"  not added: {what}: it describes this session but cannot be predicted "
+                    "at run time; log the temperature that drives it and diagnose again"
                 )
         return 0
 
@@ -121,4 +162,10 @@ def add_parsers(subparsers: Any) -> None:
     e.add_argument("machine", help="machine.toml")
     e.add_argument("measurements", help="measurements.csv (docs/formats.md §2)")
     e.add_argument("-o", "--output", required=True, help="extended machine.toml")
+    e.add_argument(
+        "--include-either",
+        action="store_true",
+        help="also add the effects the session cannot assign to the machine or the reference "
+        "(each with a comment in the TOML)",
+    )
     e.set_defaults(handler=cmd_extend)

@@ -7,8 +7,9 @@ F-tests), :mod:`.selection` (greedy out-of-sample selection, :func:`diagnose`),
 :mod:`.unexplained` (structure no cause explains), :mod:`.report` (plots and HTML).
 """
 
+from .outcome import Diagnosis
 from .residuals import Residuals, axis_statistics, compute_residuals, length_error_e0_um, rms3d
-from .selection import Diagnosis, diagnose
+from .selection import diagnose
 
 __all__ = [
     "Diagnosis",

@@ -3,7 +3,8 @@
 After selection, each accepted cause is swapped in turn for every other candidate (the other
 accepted causes kept, nonlinear parameters re-profiled). A candidate whose fit — at its default
 shape or, for a cause of the named one's kind (tables and couplings are one kind), its rich
-shape, each parameter beyond the named term's charged one noise variance — is worse by less
+shape, each parameter beyond the named term's charged one noise variance and each one fewer
+credited one — is worse by less
 than the ``1 − alpha`` quantile of χ²(1) times the noise variance is an *alternative*: the data
 do not prefer the named cause over it. Typical case: with one stylus straight down, an angular
 error of Z and a straightness of Z have the same Abbe arm and act identically.
@@ -163,11 +164,12 @@ def find_alternatives(
         # another carriage, a table of another component), its rich shape: a cause the session
         # cannot tell from the named one may need its richer shape to act alike (a twist that
         # sags along the other axis); each parameter beyond the named term's is charged the σ²
-        # it gains from noise
+        # it gains from noise, and each one fewer credited it (the named term's extra
+        # parameters gained it too: a leaner cause is judged on equal terms)
         rich = root.rich if _kind(root.cause) == _kind(term.candidate.cause) else None
         for cand in (root,) if rich is None else (root, rich):
             theta, rss, _ = best_theta(problem, others, cand)
-            charged = rss + sigma2 * max(cand.n_params - n_named, 0)
+            charged = rss + sigma2 * (cand.n_params - n_named)
             if charged - rss_after < threshold:
                 found.append((charged, cand, theta))
     if not found:
@@ -188,6 +190,14 @@ def find_alternatives(
             if v is not None
         }
         text, miss = separating_measurement(problem.res, effect, cand, theta)
-        alternatives.append({**keys, "separated_by": text, "misfit_there": round(miss, 3)})
+        alternatives.append(
+            {
+                **keys,
+                "source": cand.source,
+                "locked_to": cand.locked_to,
+                "separated_by": text,
+                "misfit_there": round(miss, 3),
+            }
+        )
         advice.append(f"{cand.label}: {text}")
     return {"alternatives": alternatives, "separate_by": "; ".join(advice)}

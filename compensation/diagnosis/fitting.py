@@ -331,7 +331,9 @@ def best_theta(
     rss_all, rank_all = profile_rss(problem, cand, thetas, r, q, y)
     i = int(np.argmin(rss_all))
     theta, rss, rank = thetas[i], float(rss_all[i]), int(rank_all[i])
-    if refine and isinstance(theta, float):
+    if refine and cand.theta_step is not None and isinstance(theta, tuple):
+        theta, rss, rank = _refine_tuple(problem, cand, theta, r, q, y, rss, rank)
+    elif refine and isinstance(theta, float):
         lo = thetas[max(i - 1, 0)]
         hi = thetas[min(i + 1, len(thetas) - 1)]
         lo, hi = min(lo, hi), max(lo, hi)
@@ -345,6 +347,44 @@ def best_theta(
             if sol.fun < rss:
                 theta = float(sol.x)
                 rss, rank = _profile_rss(problem, cand, theta, r, q, y)
+    return theta, rss, rank
+
+
+def _refine_tuple(
+    problem: Problem,
+    cand: Candidate,
+    theta: tuple[Any, ...],
+    r: Any,
+    q: FloatArray | None,
+    y: FloatArray,
+    rss: float,
+    rank: int,
+) -> tuple[Any, float, int]:
+    """Continuous refinement of a tuple parameter ``(kind, v1, v2, …)`` (a ripple's period law)
+    by Nelder–Mead on its numbers, started at the grid's best with steps ``cand.theta_step``."""
+    steps = np.asarray(cand.theta_step, dtype=float)
+    x0 = np.asarray(theta[1:], dtype=float)
+
+    def at(z: FloatArray) -> tuple[Any, ...]:
+        return (theta[0], *(float(v) for v in x0 + z * steps))
+
+    def cost(z: FloatArray) -> float:
+        try:
+            return _profile_rss(problem, cand, at(z), r, q, y)[0]
+        except ValueError:  # a law outside its domain (r0 inside the travel …)
+            return float("inf")
+
+    simplex = np.vstack([np.zeros(len(x0)), np.eye(len(x0))])
+    sol = optimize.minimize(
+        cost,
+        np.zeros(len(x0)),
+        method="Nelder-Mead",
+        options={"initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-6 * rss, "maxfev": 200},
+    )
+    if np.isfinite(sol.fun) and sol.fun < rss:
+        best = at(sol.x)
+        rss, rank = _profile_rss(problem, cand, best, r, q, y)
+        return best, rss, rank
     return theta, rss, rank
 
 
@@ -376,7 +416,8 @@ def cv_predictions(
         train = np.setdiff1d(all_rows, test)
         fold_terms: list[Term] = []
         for i, t in enumerate(terms):
-            if rescan and len(t.candidate.thetas) > 1:
+            # (a ripple's period law is kept: its few numbers are pinned by thousands of points)
+            if rescan and len(t.candidate.thetas) > 1 and t.candidate.theta_step is None:
                 others = [*fold_terms, *terms[i + 1 :]]
                 theta, _, _ = best_theta(problem, others, t.candidate, train, near=t.theta)
                 fold_terms.append(Term(t.candidate, theta))

@@ -1,9 +1,10 @@
-"""The diagnosis report: residual plots (PNG, Agg backend) and one HTML page linking them.
+"""The diagnosis report: the diagnosis in words (``report.md``, :mod:`.words`), residual plots
+(PNG, Agg backend) and one HTML page with both.
 
-Plots: residual per axis against each position, time, temperature, the temperature difference,
-travel directions and probing azimuth, before (model as described) and after (extended model,
-out-of-fold predictions); residual statistics per axis; the effects found and the candidates'
-test table of the first round.
+Plots, for the measured axes only: residual against each moved position, time, temperature, the
+temperature difference, travel directions and probing azimuth, before (model as described) and
+after (extended model, out-of-fold predictions); residual statistics per axis; the effects found
+and the candidates' test table of the first round.
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from .outcome import Diagnosis
 from .residuals import axis_statistics, binned_statistics, explanatory_variables
-from .selection import Diagnosis
+from .words import report_markdown
 
 
 def _plot_against(
@@ -52,7 +54,7 @@ def display_label(label: str, machine: Any) -> str:
 
 def _shown_keys(entry: dict[str, Any], machine: Any) -> dict[str, Any]:
     """An entry's identifying keys for the report, its component named as the file names it."""
-    hidden = ("cause", "parameters", "explained_fraction", "label")
+    hidden = ("cause", "parameters", "explained_fraction", "label", "evidence", "alternatives")
     keys = {k: v for k, v in entry.items() if k not in hidden}
     if isinstance(keys.get("component"), str):
         keys["component"] = machine.error_label(keys["component"])
@@ -64,12 +66,15 @@ def _slug(name: str) -> str:
 
 
 def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagnosis") -> Path:
-    """Write PNGs, ``diagnosis.json`` and ``index.html`` into ``out_dir``; returns the HTML path."""
+    """Write ``report.md``, PNGs, ``diagnosis.json`` and ``index.html`` into ``out_dir``;
+    returns the HTML path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     res = diagnosis.residuals
     before = res.residual_um
     after = before - diagnosis.heldout_pred_um
+    words = report_markdown(diagnosis, title)
+    (out / "report.md").write_text(words + "\n", encoding="utf-8")
     images: list[tuple[str, str]] = []
     binned: dict[str, Any] = {}
     measured = ["xyz".index(a) for a in diagnosis.summary.get("measured_axes", "xyz")]
@@ -101,7 +106,7 @@ def write_report(diagnosis: Diagnosis, out_dir: str | Path, title: str = "Diagno
             for m in ("mean_um", "std_um", "rms_um")
         )
         + "</tr>"
-        for a in ("x", "y", "z")
+        for a in diagnosis.summary["measured_axes"]
     )
     cand_rows = ""
     if diagnosis.rounds:
@@ -123,6 +128,7 @@ CV folds: {s["folds"]}.</p>
 <tr><td>residual RMS 3-D (µm)</td><td>{s["residual_rms_um"]["before"]:.3f}</td><td>{s["residual_rms_um"]["after"]:.3f}</td></tr>
 <tr><td>held-out RMS 3-D (µm)</td><td>{s["heldout_rms_um"]["before"]:.3f}</td><td>{s["heldout_rms_um"]["after"]:.3f}</td></tr>
 <tr><td>E0 estimate (µm)</td><td>{s["e0_um"]["before"]:.3f}</td><td>{s["e0_um"]["after"]:.3f}</td></tr></table>
+<h2>In words</h2><pre style="white-space:pre-wrap">{html.escape(words)}</pre>
 <h2>Effects found</h2><table><tr><th>cause</th><th>keys</th><th>parameters</th><th>explained</th></tr>{rows}</table>
 <h2>Residual statistics per axis (µm)</h2><table><tr><th>axis</th><th>mean</th><th>std</th><th>rms</th>
 <th>mean (after)</th><th>std (after)</th><th>rms (after)</th></tr>{stat_rows}</table>

@@ -58,8 +58,13 @@ class Residuals:
 
     def has(self, *names: str) -> bool:
         """Whether the measurements carry every signal in ``names`` (not just the default)."""
-        given = set(self.data.temps_C) | set(self.data.inputs())
+        given = set(self.data.temps_C) | set(self.data.inputs()) | set(self.data.velocities)
         return all(n in given for n in names)
+
+    @property
+    def ref_mm(self) -> FloatArray:
+        """(N, 3) the reference instrument's reading in the machine frame (mm)."""
+        return self.data.reference_mm
 
     def subset(self, index: Any) -> Residuals:
         return Residuals(
@@ -84,6 +89,7 @@ def compute_residuals(machine: Machine, data: Measurements) -> Residuals:
     signals: dict[str, FloatArray] = {k: np.full(data.n, ref_c) for k in TEMPERATURE_ROLES}
     signals.update(data.temps_C)
     signals.update(data.inputs())
+    signals.update(data.velocities)  # diagnosis only: a latency acts through them
     jac, sq = first_order_jacobian(
         machine.chain, data.indicated_mm - machine.volume.reference_mm, stylus
     )

@@ -155,7 +155,15 @@ def local_entry(
     _, rss1, _ = fit(problem, accepted)
     total = float(np.sum(problem.y**2))
     params: dict[str, Any] = {"varies_mostly_with": "position", "local": True}
-    params.update(locate(problem.res, contrib))
+    # located on the data (the residual with the bump added back), not on the fitted local
+    # basis: its Gaussians sit on a fixed grid and are shrunk, which pulls a bump at an edge
+    # towards the grid's interior
+    others = np.zeros((problem.res.n, 3))
+    others[:, problem.axes] = (problem.stacked(accepted) @ beta).reshape(problem.res.n, -1)
+    partial = problem.res.residual_um - others + contrib
+    causes = [t for i, t in enumerate(accepted) if i not in indices]
+    extra = problem.stacked(causes)[:, problem.n_nuisance :] if causes else None
+    params.update(locate(problem.res, partial, extra))
     return {
         "cause": "unexplained",
         "parameters": params,
@@ -209,11 +217,20 @@ def unexplained_candidate(
     }
 
 
-def locate(res: Residuals, remaining_um: FloatArray) -> dict[str, Any]:
+def locate(
+    res: Residuals, remaining_um: FloatArray, extra: FloatArray | None = None
+) -> dict[str, Any]:
     """Where and when the structure that remains sits: the axis carrying most of it, the centre
-    and extent (mm) of the 10 % of points with the largest remaining residual on that axis
-    (smoothed over each point's 10 nearest neighbours in position, so noise does not pick them),
-    and their time span (s) when the session has times."""
+    and extent (mm) of a bump fitted to it, and the time span (s) of the points near it.
+
+    A first guess is the mean position of the 10 % of points with the largest remaining
+    residual on that axis (smoothed over each point's 10 nearest neighbours in position, so
+    noise does not pick them). Near an edge of the volume those points all lie on the inner
+    side of the bump, so their mean is pulled towards the centre of the volume (by a radius or
+    more); the centre is therefore refined by fitting a Gaussian bump
+    ``v·exp(−½|(q − c)/(w·span)|²)`` (plus offsets) to the remaining residual — centre c, width
+    w, direction v — which may place it at the edge or just beyond the points measured
+    (:func:`fit_bump`). ``located_by`` says which of the two was used."""
     r = np.asarray(remaining_um, dtype=float)
     axis = int(np.argmax(np.sum(r**2, axis=0)))
     q = res.q_mm
@@ -225,16 +242,91 @@ def locate(res: Residuals, remaining_um: FloatArray) -> dict[str, Any]:
     _, nn = cKDTree(qn).query(qn, k=k)
     smooth = np.mean(r[np.asarray(nn).reshape(n, k), axis], axis=1)
     top = np.argsort(-np.abs(smooth))[: max(1, n // 10)]
+    where = np.mean(q[top], axis=0)
+    extent = np.ptp(q[top], axis=0)
+    located_by = "largest residuals"
+    bump = fit_bump(q, r, where, extra)
+    radius = None
+    if bump is not None:
+        where, radius = bump
+        extent = 2.0 * radius
+        located_by = "gaussian fit"
+    near = np.linalg.norm((q - where) / span, axis=1)
+    close = np.argsort(near)[: max(1, n // 10)]
     out: dict[str, Any] = {
         "axis": "xyz"[axis],
-        "where_mm": [float(v) for v in np.mean(q[top], axis=0)],
-        "where_extent_mm": [float(v) for v in np.ptp(q[top], axis=0)],
+        "where_mm": [float(v) for v in where],
+        "where_extent_mm": [float(v) for v in extent],
         "mean_there_um": float(np.mean(smooth[top])),
+        "located_by": located_by,
     }
+    if radius is not None:
+        out["radius_mm"] = [float(v) for v in radius]
     t = res.data.t_s
     if t is not None:
-        out["when_s"] = [float(np.min(t[top])), float(np.max(t[top]))]
+        out["when_s"] = [float(np.min(t[close])), float(np.max(t[close]))]
     return out
+
+
+#: The bump fit's width (fraction of the travel) is kept within these bounds.
+BUMP_WIDTH = (0.03, 0.6)
+
+
+def fit_bump(
+    q_mm: FloatArray,
+    r_um: FloatArray,
+    start_mm: FloatArray,
+    extra: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray] | None:
+    """(centre mm, radius mm per axis) of the Gaussian bump ``v·exp(−½Σ((q − c)/w)²)`` (a width
+    per moved axis) that best fits ``r_um`` (N, 3), started at ``start_mm``. Its amplitudes
+    per axis, offsets and the columns of ``extra`` (N·measured axes, p: the other causes named,
+    refitted beside it so that what they took of the bump comes back) are linear and
+    profiled. None when the fit does not improve on offsets alone or runs away (more than half
+    a travel outside)."""
+    from scipy import optimize
+
+    moved = np.ptp(q_mm, axis=0) > 1e-6
+    if not np.any(moved):
+        return None
+    lo, span = np.min(q_mm, axis=0), np.where(moved, np.ptp(q_mm, axis=0), 1.0)
+    qn = ((q_mm - lo) / span)[:, moved]
+    cols = np.flatnonzero(np.any(r_um != 0.0, axis=0))
+    n, m = len(q_mm), len(cols)
+    y = r_um[:, cols].reshape(-1)
+    fixed = [np.kron(np.ones((n, 1)), np.eye(m))]
+    if extra is not None and extra.shape[0] == n * m and extra.shape[1]:
+        fixed.append(extra)
+    base_x = np.hstack(fixed)
+    base_coef, *_ = np.linalg.lstsq(base_x, y, rcond=None)
+    base = float(np.sum((y - base_x @ base_coef) ** 2))
+    k = int(np.sum(moved))
+
+    def rss(p: FloatArray) -> float:
+        c, w = p[:k], np.clip(p[k:], *BUMP_WIDTH)
+        g = np.exp(-0.5 * np.sum(((qn - c) / w) ** 2, axis=1))
+        a = np.hstack([base_x, np.kron(g[:, None], np.eye(m))])
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        return float(np.sum((y - a @ coef) ** 2))
+
+    c0 = ((start_mm - lo) / span)[moved]
+    best = None
+    for w0 in (0.1, 0.2, 0.35):
+        x0 = np.concatenate([c0, np.full(k, w0)])
+        sol = optimize.minimize(
+            rss, x0, method="Nelder-Mead", options={"xatol": 1e-4, "maxfev": 300 * (2 * k)}
+        )
+        if best is None or sol.fun < best.fun:
+            best = sol
+    assert best is not None
+    c = best.x[:k]
+    if not best.fun < 0.9 * base or np.any(c < -0.5) or np.any(c > 1.5):
+        return None
+    centre = start_mm.astype(float).copy()
+    centre[moved] = lo[moved] + c * span[moved]
+    radius = np.zeros(3)
+    radius[moved] = np.clip(best.x[k:], *BUMP_WIDTH) * span[moved]
+    return centre, radius
 
 
 def local_unexplained(

@@ -3,7 +3,8 @@
 * :mod:`.base` — :class:`Effect`, :class:`EvalContext`, the cause registry and the helpers every
   effect shares;
 * :mod:`.parametric` — corrections of the parametric errors (``parametric``, ``coupling``,
-  ``reversal``, ``periodic``);
+  ``reversal``); :mod:`.periodic` — cyclic errors (``periodic``), their period laws in
+  :mod:`.period_law`;
 * :mod:`.probe` — probe lobing;
 * :mod:`.drift` — an axis' error drifting with time (``drift``: diagnosis only).
 
@@ -19,12 +20,13 @@ from .drift import DriftEffect
 from .parametric import (
     CouplingEffect,
     ParametricEffect,
-    PeriodicEffect,
     ReversalEffect,
     default_orders,
     legendre_shape,
     normalised,
 )
+from .period_law import PeriodLaw
+from .periodic import PeriodicEffect, ripple_columns, ripple_terms
 from .probe import ProbeLobingEffect, lobing_signals
 from .static_image import StaticImageEffect
 
@@ -34,6 +36,7 @@ __all__ = [
     "Effect",
     "EvalContext",
     "ParametricEffect",
+    "PeriodLaw",
     "PeriodicEffect",
     "ProbeLobingEffect",
     "ReversalEffect",
@@ -45,4 +48,6 @@ __all__ = [
     "lobing_signals",
     "normalised",
     "register_effect",
+    "ripple_columns",
+    "ripple_terms",
 ]

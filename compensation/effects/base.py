@@ -66,6 +66,9 @@ class Effect:
     #: False for effects that describe a session but cannot be predicted at run time (a drift
     #: with time): ``cmm-comp extend`` leaves them out of the extended machine.
     compensable: ClassVar[bool] = True
+    #: Which instrument carries the effect: ``"machine"`` (what compensation corrects) or
+    #: ``"reference"`` (the instrument that measured it: never added to a machine).
+    source: ClassVar[str] = "machine"
 
     def signals(self) -> dict[str, float]:
         """Runtime signals this effect needs, with their reference (neutral) values."""
@@ -136,6 +139,7 @@ def register_wrapper(
 #: Modules defining the built-in effects; each registers its causes when imported.
 BUILTIN_EFFECT_MODULES: tuple[str, ...] = (
     "cmm_comp.compensation.effects.parametric",
+    "cmm_comp.compensation.effects.periodic",
     "cmm_comp.compensation.effects.drift",
     "cmm_comp.compensation.effects.probe",
     "cmm_comp.compensation.effects.static_image",

@@ -1,6 +1,6 @@
 """Effects on the parametric model itself (docs/formats.md §4 causes ``parametric``, ``coupling``,
-``reversal``, ``periodic``): smooth corrections of the 21 errors, their dependence on another
-axis, the direction of travel and cyclic errors along an axis.
+``reversal``): smooth corrections of the 21 errors, their dependence on another axis and the
+direction of travel (cyclic errors along an axis: :mod:`.periodic`).
 
 Each effect is a physically meaningful term with few parameters, linear in its amplitude
 parameters (the diagnosis fits them by linear least squares) and linear in the runtime signals it
@@ -40,11 +40,11 @@ from .base import (
 __all__ = [
     "CouplingEffect",
     "ParametricEffect",
-    "PeriodicEffect",
     "ReversalEffect",
     "default_orders",
     "legendre_shape",
     "normalised",
+    "slope_of",
 ]
 
 
@@ -199,8 +199,12 @@ class CouplingEffect(Effect):
         with_orders: Sequence[int] = (1,),
         offset: float = 0.0,
         along: Sequence[float] = (),
+        with_slope: bool = False,
     ) -> None:
         c = parse_component(component)
+        self.slope = slope_of(c.name) if with_slope else None
+        if with_slope and self.slope is None:
+            raise ValueError(f"coupling: with_slope needs a straightness, got {component!r}")
         self.along = read_floats(along, "along")
         self.offset = float(offset)
         if not math.isfinite(self.offset):
@@ -232,6 +236,33 @@ class CouplingEffect(Effect):
                 total += self.coefficients[i] * sb * sa
                 i += 1
         add_to_component(ctx, self.component, total)
+        if self.slope is not None:
+            angular, sign = self.slope
+            add_to_component(ctx, angular, sign * self._slope_urad(ctx, a, b))
+
+    def _slope_urad(self, ctx: EvalContext, a: int, b: int) -> FloatArray:
+        """d(straightness)/d(q_a) in µrad (µm/mm · 1000) at the context's points."""
+        lo, hi = self.span_mm
+        s = normalised(ctx.q_mm[:, a], self.span_mm)
+        scale = 2.0 / (hi - lo) * 1000.0
+
+        def dshape(k: int) -> FloatArray:
+            if k == 0:
+                return np.zeros(ctx.n)
+            c = np.zeros(k + 1)
+            c[k] = 1.0
+            return np.asarray(legendre.legval(s, legendre.legder(c)), dtype=float) * scale
+
+        total = np.zeros(ctx.n)
+        for k, c in enumerate(self.along, start=1):
+            total += c * dshape(k)
+        i = 0
+        for j in self.with_orders:
+            sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
+            for k in self.orders:
+                total += self.coefficients[i] * sb * dshape(k)
+                i += 1
+        return total
 
     def _names(self) -> list[str]:
         return [
@@ -252,18 +283,22 @@ class CouplingEffect(Effect):
             "coefficients": list(self.coefficients),
             "offset": self.offset,
             "along": list(self.along),
+            **({"with_slope": True} if self.slope is not None else {}),
         }
 
     def describe(self) -> dict[str, Any]:
+        params: dict[str, Any] = {
+            **dict(zip(self._names(), self.coefficients, strict=True)),
+            "offset_at_reference": self.offset,
+            **{f"along_{k}": c for k, c in enumerate(self.along, start=1)},
+        }
+        if self.slope is not None:
+            params["carriage_follows_slope"] = self.slope[0]
         return {
             "cause": self.cause,
             "component": self.component,
             "varies_with": self.varies_with,
-            "parameters": {
-                **dict(zip(self._names(), self.coefficients, strict=True)),
-                "offset_at_reference": self.offset,
-                **{f"along_{k}": c for k, c in enumerate(self.along, start=1)},
-            },
+            "parameters": params,
         }
 
     @classmethod
@@ -280,7 +315,23 @@ class CouplingEffect(Effect):
             with_orders,
             read_number(t, "offset", 0.0),
             read_floats(t.get("along", []), "along"),
+            bool(t.get("with_slope", False)),
         )
+
+
+def slope_of(straightness: str) -> tuple[str, float] | None:
+    """The angular error a carriage gets from the slope of its guideway's straightness, and its
+    sign: a carriage riding a rail bent by w (µm) in direction r along axis a tilts about the
+    third axis c by ±dw/da — ``+`` when a → r → c is cyclic (x→y→z), ``−`` otherwise
+    (``dz_x`` → ``ey_x = −dw/dx``, ``dz_y`` → ``ex_y = +dw/dy``, ``dx_z`` → ``ey_z = +dw/dz``,
+    as the thermal bend of docs/formats.md §1.9). None for a positional or angular component."""
+    c = parse_component(straightness)
+    if not c.is_straightness:
+        return None
+    a, r = straightness[-1], straightness[1]
+    third = next(x for x in "xyz" if x not in (a, r))
+    cyclic = "xyzxy".find(a + r) >= 0
+    return f"e{third}_{a}", 1.0 if cyclic else -1.0
 
 
 # ----------------------------------------------------------------------------- direction
@@ -333,92 +384,5 @@ class ReversalEffect(Effect):
         )
 
 
-class PeriodicEffect(Effect):
-    """Cyclic positional error along an axis: ``a·cos(2πq/P) + b·sin(2πq/P)`` µm (q the indicated
-    position, P ``period_mm``) plus optional harmonics ``a_n·cos(2πnq/P) + b_n·sin(2πnq/P)``
-    (n = 2, 3, … in order: ``harmonics_um = [[a_2, b_2], [a_3, b_3], …]``), minus the value at
-    the reference point."""
-
-    cause: ClassVar[str] = "periodic"
-
-    def __init__(
-        self,
-        axis: str,
-        period_mm: float,
-        a_cos_um: float,
-        b_sin_um: float,
-        harmonics_um: Sequence[Sequence[float]] = (),
-    ) -> None:
-        self.axis = read_axis(axis)
-        if not (math.isfinite(period_mm) and period_mm > 0):
-            raise ValueError(f"period_mm must be finite and > 0, got {period_mm}")
-        self.period_mm = float(period_mm)
-        self.a_cos_um = float(a_cos_um)
-        self.b_sin_um = float(b_sin_um)
-        self.harmonics_um = [tuple(read_floats(h, "harmonics_um", 2)) for h in harmonics_um]
-
-    def shape(
-        self, q_mm: FloatArray, ref_mm: float, harmonic: int = 1
-    ) -> tuple[FloatArray, FloatArray]:
-        """(cos, sin) of harmonic n at ``q_mm``, each minus its value at ``ref_mm``."""
-        w = 2.0 * math.pi * harmonic / self.period_mm
-        q = np.asarray(q_mm, dtype=float)
-        return np.cos(w * q) - math.cos(w * ref_mm), np.sin(w * q) - math.sin(w * ref_mm)
-
-    def shortest_wavelength_mm(self) -> dict[str, float]:
-        """The period of the highest harmonic."""
-        return {self.axis: self.period_mm / (1 + len(self.harmonics_um))}
-
-    def modify_errors(self, ctx: EvalContext) -> None:
-        k = AXIS_INDEX[self.axis]
-        ref = float(ctx.reference_mm[k])
-        c, s = self.shape(ctx.q_mm[:, k], ref)
-        ctx.errors[:, k, k] += self.a_cos_um * c + self.b_sin_um * s
-        for n, (a_n, b_n) in enumerate(self.harmonics_um, start=2):
-            c, s = self.shape(ctx.q_mm[:, k], ref, n)
-            ctx.errors[:, k, k] += a_n * c + b_n * s
-
-    def to_table(self) -> dict[str, Any]:
-        t: dict[str, Any] = {
-            "cause": self.cause,
-            "axis": self.axis,
-            "period_mm": self.period_mm,
-            "a_cos_um": self.a_cos_um,
-            "b_sin_um": self.b_sin_um,
-        }
-        if self.harmonics_um:
-            t["harmonics_um"] = [list(h) for h in self.harmonics_um]
-        return t
-
-    def describe(self) -> dict[str, Any]:
-        params: dict[str, Any] = {
-            "period_mm": self.period_mm,
-            "amplitude_um": math.hypot(self.a_cos_um, self.b_sin_um),
-            "a_cos_um": self.a_cos_um,
-            "b_sin_um": self.b_sin_um,
-        }
-        for n, (a_n, b_n) in enumerate(self.harmonics_um, start=2):
-            params[f"harmonic_{n}_amplitude_um"] = math.hypot(a_n, b_n)
-        return {
-            "cause": self.cause,
-            "axis": self.axis,
-            "period_mm": self.period_mm,
-            "parameters": params,
-        }
-
-    @classmethod
-    def from_table(cls, t: Mapping[str, Any]) -> PeriodicEffect:
-        harmonics = t.get("harmonics_um", [])
-        if not isinstance(harmonics, list):
-            raise ValueError(f"harmonics_um must be a list of [a, b] pairs, got {harmonics!r}")
-        return cls(
-            read_str(t, "axis"),
-            read_number(t, "period_mm"),
-            read_number(t, "a_cos_um"),
-            read_number(t, "b_sin_um"),
-            harmonics,
-        )
-
-
-for _cls in (ParametricEffect, CouplingEffect, ReversalEffect, PeriodicEffect):
+for _cls in (ParametricEffect, CouplingEffect, ReversalEffect):
     register_effect(_cls.cause, _cls.from_table)

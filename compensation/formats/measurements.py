@@ -2,7 +2,9 @@
 
 Columns: ``x,y,z`` indicated (mm), ``ref_x,ref_y,ref_z`` reference = true position of the stylus
 tip (mm) are required; optional ``t`` (s), temperatures ``T_x … T_air`` (°C), ``dir_x …`` (±1),
-``nx,ny,nz`` (unit probing direction), ``px,py,pz`` stylus offset (mm), ``group`` (label).
+``nx,ny,nz`` (unit probing direction), ``px,py,pz`` stylus offset (mm), ``v_x,v_y,v_z``
+(velocity of each axis at the sample, mm/s, signed: a dense stream's), ``state`` (``rest``,
+``steady``, … : what the axis was doing), ``group`` (label).
 Unknown columns are kept aside and ignored. The observed error is ``(ref − indicated)·1000`` µm
 (error = true − indicated).
 """
@@ -37,7 +39,17 @@ TEMPERATURE_COLUMNS = TEMPERATURE_ROLES
 DIR_COLUMNS = ("dir_x", "dir_y", "dir_z")
 NORMAL_COLUMNS = ("nx", "ny", "nz")
 STYLUS_COLUMNS = ("px", "py", "pz")
-NUMERIC = (*REQUIRED, "t", *TEMPERATURE_COLUMNS, *DIR_COLUMNS, *NORMAL_COLUMNS, *STYLUS_COLUMNS)
+VELOCITY_COLUMNS = ("v_x", "v_y", "v_z")
+_TEXT_COLUMNS = ("group", "state")
+NUMERIC = (
+    *REQUIRED,
+    "t",
+    *TEMPERATURE_COLUMNS,
+    *DIR_COLUMNS,
+    *NORMAL_COLUMNS,
+    *STYLUS_COLUMNS,
+    *VELOCITY_COLUMNS,
+)
 
 
 @dataclass
@@ -53,6 +65,10 @@ class Measurements:
     stylus_mm: FloatArray | None = None  # (N, 3)
     group: NDArray[np.str_] | None = None
     source: str = "<memory>"
+    #: v_x … (mm/s, signed): each axis' velocity at the sample (a dense stream's; diagnosis only)
+    velocities: dict[str, FloatArray] = field(default_factory=dict)
+    #: what the axis was doing at the sample (``rest``, ``steady``, …; diagnosis only)
+    state: NDArray[np.str_] | None = None
 
     @property
     def n(self) -> int:
@@ -94,6 +110,8 @@ class Measurements:
             stylus_mm=pick(self.stylus_mm),
             group=pick(self.group),
             source=self.source,
+            velocities={k: v[index] for k, v in self.velocities.items()},
+            state=pick(self.state),
         )
 
     def columns(self) -> dict[str, Any]:
@@ -111,6 +129,9 @@ class Measurements:
             out.update({c: self.normals[:, k] for k, c in enumerate(NORMAL_COLUMNS)})
         if self.stylus_mm is not None:
             out.update({c: self.stylus_mm[:, k] for k, c in enumerate(STYLUS_COLUMNS)})
+        out.update({k: self.velocities[k] for k in VELOCITY_COLUMNS if k in self.velocities})
+        if self.state is not None:
+            out["state"] = self.state
         if self.group is not None:
             out["group"] = self.group
         return out
@@ -125,7 +146,10 @@ def write_measurements(path: str | Path, data: Measurements) -> Path:
         writer.writerow(list(cols))
         for i in range(data.n):
             writer.writerow(
-                [repr(float(v[i])) if k != "group" else str(v[i]) for k, v in cols.items()]
+                [
+                    repr(float(v[i])) if k not in _TEXT_COLUMNS else str(v[i])
+                    for k, v in cols.items()
+                ]
             )
     return path
 
@@ -170,6 +194,7 @@ def read_measurements(path: str | Path) -> Measurements:
     numeric = [c for c in NUMERIC if c in index]
     values = {c: np.empty(len(body)) for c in numeric}
     groups: list[str] = []
+    states: list[str] = []
     for r, (line, row) in enumerate(body):
         if len(row) != len(header):
             raise _fail(src, line, None, f"{len(row)} fields, the header has {len(header)}")
@@ -188,6 +213,8 @@ def read_measurements(path: str | Path) -> Measurements:
             values[c][r] = v
         if "group" in index:
             groups.append(row[index["group"]].strip())
+        if "state" in index:
+            states.append(row[index["state"]].strip())
         if all(c in index for c in NORMAL_COLUMNS):
             norm = math.sqrt(sum(values[c][r] ** 2 for c in NORMAL_COLUMNS))
             if abs(norm - 1.0) > 0.01:
@@ -208,12 +235,14 @@ def read_measurements(path: str | Path) -> Measurements:
     columns: dict[str, Any] = dict(values)
     if "group" in index:
         columns["group"] = groups
+    if "state" in index:
+        columns["state"] = states
     return measurements_from_columns(columns, src)
 
 
 def measurements_from_columns(columns: Mapping[str, Any], source: str = "<memory>") -> Measurements:
     """Build from a column mapping like :meth:`Measurements.columns` returns."""
-    arr = {k: np.asarray(v, dtype=float) for k, v in columns.items() if k != "group"}
+    arr = {k: np.asarray(v, dtype=float) for k, v in columns.items() if k not in _TEXT_COLUMNS}
 
     def stack(cols: Sequence[str]) -> FloatArray | None:
         return np.column_stack([arr[c] for c in cols]) if all(c in arr for c in cols) else None
@@ -231,4 +260,6 @@ def measurements_from_columns(columns: Mapping[str, Any], source: str = "<memory
         stylus_mm=stack(STYLUS_COLUMNS),
         group=None if "group" not in columns else np.asarray(columns["group"], dtype=str),
         source=source,
+        velocities={c: arr[c] for c in VELOCITY_COLUMNS if c in arr},
+        state=None if "state" not in columns else np.asarray(columns["state"], dtype=str),
     )

@@ -1,0 +1,263 @@
+"""Which instrument carries each effect, and which coordinate it is locked to: the test.
+
+Every named term has *twins*: the same shape carried by the other instrument, or locked to
+another coordinate (:data:`TWINS`) — a cyclic error of the axis' position and one of the
+reference's reading with the same period law; a positional table and a smooth nonlinearity of
+the reading (or a scale of the reference); a reversal and a latency (an error ∝ velocity); a
+drift that changes along the axis and a reference drift the same everywhere. After selection,
+each named term is refitted as each of its twins (the other named terms kept, the twin's
+nonlinear parameter re-profiled about the term's), and the residual sums of squares compared
+(a twin with more parameters charged one noise variance σ² per extra parameter, as
+:mod:`.alternatives` does; σ² per *effective* observation: neighbouring residuals of a dense
+record are correlated, and a difference of fits is then worth fewer independent points — the
+variance is inflated by (1 + ρ)/(1 − ρ), ρ the residual's lag-one correlation in time):
+
+Two figures per twin, both in units of that σ²: Δχ², how much worse the twin fits, and the
+*separability*, how badly the twin (the other terms free) can imitate the named term's fitted
+contribution — what the session could at best show. With ``band = χ²₁(1 − α)``:
+
+* separable (beyond the band, and — for a twin in the other coordinate, through the map between
+  position and reading — missing at least 1 % of the term's energy — a cyclic error moved by
+  ~3 % of its period (misfit sin²(π·shift)) between the directions: below that the difference is the map's own
+  imperfection in a quiet session, not a physical one) and Δχ² > band: the twin is refuted; the term's own source and coordinate stand;
+* separable and Δχ² < −band: the twin replaces the term (the data say which object it is) and
+  is then tested against its own twins — except a smooth function of the reading
+  (:data:`READING_SHAPES`), which is never named in place of a machine term;
+* otherwise (within the band, or not separable: the difference comes from elsewhere in the
+  model) the twin is an explanation the session cannot refuse: the entry's source is ``either``
+  (when the twin's instrument differs) and its ``locked_to`` ``undetermined`` (when its
+  coordinate differs); the twin is listed among ``alternatives`` with its source; the primary
+  stays the term selected.
+
+With bidirectional passes the test is the physics of the contract (docs/formats.md §4): a
+reference-locked cyclic error shifts by the reversal in axis coordinates, a position-locked one
+by nothing, so with a reversal that moves the phase clearly the two coordinates fit very
+differently; a latency differs from a reversal at rest and between speeds; a reference drift
+cannot follow a drift that changes along the axis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from .candidate import Candidate
+from .fitting import Problem, Term, best_theta, fit
+from .reference_candidates import through_map
+
+#: A twin is separable only when it misses at least this share of the named term's energy.
+SEPARATION_FLOOR = 0.01
+
+#: Twins that are smooth functions of the reference's reading: never named in place of a machine
+#: term (a smooth function of the reading beside smooth functions of the position spans the
+#: observed error itself, ``(ref − indicated)·1000``: the model would explain the data by the
+#: data); they can only make an entry ``either``.
+READING_SHAPES = ("reference_nonlinearity", "reference_scale")
+
+__all__ = ["TWINS", "SourceCall", "decide_sources", "twins_of"]
+
+#: cause → the causes that may be its twins (same axis).
+TWINS: dict[str, tuple[str, ...]] = {
+    "periodic": ("reference_ripple",),
+    "reference_ripple": ("periodic",),
+    "parametric": ("reference_nonlinearity", "reference_scale"),
+    "reference_nonlinearity": ("parametric",),
+    "reference_scale": ("parametric", "scale_expansion"),
+    "scale_expansion": ("reference_scale",),
+    "reversal": ("latency",),
+    "latency": ("reversal",),
+    "drift": ("reference_drift",),
+    "reference_drift": ("drift",),
+}
+
+
+def _axis_of(c: Candidate) -> str | None:
+    """The axis a candidate is a function of: its ``axis``, or that of a table's component
+    (``dx_x``, ``ey_x`` … → x: a table is a function of its axis' position; through the Abbe
+    arms it may act on the other components too, which a twin of the reading then cannot
+    imitate)."""
+    axis = c.keys.get("axis")
+    if isinstance(axis, str):
+        return axis
+    comp = c.keys.get("component")
+    if isinstance(comp, str) and len(comp) == 4 and comp[2] == "_" and comp[3] in "xyz":
+        return comp[3]
+    return None
+
+
+def twins_of(cand: Candidate, pool: Sequence[Candidate], theta: Any = None) -> list[Candidate]:
+    """The twins of ``cand`` in ``pool`` (same axis, a twin cause, a cyclic error's twin with
+    the same kind of period law, scanning the period ``theta`` when given)."""
+    axis = _axis_of(cand)
+    if axis is None:
+        return []
+    chirped = cand.theta_step is not None
+    out = []
+    for c in pool:
+        if c.cause not in TWINS.get(cand.cause, ()) or _axis_of(c) != axis:
+            continue
+        if c.cause in ("periodic", "reference_ripple") and (c.theta_step is not None) != chirped:
+            continue
+        if theta is not None and isinstance(theta, float) and not _covers(c, theta):
+            continue  # a scan of other periods (the dense record's short ones)
+        out.append(c)
+    return out
+
+
+def _covers(c: Candidate, theta: float) -> bool:
+    grid = [v for v in c.thetas if isinstance(v, float)]
+    return not grid or min(grid) * 0.9 <= theta <= max(grid) * 1.1
+
+
+@dataclass
+class SourceCall:
+    """The decision for one named term: its source, coordinate, and the twins' figures."""
+
+    source: str
+    locked_to: str
+    twins: list[dict[str, Any]] = field(default_factory=list)
+    alternatives: list[tuple[Term, float]] = field(default_factory=list)  # (twin, Δχ²) within
+    replaced: str | None = None  # the label of the term a better twin replaced
+
+    def summary(self, label: str) -> str:
+        if not self.twins:
+            return f"{label}: no other instrument or coordinate has a term of this shape"
+        parts = ", ".join(
+            f"{t['cause']} ({t['source']}, locked to {t['locked_to']}) Δχ² = {t['delta_chi2']:+.1f}"
+            for t in self.twins
+        )
+        if self.source == "either":
+            verdict = "the session cannot tell which instrument carries it"
+        elif self.locked_to == "undetermined":
+            verdict = "the session cannot tell which coordinate it is locked to"
+        else:
+            verdict = f"it is the {self.source}'s, locked to {self.locked_to}"
+        head = f"refitted as its twins: {parts}"
+        if self.replaced:
+            head = f"first selected as {self.replaced}; " + head
+        return f"{head}; {verdict}"
+
+
+def _twin_fit(
+    problem: Problem, others: list[Term], term: Term, twin: Candidate, rich: bool
+) -> tuple[Term, float]:
+    """The twin at the term's shape level (``rich``), its parameter profiled about the term's;
+    a twin in the other coordinate (position ↔ reading) through the session's map between them
+    (:func:`.reference_candidates.through_map`: a function of the reading beside functions of
+    the position would otherwise span the observed error itself)."""
+    if {twin.locked_to, term.candidate.locked_to} == {"position", "reference"}:
+        twin = through_map(twin, problem.res)
+    cand = twin.rich if rich and twin.rich is not None else twin
+    near = term.theta if isinstance(term.theta, float) else None
+    if isinstance(term.theta, tuple) and cand.theta_step is not None:
+        # the same law to start from: only its continuous refinement is needed
+        cand = replace(cand, thetas=(term.theta,), _cache={}, _statics={})
+    theta, rss, _ = best_theta(problem, others, cand, near=near)
+    return Term(cand, theta), rss
+
+
+#: Largest variance inflation for dependent neighbours (ρ ≈ 0.95).
+MAX_DEPENDENCE = 40.0
+
+
+def dependence_factor(problem: Problem, terms: Sequence[Term], beta: Any) -> float:
+    """(1 + ρ)/(1 − ρ) for the lag-one correlation ρ of the model's residual in time order (row
+    order without times), pooled over the measured axes; 1 for independent residuals."""
+    r = problem.y - (problem.stacked(terms) @ beta).reshape(problem.y.shape)
+    t = problem.res.data.t_s
+    order = np.argsort(t, kind="stable") if t is not None else np.arange(len(r))
+    r = r[order]
+    num = float(np.sum(r[1:] * r[:-1]))
+    den = float(np.sum(r * r))
+    rho = min(max(num / den if den > 0 else 0.0, 0.0), 0.95)
+    return float(min((1.0 + rho) / (1.0 - rho), MAX_DEPENDENCE))
+
+
+def decide_sources(
+    problem: Problem,
+    accepted: list[Term],
+    roots: list[Candidate],
+    pool: Sequence[Candidate],
+    alpha: float,
+) -> list[SourceCall]:
+    """The source and coordinate of each accepted term (module docstring). ``roots`` are the
+    accepted terms' family candidates (their twins are looked up from them); ``pool`` holds
+    every candidate and twin. Terms replaced by a better twin are replaced in ``accepted`` and
+    ``roots`` in place."""
+    calls: list[SourceCall] = []
+    n_obs = problem.y.size
+    band = float(stats.chi2.ppf(1.0 - alpha, 1))
+    for i in range(len(accepted)):
+        call: SourceCall | None = None
+        replaced: str | None = None
+        for _ in range(2):  # a term replaced by its twin is tested once more, as the twin
+            term, root = accepted[i], roots[i]
+            beta, rss_full, rank = fit(problem, accepted)
+            # neighbouring residuals of a dense record are not independent: one σ² per
+            # effective observation (Bartlett: n·(1 − ρ)/(1 + ρ), ρ the lag-one correlation)
+            kappa = dependence_factor(problem, accepted, beta)
+            sigma2 = max(rss_full / max(n_obs - rank, 1), 1e-300) * kappa
+            others = accepted[:i] + accepted[i + 1 :]
+            target = _contribution(problem, accepted, beta, i)
+            call = SourceCall(root.source, root.locked_to, replaced=replaced)
+            better: tuple[float, Term, Candidate] | None = None
+            for twin in twins_of(root, pool, term.theta):
+                t_term, rss = _twin_fit(problem, others, term, twin, term.candidate is not root)
+                extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
+                delta = (rss - rss_full) / sigma2 + extra
+                misfit = _imitation_misfit(problem, others, t_term, target)
+                apart = misfit / sigma2
+                # separable only by a difference that is a sizeable part of the term itself
+                # (≥ 1 % of its energy: a cyclic error moved by ~0.03 period between the
+                # directions), not by the imperfections of the map in a quiet session
+                # (the floor is for twins through the map between position and reading: a
+                # reversal and a latency, or two drifts, differ by their own columns)
+                mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
+                if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
+                    apart = min(apart, band)
+                call.twins.append(
+                    {
+                        "cause": twin.cause,
+                        "source": twin.source,
+                        "locked_to": twin.locked_to,
+                        "delta_chi2": float(delta),
+                        "separable_chi2": float(apart),
+                    }
+                )
+                if apart > band and delta > band:
+                    continue  # refuted
+                if apart > band and delta < -band and twin.cause not in READING_SHAPES:
+                    if better is None or delta < better[0]:
+                        better = (delta, t_term, twin)
+                    continue
+                call.alternatives.append((t_term, float(delta)))
+                if twin.source != root.source:
+                    call.source = "either"
+                if twin.locked_to != root.locked_to:
+                    call.locked_to = "undetermined"
+            if better is None or replaced is not None:
+                break
+            replaced = f"{root.label} (Δχ² {-better[0]:+.1f} against it)"
+            accepted[i], roots[i] = better[1], better[2]
+        assert call is not None
+        calls.append(call)
+    return calls
+
+
+def _contribution(problem: Problem, terms: Sequence[Term], beta: Any, index: int) -> Any:
+    """The stacked fitted contribution of ``terms[index]`` (µm)."""
+    start = problem.n_nuisance + sum(t.candidate.n_params for t in terms[:index])
+    stop = start + terms[index].candidate.n_params
+    return problem.design(terms[index]) @ beta[start:stop]
+
+
+def _imitation_misfit(problem: Problem, others: list[Term], twin: Term, target: Any) -> float:
+    """How badly the twin (with the other terms free) imitates the named term's fitted
+    contribution: the residual sum of squares (µm²) — what the data could at best show."""
+    x = problem.stacked([*others, twin])
+    coef, *_ = np.linalg.lstsq(x, target, rcond=None)
+    return float(np.sum((target - x @ coef) ** 2))
