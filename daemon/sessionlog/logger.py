@@ -4,8 +4,8 @@ against, the :class:`LogSettings` of a log (one definition, validated once), the
 topic, the error reporting and the lifecycle.
 
 :class:`~cmm_comp.daemon.sessionlog.process_writer.McapProcessLogger` is the daemon's log (the
-writing in a child process); :class:`~cmm_comp.daemon.sessionlog.thread_writer.McapLogger`
-writes the file, with a writer thread (in that child, or in any program that logs).
+writing in a child process); :class:`~cmm_comp.daemon.sessionlog.writer.SessionWriter` writes
+the files in the calling thread (in that child, or in any program that may wait for its disk).
 """
 
 from __future__ import annotations
@@ -25,8 +25,6 @@ _log = logging.getLogger(__name__)
 
 Payload = dict[str, Any] | tuple[Any, ...]
 """A logged payload: the JSON object, or a compact record tuple (``schemas.RECORD_FIELDS``)."""
-QueuedMessage = tuple[str, Payload, int]
-"""``(topic, payload, log_time_ns)`` as it waits in a queue."""
 
 
 LOW_PRIORITY_TOPICS: frozenset[str] = frozenset({"/cmm/can_rx", "/cmm/can_tx", "/cmm/modbus"})
