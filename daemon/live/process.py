@@ -18,7 +18,6 @@ wake-up (docs/live.md).
 
 from __future__ import annotations
 
-import pickle
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -29,6 +28,7 @@ from cmm_comp.compensation.errors import CmmCompError
 
 from ..childproc import ChildProcess, ChildProcessError
 from ..ring import ring_bytes
+from ..sessionlog.encoding import Packer
 from .server import LiveStartError
 from .settings import LiveSection
 from .sink import LATCHED_TOPICS, STREAMED_TOPICS, TOPIC_BITS, LiveSink, LiveStats
@@ -71,7 +71,7 @@ class LiveProcessSink(LiveSink):
         self._port = 0
         self._child: LiveStats = _EMPTY
         self._forwarded = 0
-        self._parent_errors = 0
+        self._pack = Packer()
         self._down: str | None = None
         self._dead = False
         self._errors_seen = 0
@@ -158,34 +158,16 @@ class LiveProcessSink(LiveSink):
             return n
         if log_time_ns is None:
             log_time_ns = time.time_ns()
-        try:
-            data = pickle.dumps((topic, payloads, log_time_ns), protocol=pickle.HIGHEST_PROTOCOL)
-            bad = 0
-        except Exception:  # something not plain data in a payload: find it, keep the rest
-            data, bad = self._picklable(topic, payloads, log_time_ns)
-        with self._lock:
+        with self._lock:  # objects not plain data go as their repr: encode errors in the child
             self._offered += n
-            self._parent_errors += bad
             if self._stopped:
-                self._idle += n - bad
-            elif proc.write(data, n - bad):
-                self._forwarded += n - bad
+                self._idle += n
+            elif proc.write(self._pack((topic, payloads, log_time_ns)), n):
+                self._forwarded += n
             else:
-                self._dropped += n - bad
-                self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n - bad
+                self._dropped += n
+                self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n
         return n
-
-    def _picklable(self, topic: str, payloads: Sequence[Any], t_ns: int) -> tuple[bytes, int]:
-        keep: list[Any] = []
-        for p in payloads:
-            try:
-                pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL)
-            except Exception as exc:
-                self._report(ValueError(f"live view: {topic} message not sent: {exc}"))
-                continue
-            keep.append(p)
-        data = pickle.dumps((topic, keep, t_ns), protocol=pickle.HIGHEST_PROTOCOL)
-        return data, len(payloads) - len(keep)
 
     # ------------------------------------------------------------------ statistics, health
     def stats(self) -> LiveStats:
@@ -196,7 +178,6 @@ class LiveProcessSink(LiveSink):
         with self._lock:
             offered, idle, dropped = self._offered, self._idle, self._dropped
             by_topic, forwarded = dict(self._dropped_by), self._forwarded
-            errors = self._parent_errors
         c = self._child
         for topic, k in c.dropped_by_topic.items():
             by_topic[topic] = by_topic.get(topic, 0) + k
@@ -205,7 +186,6 @@ class LiveProcessSink(LiveSink):
             offered=offered,
             not_encoded=idle + c.not_encoded,
             dropped=dropped + c.dropped,
-            encode_errors=errors + c.encode_errors,
             queue_len=max(0, forwarded - c.offered) + c.queue_len,
             dropped_by_topic=by_topic,
             up=self._down is None and not self._dead,

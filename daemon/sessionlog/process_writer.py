@@ -24,9 +24,7 @@ the file: nothing the daemon had handed over is lost. See docs/mcap.md.
 from __future__ import annotations
 
 import collections
-import io
 import logging
-import numbers
 import os
 import pickle
 import sys
@@ -43,7 +41,7 @@ from .. import memory
 from ..childproc import ChildEnd, ChildProcess, ChildProcessError, portable
 from ..osthread import expected_priority, lower_priority, name_os_thread
 from ..ring import ring_bytes
-from .encoding import NotJson, safe_repr
+from .encoding import Packer
 from .logger import LOW_PRIORITY_TOPICS, LoggerBase, LoggerStats, LogSettings, Payload
 from .writer import SessionWriter
 
@@ -69,55 +67,6 @@ _EMPTY = LoggerStats(0, 0, 0, 0, (), 0)
 class McapWriterProcessError(ChildProcessError):
     """An error of the writer child that could not be passed on as its own exception type, its
     death, or a stop it did not finish in time."""
-
-
-class _PlainPickler(pickle.Pickler):
-    """Plain data pickles as usual; numpy-like numbers become Python numbers; any other object
-    becomes a :class:`.encoding.NotJson` holding its repr, so the child never imports a class
-    and a bad payload still becomes an error record there."""
-
-    def reducer_override(self, obj: Any) -> Any:
-        if isinstance(obj, numbers.Integral) and not isinstance(obj, bool):
-            return int, (int(obj),)
-        if isinstance(obj, numbers.Real) and not isinstance(obj, bool):
-            return float, (float(obj),)
-        if isinstance(obj, type):
-            return NotImplemented  # classes pickle by reference (NotJson itself)
-        return NotJson, (safe_repr(obj),)
-
-
-class Packer:
-    """Pickles ring records ``(topic, payloads, log_time_ns, parent drops or None)`` with one
-    reused :class:`_PlainPickler` (a new pickler per record cost twice as much). A payload that
-    cannot be pickled at all (nested too deep) becomes a :class:`.encoding.NotJson`. Not
-    thread-safe: the caller holds its lock."""
-
-    def __init__(self) -> None:
-        self._buf = io.BytesIO()
-        self._pickler = _PlainPickler(self._buf, protocol=pickle.HIGHEST_PROTOCOL)
-
-    def __call__(self, batch: tuple[str, Sequence[Payload], int, dict[str, int] | None]) -> bytes:
-        try:
-            return self._dump(batch)
-        except Exception:
-            pass
-        topic, payloads, t_ns, drops = batch
-        safe: list[Any] = []
-        for p in payloads:
-            try:
-                self._dump(p)
-                safe.append(p)
-            except Exception as exc:
-                safe.append(NotJson(f"<not picklable: {type(exc).__name__}> {safe_repr(p, 200)}"))
-        return self._dump((topic, safe, t_ns, drops))
-
-    def _dump(self, obj: Any) -> bytes:
-        buf = self._buf
-        buf.seek(0)
-        buf.truncate()
-        self._pickler.clear_memo()
-        self._pickler.dump(obj)
-        return buf.getvalue()
 
 
 class McapProcessLogger(LoggerBase):
