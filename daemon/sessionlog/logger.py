@@ -168,7 +168,26 @@ class LogSettings:
         return self.target.suffix == ".mcap"
 
 
-class LoggerBase:
+class Stoppable:
+    """``close()`` and ``with`` for a class with ``stop(timeout_s)``: the loggers, the live
+    view, their fan-out."""
+
+    def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - the classes override
+        """End the work (drain, finish); True if done within ``timeout_s`` (s)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Stop with the default timeout (the SIGTERM path)."""
+        self.stop()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class LoggerBase(Stoppable):
     """The part every writer shares: topic checks, drop counts per topic, error reporting (first
     error kept, ``on_error`` called, never raised into the producer) and the lifecycle."""
 
@@ -227,17 +246,3 @@ class LoggerBase:
                 self._on_error(exc)
             except Exception:  # the handler's own failure is logged, never raised here
                 _log.exception("MCAP on_error handler raised")
-
-    def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - the writers override
-        """Drain, finish the file, end the writer; True if done within ``timeout_s`` (s)."""
-        raise NotImplementedError
-
-    def close(self) -> None:
-        """Stop with the default timeout (the SIGTERM path)."""
-        self.stop()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
