@@ -11,7 +11,8 @@ The child (:func:`child_main`) writes straight from the ring into a
 :class:`.writer.SessionWriter`: its writer thread runs at Linux ``SCHED_IDLE`` and polls the
 ring every :data:`POLL_S`, so the JSON + MCAP + zstd work only takes CPU time no other task
 wants; when :data:`HELP_HIGH` messages' worth of bytes wait (a machine loaded to 100 % starves
-an idle thread) the main thread (normal priority) writes too, one ring record at a time. Counters, files and health reach the daemon
+an idle thread) the main thread (normal priority) writes too. Either thread holds the lock
+they share for at most :data:`BATCH` messages: a starved idle thread never holds it long. Counters, files and health reach the daemon
 through the shared status block (``stats()``: ≤ :data:`REPORT_S` old while running, exact
 after ``stop()``), errors through the pipe (``on_error`` in the watch thread).
 
@@ -53,6 +54,8 @@ POLL_S = 0.01
 """The child reads the ring this often, s (bounds how long a message waits to be written)."""
 REPORT_S = 0.1
 """The child publishes its counters at most this often while they change, s."""
+BATCH = 32
+"""Messages written per hold of the child's lock."""
 HELP_HIGH, HELP_LOW = 8192, 1024
 """Ring backlog (in messages of :data:`MESSAGE_BYTES`) at which the child's main thread starts
 writing itself, and until how many are left."""
@@ -294,19 +297,25 @@ def _serve(end: ChildEnd) -> None:
     lock = threading.Lock()  # one ring reader and file writer at a time
     done = threading.Event()
     received = 0
+    current: collections.deque[tuple[str, Any, int]] = collections.deque()
+    """The messages of the ring record being written (one record, taken whole from the ring)."""
 
-    def take_one() -> int:
-        """Write the ring's oldest record (lock held); its message count, 0 if none."""
+    def step(limit: int = BATCH) -> int:
+        """Write at most ``limit`` messages: the current record's, else the ring's next (lock
+        held; short, so a starved idle thread never holds the lock long). 0: nothing waits."""
         nonlocal received
-        for n, data in end.ring.read():
-            topic, payloads, t_ns, drops = pickle.loads(data)
-            if drops is not None:
-                writer.set_upstream_drops(drops)
-            for p in payloads:
-                writer.write(topic, p, t_ns)
-            received += n
-            return n
-        return 0
+        if not current:
+            for n, data in end.ring.read():
+                topic, payloads, t_ns, drops = pickle.loads(data)
+                if drops is not None:
+                    writer.set_upstream_drops(drops)
+                current.extend((topic, p, t_ns) for p in payloads)
+                received += n
+                break
+        k = min(limit, len(current))
+        for _ in range(k):
+            writer.write(*current.popleft())
+        return k
 
     def idle_writer() -> None:
         name_os_thread()
@@ -315,7 +324,7 @@ def _serve(end: ChildEnd) -> None:
             _log.warning("MCAP writer priority idle not available: %s", took)
         while not done.is_set():
             with lock:
-                n = 0 if done.is_set() else take_one()
+                n = 0 if done.is_set() else step()
                 writer.tick()
             if not n:
                 done.wait(POLL_S)
@@ -339,9 +348,11 @@ def _serve(end: ChildEnd) -> None:
         while True:
             stop, last = end.stop_requested(POLL_S)
             if end.ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
+                until = time.monotonic() + REPORT_S  # then report, and help again
                 while end.ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
                     with lock:
-                        take_one()
+                        if not step() or time.monotonic() > until:
+                            break
             forward_errors()
             now = time.monotonic()
             if now - last_report >= REPORT_S:
@@ -355,7 +366,7 @@ def _serve(end: ChildEnd) -> None:
         # gets next to no CPU on a saturated machine (the daemon bounds the wait)
         done.set()
         with lock:
-            while take_one():
+            while step(1 << 30):
                 pass
             if last is not None:
                 writer.set_upstream_drops(last)
