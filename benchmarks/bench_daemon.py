@@ -20,8 +20,10 @@ reported; a run whose load changed a lot is worth repeating.
   reading of the daemon's process and of its process tree; per-round ratios daemon/baseline.
 * ``virtual``: controller and daemon in one process on python-can's ``virtual`` bus: ``echo``,
   the daemon with MCAP off, on, and on with a grid carrying U (U sent, a fifth frame).
-* ``throughput`` (``virtual``, one process, one GIL): unpaced floods of ``--flood`` readings
-  (batches of 16, ≤ 512 unanswered) to a bare batch echo and to the daemon with MCAP on and off,
+* ``throughput`` (``virtual``, one process, one GIL): ``virtual_raw``, the bus alone (3 frames
+  sent and received, 4 answer frames sent and received per reading, one thread, no daemon: the
+  ceiling this bus sets); unpaced floods of ``--flood`` readings (batches of 16, ≤ 512
+  unanswered) to a bare batch echo and to the daemon with MCAP on and off,
   and ``sustained``: ``--sustain-n`` readings paced at ``--sustain-hz`` (10 s at 10 kHz) to the
   daemon with MCAP on; lost answers, answers missing from the MCAP file, drops per topic.
 * ``modbus``: FC16 write of READING + FC3 read of ANSWER on 127.0.0.1, against a plain pymodbus
@@ -259,7 +261,7 @@ def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> d
 
     thread = threading.Thread(target=rx, name="flood-rx")
     thread.start()
-    t0, i = time.perf_counter(), 0
+    t0, c0, i = time.perf_counter(), time.process_time(), 0
     try:
         while i < n:
             with cond:
@@ -274,7 +276,7 @@ def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> d
         with cond:
             while got[0] < n and cond.wait(10.0):
                 pass
-        dt = time.perf_counter() - t0
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     finally:
         stop.set()
         thread.join()
@@ -282,8 +284,34 @@ def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> d
         "readings": n,
         "lost": n - got[0],
         "readings_per_s": n / dt,
+        "readings_per_cpu_s": n / cpu,
         "statuses": {Status(k).label: v for k, v in sorted(statuses.items())},
     }
+
+
+def virtual_raw(frames: list[can.Message]) -> dict[str, Any]:
+    """python-can's ``virtual`` bus alone, no daemon, no thread, no wait: per batch of 16
+    readings the controller's bus sends the 3 raw frames of each, a second bus receives them
+    and sends 4 answer frames each, the first receives those. The bus's own cost (a copy of
+    each frame per receiver, a ``queue.Queue`` put and get): the ceiling of any reader of 3 and
+    writer of 4 frames a reading on this bus in one process."""
+    n, chunk = len(frames) // 3, 16
+    ch = f"bench-{uuid.uuid4().hex[:8]}"
+    answer = _answers({}, bytes(8))
+    lost = 0
+    with (
+        can.Bus(interface="virtual", channel=ch) as ctl,
+        can.Bus(interface="virtual", channel=ch) as dev,
+    ):
+        t0, c0 = time.perf_counter(), time.process_time()
+        for i in range(0, n, chunk):
+            k = min(n, i + chunk) - i
+            send_batch(ctl, frames[3 * i : 3 * (i + k)], None)
+            lost += sum(dev.recv(0.0) is None for _ in range(3 * k))
+            send_batch(dev, answer * k, None)
+            lost += sum(ctl.recv(0.0) is None for _ in range(4 * k))
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"readings": n, "lost": lost, "readings_per_s": n / dt, "readings_per_cpu_s": n / cpu}
 
 
 def flood_one(name: str, grid: Path, n: int, rate_hz: float, tmp: Path) -> dict[str, Any]:
@@ -291,6 +319,8 @@ def flood_one(name: str, grid: Path, n: int, rate_hz: float, tmp: Path) -> dict[
     daemon (``daemon_no_mcap``: logging off), in this process; for the daemon, the MCAP log's
     own counts once it has stopped (every answer in the file? drops per topic)."""
     frames = raw_frames(readings(n, np.random.default_rng(2)))
+    if name == "virtual_raw":
+        return virtual_raw(frames)
     ch = f"bench-{uuid.uuid4().hex[:8]}"
     if name == "echo":
         with virtual_echo(ch, True), can.Bus(interface="virtual", channel=ch) as bus:
@@ -315,7 +345,7 @@ def bench_throughput(grid: Path, args: Any, tmp: Path, pythonpath: str) -> dict[
     """The floods, each in a fresh process (this tree's, or with ``pythonpath`` the
     baseline's: ``baseline_*`` cases), in 2 interleaved rounds; best round of each (the least
     disturbed) and all rounds."""
-    cases = ["echo", "daemon_mcap", "daemon_no_mcap", "sustained"]
+    cases = ["virtual_raw", "echo", "daemon_mcap", "daemon_no_mcap", "sustained"]
     if pythonpath:
         cases += ["baseline_daemon_mcap", "baseline_sustained"]
     runs: dict[str, list[dict[str, Any]]] = {c: [] for c in cases}
@@ -335,6 +365,7 @@ def bench_throughput(grid: Path, args: Any, tmp: Path, pythonpath: str) -> dict[
     for name in cases:
         best = max(runs[name], key=lambda r: r["readings_per_s"])
         out[name] = {**best, "all_readings_per_s": [r["readings_per_s"] for r in runs[name]]}
+        out[name]["all_readings_per_cpu_s"] = [r["readings_per_cpu_s"] for r in runs[name]]
         out[name]["all_lost"] = [r["lost"] for r in runs[name]]
     return out
 
@@ -596,6 +627,18 @@ def print_table(result: dict[str, Any]) -> None:
         print(
             f"throughput {name:<16} best {r['readings_per_s']:>7.0f} readings/s (all {allr}), lost "
             f"{r['all_lost']}, answers not logged {r.get('answers_not_logged', '-')}"
+        )
+    tp = result.get("throughput", {})
+    for name, r in tp.items():
+        cpu = max(r["all_readings_per_cpu_s"])
+        print(f"throughput {name:<16} per CPU second of its process: {cpu:>7.0f} readings")
+    for name in ("daemon_mcap", "daemon_no_mcap") if "virtual_raw" in tp else ():
+        best, cpu = tp[name]["readings_per_s"], max(tp[name]["all_readings_per_cpu_s"])
+        print(
+            f"throughput {name} / bare echo {best / tp['echo']['readings_per_s']:.2f}× "
+            f"(per CPU s {cpu / max(tp['echo']['all_readings_per_cpu_s']):.2f}×), / the virtual "
+            f"bus alone {best / tp['virtual_raw']['readings_per_s']:.2f}× (per CPU s "
+            f"{cpu / max(tp['virtual_raw']['all_readings_per_cpu_s']):.2f}×)"
         )
     if "modbus" in result:
         m = result["modbus"]

@@ -21,7 +21,7 @@ from typing import Any
 from mcap.writer import CompressionType, Writer
 
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, stamp_from_ns
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 RESULTS = Path(__file__).resolve().parent / "results" / "mcap.json"
 CHUNK_SIZE = 256 * 1024
@@ -52,8 +52,8 @@ def raw_writer(path: Path, n: int, compression: CompressionType) -> float:
 
 
 def logger_run(path: Path, n: int, compression: CompressionType) -> dict[str, float]:
-    """McapLogger end to end: first log() to finished file. Also times each log() call."""
-    lg = McapLogger(path, queue_size=n + 1, compression=compression, chunk_size=CHUNK_SIZE)
+    """SessionWriter end to end: first log() to finished file. Also times each log() call."""
+    lg = SessionWriter(path, queue_size=n + 1, compression=compression, chunk_size=CHUNK_SIZE)
     costs_ns = []
     pc = time.perf_counter_ns
     t0 = time.perf_counter()
@@ -78,7 +78,7 @@ def logger_run(path: Path, n: int, compression: CompressionType) -> dict[str, fl
 
 def log_cost_batched(path: Path, n: int) -> float:
     """Mean log() cost without the per-call timer overhead (µs), queue never full."""
-    with McapLogger(path, queue_size=n + 1) as lg:
+    with SessionWriter(path, queue_size=n + 1) as lg:
         p = payload(0)
         t0 = time.perf_counter()
         for _ in range(n):
@@ -92,7 +92,7 @@ def paced_run(path: Path, rate_hz: float, duration_s: float) -> dict[str, float]
     n = int(rate_hz * duration_s)
     costs_ns = []
     pc = time.perf_counter_ns
-    with McapLogger(path, flush_period_s=1.0) as lg:
+    with SessionWriter(path, flush_period_s=1.0) as lg:
         t0 = time.monotonic()
         for i in range(n):
             a = pc()

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 RESULTS = Path(__file__).resolve().parent / "results" / "mcap_memory.json"
 FRAME = (0x181, False, 8, bytes(range(8)), 1_700_000_000.5, "vcan0", False, False, False)
@@ -47,8 +47,8 @@ def run(writer: str, seconds: float, warmup_s: float, rate_hz: float, roll_mb: f
     """Log for ``seconds`` through ``writer`` and return the RSS samples and slopes."""
     with tempfile.TemporaryDirectory() as tmp:
         kw: dict[str, Any] = {"roll_bytes": int(roll_mb * 1e6)}
-        lg: McapLogger | McapProcessLogger = (
-            McapProcessLogger(tmp, **kw) if writer == "process" else McapLogger(tmp, **kw)
+        lg: SessionWriter | McapProcessLogger = (
+            McapProcessLogger(tmp, **kw) if writer == "process" else SessionWriter(tmp, **kw)
         )
         child = lg.child_pid if isinstance(lg, McapProcessLogger) else None
         samples: list[tuple[float, float, float]] = []

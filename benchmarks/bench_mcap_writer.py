@@ -16,7 +16,7 @@ flush at 1 kHz readings), written to a real file:
   ``mcap.Writer`` without message indexes driven through its private attributes, this tree:
   ``McapFileWriter`` with every index), time from the first message to the finished file;
   optionally foxglove-sdk's MCAP writer (``--foxglove``, Rust, all indexes) for comparison;
-* **thread logger**: ``McapLogger`` end to end (JSON encoding of the compact records and the
+* **thread logger**: ``SessionWriter`` end to end (JSON encoding of the compact records and the
   MCAP file), wall time from the first ``log()`` to the finished file and the process's CPU
   time, per message. Each revision gets the records in the layout it logs (frames with their
   ``direction`` here, when the base has none); this tree also gets the base's layout (no
@@ -198,7 +198,7 @@ def file_foxglove(path: Path, msgs: list[tuple[str, int, bytes]]) -> Timing:
 
 
 def logger_run(cls: Any, path: Path, mix: list[tuple[str, tuple[Any, ...]]]) -> tuple[float, float]:
-    """McapLogger end to end: (wall s, process CPU s) from the first log() to the finished
+    """SessionWriter end to end: (wall s, process CPU s) from the first log() to the finished
     file."""
     # the queue never fills (low-priority topics stop at half of it)
     lg = cls(path, queue_size=2 * len(mix) + 2, chunk_size=CHUNK_SIZE, flush_period_s=1.0)
@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=90_000, help="messages per run (9 per reading)")
     ap.add_argument("--foxglove", action="store_true", help="also foxglove-sdk's MCAP writer")
     args = ap.parse_args(argv)
-    from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+    from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
     n_readings = max(1, args.n // 9)
     with tempfile.TemporaryDirectory() as tmp:
@@ -267,8 +267,8 @@ def main(argv: list[str] | None = None) -> int:
                 p = d / f"l-{who}-{r}.mcap"
                 cls, mix = {
                     "base": (base_logger, base_mix),
-                    "new": (McapLogger, new_mix),
-                    "same": (McapLogger, base_mix),
+                    "new": (SessionWriter, new_mix),
+                    "same": (SessionWriter, base_mix),
                 }[who]
                 wall, cpu = logger_run(cls, p, mix)
                 rows[f"log_{who}"].append(wall / len(mix) * 1e6)

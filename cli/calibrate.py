@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .common import load_machine, write_json_atomic
+from .common import Subparsers, load_machine, write_json_atomic
 
 __all__ = ["add_parsers", "cmd_calibrate"]
 
@@ -140,7 +140,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return _calibrate(args, words)
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parsers(sub: Subparsers) -> None:
     """Register ``calibrate`` (with its ``plan`` and ``apply`` forms)."""
     p = sub.add_parser(
         "calibrate",

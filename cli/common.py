@@ -10,12 +10,13 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
     from cmm_comp.compensation import Machine
 
 __all__ = [
+    "Subparsers",
     "fail",
     "load_machine",
     "progress_printer",
@@ -23,6 +24,15 @@ __all__ = [
     "write_json_atomic",
     "write_text_atomic",
 ]
+
+
+class Subparsers(Protocol):
+    """What a command group needs of ``ArgumentParser.add_subparsers()``'s result (whose class
+    argparse keeps private): a new subcommand parser."""
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        """The parser of subcommand ``name`` (``help``, ``description`` … as argparse takes)."""
+        ...
 
 
 def fail(message: str) -> int:

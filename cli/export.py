@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .common import load_machine
+from .common import Subparsers, load_machine
 
 FORMATS = ("sinumerik-cec", "twincat-cnc", "linuxcnc")
 
@@ -94,7 +94,7 @@ def _write_check(args: argparse.Namespace, machine: Any, opts: Any, out: Path) -
     return 0
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parsers(sub: Subparsers) -> None:
     """Register ``export`` on the top-level parser."""
     p = sub.add_parser(
         "export",

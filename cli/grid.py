@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .common import load_machine, write_text_atomic
+from .common import Subparsers, load_machine, write_text_atomic
 
 if TYPE_CHECKING:
     import numpy as np
@@ -333,7 +333,7 @@ def cmd_correct(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parsers(sub: Subparsers) -> None:
     """Add ``grid build`` and ``correct`` to the ``cmm-comp`` subcommands."""
     p = sub.add_parser("grid", help="correction grid files")
     grid_sub = p.add_subparsers(dest="grid_command", required=True)

@@ -10,7 +10,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .common import load_machine, progress_printer, temps_from_args, write_json_atomic
+from .common import Subparsers, load_machine, progress_printer, temps_from_args, write_json_atomic
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -180,7 +180,7 @@ def cmd_export_seed(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parsers(sub: Subparsers) -> None:
     """Register this layer's subcommands on the top-level parser."""
     p = sub.add_parser("map", help="volumetric error at every node of the working volume (CSV)")
     _add_common(p)

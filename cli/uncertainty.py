@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .common import load_machine, temps_from_args, write_json_atomic, write_text_atomic
+from .common import Subparsers, load_machine, temps_from_args, write_json_atomic, write_text_atomic
 
 if TYPE_CHECKING:
     from cmm_comp.compensation import Machine
@@ -464,7 +464,7 @@ def _p_pass_text(nominal: dict[str, Any]) -> str:
     return f"{nominal['p_pass']:.3f}{spread}"
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parsers(sub: Subparsers) -> None:
     """Add ``uncertainty`` to the ``cmm-comp`` subcommands."""
     p = sub.add_parser(
         "uncertainty",

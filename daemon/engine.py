@@ -356,7 +356,7 @@ class CorrectionEngine:
     def record(self, reading: Reading, answer: Answer, latency_us: float) -> None:
         """Count, log to MCAP and report one answered reading (call after replying)."""
         self.count(answer, latency_us)
-        self.report(reading, answer, latency_us)
+        self.report_many(((reading, answer, latency_us),))
 
     def count(self, answer: Answer, latency_us: float) -> None:
         """The counters of one answer (cheap: right after replying, so they are never behind
@@ -374,8 +374,10 @@ class CorrectionEngine:
         )
 
     def report_many(self, batch: Sequence[tuple[Reading, Answer, float]]) -> None:
-        """:meth:`report` of each ``(reading, answer, latency_us)``: the events one by one, the
-        MCAP records of all with one ``log_many`` per topic (one log time)."""
+        """Events and MCAP records (compact: the writer builds the JSON,
+        ``sessionlog.schemas.RECORD_FIELDS``) of each ``(reading, answer, latency_us)``, after
+        the reply (may wait until the line is quiet): the events one by one, the records of all
+        with one ``log_many`` per topic (one log time)."""
         for _, answer, _ in batch:
             if answer.detail or answer.status != Status.OK:
                 self._report_event(answer)
@@ -427,17 +429,6 @@ class CorrectionEngine:
         if u is None:
             return rec
         return (*rec, u if u[0] == u[0] else None)
-
-    def report(self, reading: Reading, answer: Answer, latency_us: float) -> None:
-        """Events and MCAP records of one answer (may wait until the line is quiet)."""
-        if answer.detail or answer.status != Status.OK:
-            self._report_event(answer)
-        log = self.logger
-        if log is None:
-            return
-        # compact records: the MCAP writer builds the JSON (sessionlog.schemas.RECORD_FIELDS)
-        log.log("/cmm/raw", self._raw_record(reading))
-        log.log("/cmm/corrected", self._corrected_record(reading, answer, latency_us))
 
     def temperature(
         self, sensor: int, temp_C: float, counter: int, valid: bool, source: str

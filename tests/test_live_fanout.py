@@ -15,7 +15,7 @@ from cmm_comp.daemon.engine import CorrectionEngine, Reading
 from cmm_comp.daemon.live import SCENE_TOPIC, LiveFanOut, LiveProcessSink, LiveSection
 from cmm_comp.daemon.service import DaemonService
 from cmm_comp.daemon.sessionlog.reader import read_messages
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 NOW_S = 1000.0
 
@@ -47,7 +47,7 @@ def test_live_equals_the_engine_and_the_mcap_log(engine: CorrectionEngine, tmp_p
     live = LiveProcessSink(
         LiveSection(enabled=True, port=0, scene_max_new_arrows=64, max_per_update=100_000)
     ).start()
-    fan = LiveFanOut(McapLogger(path), live)
+    fan = LiveFanOut(SessionWriter(path), live)
     saved, engine.logger = engine.logger, fan
     try:
         with FoxgloveClient(live.url) as client:

@@ -66,13 +66,11 @@ def test_nothing_leaves_the_daemon_without_a_subscriber() -> None:
     assert (s.offered, s.not_encoded, s.sent) == (1000, 1000, 0)
 
 
-def test_the_daemon_hands_over_only_what_an_update_can_send() -> None:
-    """1000 answers 1 ms apart (log time); ``update_rate_hz = 30``, ``max_per_update = 4``:
-    the child sends at most 120 a second, so the daemon pickles a batch only when 1/120 s
-    (8.33 ms, i.e. 9 readings) has passed since the last one it took; an answer not ok has a
-    gate of its own. By hand: seqs 0, 9, … 504 (57), the bad one at 505, 513 … 999 (55): 113.
-    Then 1000 answers all not ok: the two gates alternate, 0, 9, … 999 (112) and 1, 10, …
-    991 (111): 223, never all 1000."""
+def test_the_child_decimates_and_never_loses_a_bad_answer() -> None:
+    """1000 answers 1 ms apart (log time), one not ok (seq 505); ``max_per_update = 4``: the
+    daemon hands every watched batch over (one gate, the child's); the child sends at most 4
+    ok answers per update plus the ones not ok, so the bad answer always arrives, and every
+    message offered is accounted for exactly once."""
     with (
         LiveProcessSink(settings(update_rate_hz=30.0, max_per_update=4)).start() as sink,
         connect(sink, ["/cmm/corrected"]) as client,
@@ -82,18 +80,13 @@ def test_the_daemon_hands_over_only_what_an_update_can_send() -> None:
             status = "outside_volume" if k == 505 else "ok"
             rec = corr_rec(k, (1, 2, 3), status, (0.5, 0.0, 0.0))
             sink.log_many("/cmm/corrected", [rec], T0_NS + k * 10**6)
-        assert sink._forwarded == 113
+        assert sink._forwarded == 1000
         seen: set[int] = set()
         while 505 not in seen:  # the bad answer is never decimated away
             seen.update(m.json()["seq"] for m in client.receive(1))
-        t1 = T0_NS + 10**10
-        for k in range(1000):
-            rec = corr_rec(k, (1, 2, 3), "outside_volume", (0.5, 0.0, 0.0))
-            sink.log_many("/cmm/corrected", [rec], t1 + k * 10**6)
-        assert sink._forwarded == 113 + 223
     s = sink.stats()
-    assert s.offered == 2000 == s.decimated + s.sent + s.not_encoded + s.dropped
-    assert s.sent <= 113 + 223
+    assert s.offered == 1000 == s.decimated + s.sent + s.not_encoded + s.dropped
+    assert s.sent >= len(seen)
 
 
 def test_a_stopped_child_is_reported_down_and_nothing_waits_for_it(

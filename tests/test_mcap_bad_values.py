@@ -16,7 +16,7 @@ from test_mcap_log import T0_NS, sample
 
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 
 class Opaque:
@@ -106,9 +106,9 @@ def _cases() -> list[tuple[str, Any, str]]:
     return out
 
 
-@pytest.mark.parametrize("cls", [McapLogger, McapProcessLogger])
+@pytest.mark.parametrize("cls", [SessionWriter, McapProcessLogger])
 def test_every_bad_value_in_every_record_type_is_an_error_record(
-    tmp_path: Path, cls: type[McapLogger] | type[McapProcessLogger]
+    tmp_path: Path, cls: type[SessionWriter] | type[McapProcessLogger]
 ) -> None:
     path = tmp_path / "bad.mcap"
     cases = _cases()

@@ -22,19 +22,17 @@ RATE_HZ = 1000
 # flush timer cuts chunks. Prints "ready" once the file is open.
 WRITER = """
 import signal, sys, time
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 path, flush_s, rate, mode = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
-logger = McapLogger(path, flush_period_s=flush_s, chunk_size=16 * 1024 * 1024)
-if mode == "term":
-    def on_term(signum, frame):
-        ok = logger.stop(5.0)
-        sys.exit(0 if ok and logger.error is None else 3)
-    signal.signal(signal.SIGTERM, on_term)
+logger = SessionWriter(path, flush_period_s=flush_s, chunk_size=16 * 1024 * 1024)
+term = []
+if mode == "term":  # the writer writes in this thread: the handler only asks, the loop stops
+    signal.signal(signal.SIGTERM, lambda signum, frame: term.append(signum))
 print("ready", flush=True)
 t0 = time.monotonic()
 i = 0
 reported = 0
-while True:
+while not term:
     logger.log("/cmm/raw", {"seq": i, "x_mm": i * 0.001, "y_mm": 0.0, "z_mm": 0.0})
     i += 1
     flushed = logger.stats().flushed  # written before the last flush to the OS
@@ -44,6 +42,8 @@ while True:
     delay = t0 + i / rate - time.monotonic()
     if delay > 0:
         time.sleep(delay)
+ok = logger.stop(5.0)
+sys.exit(0 if ok and logger.error is None else 3)
 """
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="needs POSIX signals")

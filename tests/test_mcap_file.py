@@ -29,7 +29,7 @@ from mcap.writer import CompressionType, Writer
 from cmm_comp.daemon.sessionlog.mcapfile import McapFileWriter
 from cmm_comp.daemon.sessionlog.recover import recover
 from cmm_comp.daemon.sessionlog.summary import ChunkIndexSpool
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 WRITER_PY = Path(__file__).resolve().parents[1] / "daemon" / "sessionlog"
 
@@ -257,7 +257,7 @@ def test_logger_single_file_with_many_chunks_reads_and_recovers(tmp_path: Path) 
     recovered by ``recover`` with every chunk before the cut."""
     path = tmp_path / "one.mcap"
     frame = (0x181, False, 8, bytes(range(8)), 1_700_000_000.5, "vcan0", False, False, False)
-    with McapLogger(path, chunk_size=2048) as lg:
+    with SessionWriter(path, chunk_size=2048) as lg:
         for _ in range(12000):
             assert lg.log("/cmm/can_rx", frame)
         assert lg.stop(60.0)

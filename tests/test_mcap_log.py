@@ -1,4 +1,4 @@
-"""McapLogger + sessionlog.reader: round trip against the mcap package's own reader, rolling,
+"""SessionWriter + sessionlog.reader: round trip against the mcap package's own reader, rolling,
 non-blocking behaviour with a slow sink, writer errors, and reading cut files."""
 
 from __future__ import annotations
@@ -14,11 +14,10 @@ from typing import Any
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import CompressionType
 
 from cmm_comp.daemon.sessionlog.reader import load_session, read_messages, session_files
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 T0_NS = 1_700_000_000_123_456_789
 
@@ -109,11 +108,11 @@ def test_every_topic_round_trips_against_mcap_reader(tmp_path: Path) -> None:
     path = tmp_path / "one.mcap"
     n = 50
     sent = []
-    with McapLogger(path, flush_period_s=0.05, chunk_size=2048, metadata={"machine": "demo"}):
+    with SessionWriter(path, flush_period_s=0.05, chunk_size=2048, metadata={"machine": "demo"}):
         pass  # an empty session is a valid file too
     assert read_messages(path).messages == []
     path.unlink()
-    with McapLogger(path, flush_period_s=0.05, chunk_size=2048) as logger:
+    with SessionWriter(path, flush_period_s=0.05, chunk_size=2048) as logger:
         for i in range(n):
             for topic in TOPIC_SCHEMAS:
                 t_ns = T0_NS + (i * len(TOPIC_SCHEMAS) + len(sent) % 9) * 1000
@@ -161,7 +160,7 @@ def test_every_topic_round_trips_against_mcap_reader(tmp_path: Path) -> None:
 
 def test_rolling_by_size_keeps_every_seq_in_order(tmp_path: Path) -> None:
     n = 3000
-    with McapLogger(tmp_path, roll_bytes=16_000, chunk_size=2048, flush_period_s=0.05) as lg:
+    with SessionWriter(tmp_path, roll_bytes=16_000, chunk_size=2048, flush_period_s=0.05) as lg:
         for i in range(n):
             lg.log("/cmm/raw", sample("/cmm/raw", i))
             if i % 500 == 0:
@@ -193,13 +192,13 @@ def test_session_files_orders_numerically(tmp_path: Path) -> None:
 
 def test_argument_errors(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="rolling needs a directory"):
-        McapLogger(tmp_path / "x.mcap", roll_bytes=10)
+        SessionWriter(tmp_path / "x.mcap", roll_bytes=10)
     with pytest.raises(ValueError, match="flush_period_s=0"):
-        McapLogger(tmp_path, flush_period_s=0)
-    with McapLogger(tmp_path / "y.mcap") as lg, pytest.raises(KeyError, match="/cmm/nope"):
+        SessionWriter(tmp_path, flush_period_s=0)
+    with SessionWriter(tmp_path / "y.mcap") as lg, pytest.raises(KeyError, match="/cmm/nope"):
         lg.log("/cmm/nope", {})
     first = (tmp_path / "y.mcap").read_bytes()
-    with McapLogger(tmp_path / "y.mcap") as lg2:  # never overwrites a session: rotates
+    with SessionWriter(tmp_path / "y.mcap") as lg2:  # never overwrites a session: rotates
         pass
     assert lg2.files == (tmp_path / "y.1.mcap",)
     assert (tmp_path / "y.mcap").read_bytes() == first
@@ -230,47 +229,6 @@ class SlowStream(io.RawIOBase):
         super().close()
 
 
-class GatedStream(SlowStream):
-    """A file sink whose writes wait while ``gate`` is shut (a disk that hangs)."""
-
-    def __init__(self, path: Path, gate: threading.Event) -> None:
-        super().__init__(path, delay_s=0.0)
-        self._gate = gate
-
-    def write(self, b: Any) -> int:
-        self._gate.wait(60.0)
-        return super().write(b)
-
-
-def test_hot_path_never_blocks_and_counts_drops(tmp_path: Path) -> None:
-    """Causality, not a clock: the sink hangs (its writes wait on a shut gate) while the test
-    logs 20k messages; had ``log()`` waited for the writer even once, the loop could not end
-    before the gate opens."""
-    n = 20_000
-    gate = threading.Event()
-    gate.set()  # the constructor writes the file header
-    lg = McapLogger(
-        tmp_path / "slow.mcap",
-        queue_size=200,
-        chunk_size=512,
-        flush_period_s=0.02,
-        opener=lambda p: GatedStream(p, gate),
-    )
-    gate.clear()
-    taken = [lg.log("/cmm/raw", sample("/cmm/raw", i)) for i in range(n)]
-    gate.set()
-    assert lg.stop(30.0)
-    st = lg.stats()
-    assert sum(taken) < n - 1000  # the hung sink let at most the queue (200) and a chunk in
-    assert st.dropped == n - sum(taken) and st.written + st.dropped == n
-    res = read_messages(tmp_path / "slow.mcap")
-    assert len(res.messages) == st.written and not res.truncated
-    end = dict(res.metadata)["session_end"]
-    assert int(end["dropped"]) == st.dropped  # drops are reported in the file itself
-    assert lg.log("/cmm/raw", sample("/cmm/raw", 0)) is False  # after stop: dropped, counted
-    assert lg.stats().dropped == st.dropped + 1
-
-
 def test_writer_errors_reach_on_error_and_status(tmp_path: Path) -> None:
     seen: list[BaseException] = []
     got_error = threading.Event()
@@ -279,7 +237,7 @@ def test_writer_errors_reach_on_error_and_status(tmp_path: Path) -> None:
         seen.append(exc)
         got_error.set()
 
-    lg = McapLogger(
+    lg = SessionWriter(
         tmp_path / "full.mcap",
         chunk_size=256,
         flush_period_s=0.01,
@@ -294,7 +252,7 @@ def test_writer_errors_reach_on_error_and_status(tmp_path: Path) -> None:
     assert lg.log("/cmm/raw", sample("/cmm/raw", 1)) is False
     # an unencodable payload is reported and counted, and the logger carries on
     seen.clear()
-    with McapLogger(tmp_path / "nan.mcap", on_error=seen.append) as lg2:
+    with SessionWriter(tmp_path / "nan.mcap", on_error=seen.append) as lg2:
         lg2.log("/cmm/raw", {"seq": 0, "x_mm": float("nan"), "y_mm": 0.0, "z_mm": 0.0})
         lg2.log("/cmm/raw", sample("/cmm/raw", 1))
     assert lg2.stats().encode_errors == 1 and lg2.stats().written == 1
@@ -303,7 +261,7 @@ def test_writer_errors_reach_on_error_and_status(tmp_path: Path) -> None:
 
 def test_cut_anywhere_reads_a_prefix_and_never_raises(tmp_path: Path) -> None:
     full = tmp_path / "full.mcap"
-    with McapLogger(full, chunk_size=600, flush_period_s=10.0) as lg:
+    with SessionWriter(full, chunk_size=600, flush_period_s=10.0) as lg:
         for i in range(300):
             lg.log("/cmm/raw", sample("/cmm/raw", i), log_time_ns=T0_NS + i)
     seqs = [m.payload["seq"] for m in read_messages(full).messages]
@@ -325,7 +283,7 @@ def test_cut_anywhere_reads_a_prefix_and_never_raises(tmp_path: Path) -> None:
 
 
 def test_rolling_by_time(tmp_path: Path) -> None:
-    with McapLogger(tmp_path, roll_s=0.1, flush_period_s=0.05) as lg:
+    with SessionWriter(tmp_path, roll_s=0.1, flush_period_s=0.05) as lg:
         for i in range(40):
             lg.log("/cmm/raw", sample("/cmm/raw", i))
             time.sleep(0.01)
@@ -334,104 +292,3 @@ def test_rolling_by_time(tmp_path: Path) -> None:
     assert [m.payload["seq"] for m in res.messages] == list(range(40)) and not res.truncated
     indexes = [int(meta["file_index"]) for name, meta in res.metadata if name == "session"]
     assert indexes == list(range(len(lg.files)))
-
-
-def test_drain_to_writes_from_the_callers_thread_while_the_writer_is_starved(
-    tmp_path: Path,
-) -> None:
-    """The writer thread is held (as a starved SCHED_IDLE thread would be); drain_to() writes
-    from the caller, in order, and the file still ends complete once the writer runs again."""
-    release = threading.Event()
-    path = tmp_path / "s.mcap"
-    lg = McapLogger(path, writer_setup=release.wait)
-    for i in range(1000):
-        assert lg.log("/cmm/raw", sample("/cmm/raw", i), T0_NS + i)
-    assert lg.backlog == 1000 and lg.stats().written == 0
-    assert lg.drain_to(100) >= 900
-    assert lg.backlog <= 100
-    for i in range(1000, 1100):
-        lg.log("/cmm/raw", sample("/cmm/raw", i), T0_NS + i)
-    release.set()
-    assert lg.stop()
-    assert lg.stats().written == 1100 and lg.stats().dropped == 0
-    res = read_messages(path)
-    assert not res.truncated
-    assert [m.payload["seq"] for m in res.messages] == list(range(1100))
-
-
-def test_sliced_file_writes_whole_buffers_in_short_system_calls(tmp_path: Path) -> None:
-    """SlicedFileIO caps each write() at WRITE_SLICE; BufferedWriter on top still writes
-    everything, in order (what the MCAP writer relies on)."""
-    import io as _io
-
-    from cmm_comp.daemon.sessionlog.writer import WRITE_SLICE, SlicedFileIO
-
-    path = tmp_path / "f.bin"
-    raw = SlicedFileIO(path, "xb")
-    sizes: list[int] = []
-    write = raw.write
-
-    def spy(b):  # type: ignore[no-untyped-def]
-        n = write(b)
-        sizes.append(n)
-        return n
-
-    raw.write = spy  # type: ignore[method-assign]
-    data = np.random.default_rng(3).bytes(5 * WRITE_SLICE + 123)
-    with _io.BufferedWriter(raw) as f:
-        f.write(data[:100])
-        f.write(data[100:])
-    assert path.read_bytes() == data
-    assert max(sizes) <= WRITE_SLICE and len(sizes) >= 6
-    with pytest.raises(FileExistsError):
-        SlicedFileIO(path, "xb")
-
-
-def test_the_chunk_index_kept_until_the_end_is_small_and_exact(tmp_path: Path) -> None:
-    """A long file keeps its chunk index on disk until it is finished (spooled: memory does
-    not grow with the chunks; was 57 B a chunk packed, ~1.5 KiB with message indexes). Oracle
-    for exactness: the chunk records found by scanning the file match the summary's index,
-    read by the mcap reader."""
-    import tracemalloc
-
-    from mcap.records import Chunk
-    from mcap.stream_reader import StreamReader
-
-    from cmm_comp.daemon.sessionlog.writer import (
-        finish_session_file,
-        open_exclusive,
-        open_session_file,
-    )
-
-    path = tmp_path / "many-chunks.mcap"
-    stream, writer, channels = open_session_file(
-        path,
-        open_exclusive,
-        chunk_size=10**9,
-        compression=CompressionType.ZSTD,
-        schemas=TOPIC_SCHEMAS,
-        metadata={},
-    )
-    n = 3000
-    data = json.dumps(sample("/cmm/raw", 1)).encode()
-    tracemalloc.start()
-    before = tracemalloc.get_traced_memory()[0]
-    for i in range(n):
-        for topic in ("/cmm/raw", "/cmm/corrected", "/cmm/can_rx"):
-            writer.add_message(channels[topic], T0_NS + i, data, T0_NS + i)
-        writer.flush()  # one chunk per round, as the flush timer does
-    kept = tracemalloc.get_traced_memory()[0] - before
-    tracemalloc.stop()
-    finish_session_file(writer, stream, {}, fsync=False)
-    assert kept < 20_000, kept  # the spool file's buffer, not an entry per chunk
-    with open(path, "rb") as f:
-        indexes = make_reader(f).get_summary().chunk_indexes
-        f.seek(0)
-        offsets = []
-        reader = StreamReader(f, emit_chunks=True)
-        for record in reader.records:
-            if isinstance(record, Chunk):
-                offsets.append((record.message_start_time, record.compression))
-    assert len(indexes) == n
-    assert [(c.message_start_time, c.compression) for c in indexes] == offsets
-    assert [c.message_start_time for c in indexes] == [T0_NS + i for i in range(n)]

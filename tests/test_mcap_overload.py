@@ -6,17 +6,18 @@ package's reader finds in the file plus what the file itself says it dropped."""
 
 from __future__ import annotations
 
+import contextlib
 import json
-import threading
+import os
+import signal
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from mcap.reader import make_reader
-from test_mcap_log import SlowStream
 
-from cmm_comp.daemon.sessionlog.logger import LOW_PRIORITY_TOPICS
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 FRAME = (0x181, False, 8, bytes(8), 1_700_000_000.5, "vcan0", False, False, False)
 RAW = (0, 1.0, 2.0, 3.0, (1, 1, 1), (True, True, True), "can", (0.0, 0.0, 0.0), None)
@@ -76,28 +77,6 @@ def _check_accounts(path: Path, logged: dict[str, int], st: Any) -> dict[str, in
     return file_dropped
 
 
-def test_thread_writer_slow_sink_flood_drops_frames_first_and_counts_exactly(
-    tmp_path: Path,
-) -> None:
-    path = tmp_path / "slow.mcap"
-    n = 4000
-    lg = McapLogger(
-        path,
-        queue_size=400,
-        chunk_size=4096,
-        flush_period_s=0.02,
-        opener=lambda p: SlowStream(p, delay_s=0.002),
-    )
-    logged = _flood(lg, n)
-    assert lg.stop(30.0)
-    st = lg.stats()
-    dropped = _check_accounts(path, logged, st)
-    frames_lost = sum(dropped.get(t, 0) for t in LOW_PRIORITY_TOPICS) / (7 * n)
-    answers_lost = dropped.get("/cmm/corrected", 0) / n
-    assert frames_lost > 0.1  # the flood did overload the writer...
-    assert answers_lost < frames_lost  # ...and frames went first
-
-
 def test_process_writer_flood_counts_parent_and_child_drops_in_the_file(tmp_path: Path) -> None:
     path = tmp_path / "flood.mcap"
     n = 6000
@@ -109,20 +88,33 @@ def test_process_writer_flood_counts_parent_and_child_drops_in_the_file(tmp_path
     assert st.dropped > 0 and sum(dropped.values()) == st.dropped
 
 
-def test_policy_frames_take_half_the_queue_answers_all_of_it(tmp_path: Path) -> None:
-    """The policy itself, without a race: the writer thread is held (as a starved writer
-    would be), so a queue of 10 takes 5 frames, then only answers, up to 10."""
-    release = threading.Event()
-    lg = McapLogger(tmp_path / "q.mcap", queue_size=10, writer_setup=release.wait)
-    frames = [lg.log("/cmm/can_rx", FRAME, T0_NS + i) for i in range(8)]
-    answers = [lg.log("/cmm/corrected", _corrected(i), T0_NS + 100 + i) for i in range(8)]
-    release.set()
+@contextlib.contextmanager
+def _held(lg: McapProcessLogger) -> Iterator[None]:
+    """The writer child stopped (SIGSTOP, as a starved writer would be) while inside."""
+    os.kill(lg.child_pid, signal.SIGSTOP)
+    try:
+        yield
+    finally:
+        os.kill(lg.child_pid, signal.SIGCONT)
+
+
+def test_policy_frames_take_half_the_ring_answers_all_of_it(tmp_path: Path) -> None:
+    """The policy itself, without a race: the child is held, so frames are refused once the
+    ring is half full, answers are still taken until it is full; every refusal is counted."""
+    path = tmp_path / "q.mcap"
+    lg = McapProcessLogger(path, queue_size=64)
+    with _held(lg):
+        frames = [lg.log("/cmm/can_rx", FRAME, T0_NS + i) for i in range(2000)]
+        answers = [lg.log("/cmm/corrected", _corrected(i), T0_NS + i) for i in range(2000)]
     assert lg.stop(10.0)
-    assert frames == [True] * 5 + [False] * 3
-    assert answers == [True] * 5 + [False] * 3
+    k, m = sum(frames), sum(answers)
+    assert frames == [True] * k + [False] * (2000 - k) and 0 < k < 2000
+    assert answers == [True] * m + [False] * (2000 - m) and 0 < m < 2000
+    logged = {"/cmm/can_rx": 2000, "/cmm/corrected": 2000}
     st = lg.stats()
-    assert st.dropped_by_topic == {"/cmm/can_rx": 3, "/cmm/corrected": 3}
-    assert st.written_by_topic == {"/cmm/can_rx": 5, "/cmm/corrected": 5}
+    assert st.dropped_by_topic == {"/cmm/can_rx": 2000 - k, "/cmm/corrected": 2000 - m}
+    assert st.written_by_topic == {"/cmm/can_rx": k, "/cmm/corrected": m}
+    _check_accounts(path, logged, st)
 
 
 def _flood_batched(lg: Any, n: int, batch: int = 16) -> dict[str, int]:
@@ -144,49 +136,53 @@ def _flood_batched(lg: Any, n: int, batch: int = 16) -> dict[str, int]:
     return logged
 
 
-def test_log_many_flood_counts_exactly_for_both_writers(tmp_path: Path) -> None:
-    slow = McapLogger(
-        tmp_path / "t.mcap",
-        queue_size=400,
-        chunk_size=4096,
-        flush_period_s=0.02,
-        opener=lambda p: SlowStream(p, delay_s=0.002),
-    )
-    proc = McapProcessLogger(tmp_path / "p.mcap", queue_size=64, chunk_size=4096)
-    for lg, path in ((slow, tmp_path / "t.mcap"), (proc, tmp_path / "p.mcap")):
-        logged = _flood_batched(lg, 4000)
-        assert lg.stop(30.0)
-        st = lg.stats()
-        dropped = _check_accounts(path, logged, st)
-        assert st.dropped > 0 and sum(dropped.values()) == st.dropped
+def test_log_many_flood_counts_exactly(tmp_path: Path) -> None:
+    path = tmp_path / "p.mcap"
+    lg = McapProcessLogger(path, queue_size=64, chunk_size=4096)
+    logged = _flood_batched(lg, 4000)
+    assert lg.stop(30.0)
+    st = lg.stats()
+    dropped = _check_accounts(path, logged, st)
+    assert st.dropped > 0 and sum(dropped.values()) == st.dropped
 
 
-def test_log_many_takes_what_log_would_take(tmp_path: Path) -> None:
-    """The policy of :func:`test_policy_frames_take_half_the_queue_answers_all_of_it`, batched:
-    a held writer, a queue of 10: 8 frames → the first 5, 8 answers → the first 5."""
-    release = threading.Event()
-    lg = McapLogger(tmp_path / "q.mcap", queue_size=10, writer_setup=release.wait)
-    assert lg.log_many("/cmm/can_rx", [FRAME] * 8, T0_NS) == 5
-    assert lg.log_many("/cmm/corrected", [_corrected(i) for i in range(8)], T0_NS + 1) == 5
-    assert lg.log_many("/cmm/corrected", [], T0_NS + 2) == 0
-    release.set()
+def test_log_many_takes_a_batch_whole_or_not_at_all(tmp_path: Path) -> None:
+    """A held child: batches of frames are refused once the ring is half full, batches of
+    answers still taken after that; a batch is never cut; drops are counted per message."""
+    path = tmp_path / "q.mcap"
+    lg = McapProcessLogger(path, queue_size=64)
+    with _held(lg):
+        frames = [lg.log_many("/cmm/can_rx", [FRAME] * 8, T0_NS) for _ in range(500)]
+        answers = [
+            lg.log_many("/cmm/corrected", [_corrected(8 * i + j) for j in range(8)], T0_NS + 1)
+            for i in range(500)
+        ]
+        assert lg.log_many("/cmm/corrected", [], T0_NS + 2) == 0
     assert lg.stop(10.0)
     assert lg.log_many("/cmm/raw", [RAW], T0_NS + 3) == 0  # after stop: dropped, counted
+    assert set(frames) == {0, 8} and set(answers) == {0, 8}
+    k, m = frames.count(8), answers.count(8)
+    assert frames == [8] * k + [0] * (500 - k) and answers == [8] * m + [0] * (500 - m)
     st = lg.stats()
-    assert st.dropped_by_topic == {"/cmm/can_rx": 3, "/cmm/corrected": 3, "/cmm/raw": 1}
-    assert st.written_by_topic == {"/cmm/can_rx": 5, "/cmm/corrected": 5}
-    with open(tmp_path / "q.mcap", "rb") as f:
+    assert st.dropped_by_topic == {
+        "/cmm/can_rx": 8 * (500 - k), "/cmm/corrected": 8 * (500 - m), "/cmm/raw": 1
+    }  # fmt: skip
+    assert st.written_by_topic == {"/cmm/can_rx": 8 * k, "/cmm/corrected": 8 * m}
+    with open(path, "rb") as f:
         seqs = [
-            json.loads(m.data)["seq"]
-            for _, ch, m in make_reader(f).iter_messages()
+            json.loads(msg.data)["seq"]
+            for _, ch, msg in make_reader(f).iter_messages()
             if ch.topic == "/cmm/corrected"
         ]
-    assert seqs == [0, 1, 2, 3, 4]
+    assert seqs == list(range(8 * m))
 
 
-def test_enqueued_message_of_an_unknown_topic_becomes_an_error_record(tmp_path: Path) -> None:
-    lg = McapLogger(tmp_path / "u.mcap")
-    lg.enqueue([("/cmm/nope", {"a": 1}, T0_NS), ("/cmm/raw", RAW, T0_NS + 1)])
+def test_message_of_an_unknown_topic_from_the_ring_becomes_an_error_record(
+    tmp_path: Path,
+) -> None:
+    lg = SessionWriter(tmp_path / "u.mcap")
+    lg.write("/cmm/nope", {"a": 1}, T0_NS)
+    lg.write("/cmm/raw", RAW, T0_NS + 1)
     assert lg.stop(10.0)
     st = lg.stats()
     assert st.encode_errors_by_topic == {"/cmm/nope": 1}

@@ -20,7 +20,7 @@ from cmm_comp.daemon.sessionlog.schemas import check_message
 from cmm_comp.daemon.sessionlog.schemas import corrected_fields as corrected_payload
 from cmm_comp.daemon.sessionlog.schemas import frame_fields as frame_payload
 from cmm_comp.daemon.sessionlog.schemas import raw_fields as raw_payload
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 T0_S = 1_700_000_000
 
@@ -125,9 +125,9 @@ def test_raw_and_corrected_payloads() -> None:
         check_message(topic, {**p, "stamp": stamp})
 
 
-@pytest.mark.parametrize("cls", [McapLogger, McapProcessLogger])
+@pytest.mark.parametrize("cls", [SessionWriter, McapProcessLogger])
 def test_records_reach_the_file_and_a_bad_record_is_an_encode_error(
-    tmp_path: Path, cls: type[McapLogger] | type[McapProcessLogger]
+    tmp_path: Path, cls: type[SessionWriter] | type[McapProcessLogger]
 ) -> None:
     errors: list[BaseException] = []
     path = tmp_path / "s.mcap"

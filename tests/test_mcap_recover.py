@@ -31,7 +31,7 @@ from test_mcap_log import T0_NS, sample
 from cmm_comp.cli.main import main
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
 from cmm_comp.daemon.sessionlog.recover import recover
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="needs POSIX signals")
@@ -56,7 +56,7 @@ def _official(path: Path) -> tuple[list[tuple[str, int, dict]], dict[str, dict[s
 
 def test_recover_keeps_every_chunk_before_the_cut(tmp_path: Path, capsys) -> None:
     full = tmp_path / "full.mcap"
-    with McapLogger(full, chunk_size=1500, flush_period_s=10.0) as lg:
+    with SessionWriter(full, chunk_size=1500, flush_period_s=10.0) as lg:
         for i in range(400):
             lg.log("/cmm/raw", sample("/cmm/raw", i), T0_NS + i)
             lg.log("/cmm/status", sample("/cmm/status", i), T0_NS + i)
@@ -106,7 +106,7 @@ def test_recover_refuses_bad_input_with_one_line(tmp_path: Path, capsys) -> None
     assert main(["mcap", "recover", str(tmp_path / "nope.mcap"), "-o", str(out)]) == 2
     assert "no such file" in capsys.readouterr().err
     good = tmp_path / "good.mcap"
-    with McapLogger(good) as lg:
+    with SessionWriter(good) as lg:
         lg.log("/cmm/raw", sample("/cmm/raw", 0))
     out.write_bytes(b"keep")
     assert main(["mcap", "recover", str(good), "-o", str(out)]) == 2
@@ -115,12 +115,12 @@ def test_recover_refuses_bad_input_with_one_line(tmp_path: Path, capsys) -> None
         recover(good, good, overwrite=True)
 
 
-# Logs /cmm/raw at ~2 kHz through a thread writer (only the 0.1 s flush timer cuts chunks) and
+# Logs /cmm/raw at ~2 kHz through a SessionWriter (only the 0.1 s flush timer cuts chunks) and
 # prints the writer's `flushed` count whenever it changes: what a kill must never lose.
-THREAD_WRITER = """
+SESSION_WRITER = """
 import sys, time
-from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
-logger = McapLogger(sys.argv[1], flush_period_s=0.1, chunk_size=16 * 1024 * 1024)
+from cmm_comp.daemon.sessionlog.writer import SessionWriter
+logger = SessionWriter(sys.argv[1], flush_period_s=0.1, chunk_size=16 * 1024 * 1024)
 print("ready", flush=True)
 last, i, t0 = -1, 0, time.monotonic()
 while True:
@@ -160,12 +160,15 @@ def _check_recovered(cut: Path, fixed: Path, acknowledged: int) -> int:
 
 
 @contextmanager
-def thread_writer(path: Path) -> Iterator[list[str]]:
-    """:data:`THREAD_WRITER` logging to ``path`` in a subprocess; yields its output lines as
+def session_writer(path: Path) -> Iterator[list[str]]:
+    """:data:`SESSION_WRITER` logging to ``path`` in a subprocess; yields its output lines as
     they arrive (a live list); SIGKILLs it on leaving, and checks that this is what ended it."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
-        [sys.executable, "-c", THREAD_WRITER, str(path)], stdout=subprocess.PIPE, text=True, env=env
+        [sys.executable, "-c", SESSION_WRITER, str(path)],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
     )
     lines, reader = _last_line_reader(proc)
     try:
@@ -185,11 +188,11 @@ def acknowledged(lines: list[str]) -> int:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_thread_writer_killed_at_a_random_moment_loses_only_the_last_chunk(
+def test_session_writer_killed_at_a_random_moment_loses_only_the_last_chunk(
     tmp_path: Path, seed: int
 ) -> None:
     path = tmp_path / "killed.mcap"
-    with thread_writer(path) as lines:
+    with session_writer(path) as lines:
         t0 = time.monotonic()
         while "ready" not in lines and time.monotonic() - t0 < 30:
             time.sleep(0.01)

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_mcap_recover import acknowledged, thread_writer
+from test_mcap_recover import acknowledged, session_writer
 
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS
 from cmm_comp.daemon.sessionlog.writer import LIBRARY
@@ -127,7 +127,7 @@ def test_recovered_daemon_log_reads_in_foxglove_s_reader(
 
 def test_log_of_a_killed_writer_recovers_for_foxglove_s_reader(mcap_ts, tmp_path) -> None:
     path = tmp_path / "killed.mcap"
-    with thread_writer(path) as lines:  # SIGKILLed on leaving
+    with session_writer(path) as lines:  # SIGKILLed on leaving
         t0 = time.monotonic()  # generous: a loaded machine
         while acknowledged(lines) < 500 and time.monotonic() - t0 < 60:
             time.sleep(0.01)

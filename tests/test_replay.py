@@ -82,10 +82,10 @@ def test_replay_reads_a_cut_session_with_a_one_line_warning(session, tmp_path, c
 
     from cmm_comp.cli.main import main
     from cmm_comp.daemon.sessionlog.reader import read_messages
-    from cmm_comp.daemon.sessionlog.thread_writer import McapLogger
+    from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
     small = tmp_path / "small-chunks.mcap"  # the same session in many small chunks
-    with McapLogger(small, chunk_size=3000) as lg:
+    with SessionWriter(small, chunk_size=3000) as lg:
         for m in read_messages(session).messages:
             lg.log(m.topic, m.payload, m.log_time_ns)
     with open(small, "rb") as f:

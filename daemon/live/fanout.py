@@ -13,15 +13,14 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Self
 
-from ..sessionlog.logger import LoggerStats, Payload, SessionLogger
+from ..sessionlog.logger import LoggerStats, Payload, SessionLogger, Stoppable
 from .sink import LiveSink
 
 _EMPTY = LoggerStats(0, 0, 0, 0, (), 0)
 
 
-class LiveFanOut:
+class LiveFanOut(Stoppable):
     """A :class:`SessionLogger` that hands every message to ``primary`` (the MCAP logger, or
     None) and to ``live``. ``stop`` stops both (the MCAP file first)."""
 
@@ -30,12 +29,8 @@ class LiveFanOut:
         self.live = live
 
     def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
-        """``primary.log`` (its result), then the live view, with one log time (ns)."""
-        if log_time_ns is None:
-            log_time_ns = time.time_ns()
-        taken = self.primary.log(topic, payload, log_time_ns) if self.primary is not None else True
-        self.live.log(topic, payload, log_time_ns)
-        return taken
+        """:meth:`log_many` of one message: True when the MCAP logger took it."""
+        return self.log_many(topic, (payload,), log_time_ns) == 1
 
     def log_many(
         self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
@@ -83,13 +78,3 @@ class LiveFanOut:
         ok = self.primary.stop(timeout_s) if self.primary is not None else True
         ok &= self.live.stop(max(0.5, deadline - time.monotonic()))
         return ok
-
-    def close(self) -> None:
-        """Stop with the default timeout."""
-        self.stop()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -5,12 +5,11 @@ wake-up (docs/live.md).
 
 * the producers' side (:meth:`LiveProcessSink.log_many`, called in the daemon's bookkeeping
   after the replies are sent) drops a topic nobody watches at once (one byte of shared memory
-  read: the process publishes which topics some client watches), drops a batch of a decimated
-  topic the process could not send anyway (:meth:`LiveProcessSink._gate`), else pickles the
-  batch and copies it into the ring; a full ring (the process stopped or starved) drops the
-  batch, counted exactly;
-* the process polls the ring at ``update_rate_hz`` at ``SCHED_IDLE``, decimates, encodes and
-  serves; it publishes its counters, its newest errors and a heartbeat in the shared memory;
+  read: the process publishes which topics some client watches), else pickles the batch and
+  copies it into the ring; a full ring (the process stopped or starved) drops the batch,
+  counted exactly;
+* the process polls the ring at ``update_rate_hz`` at ``SCHED_IDLE``, decimates (the one
+  gate of the high-rate topics, :mod:`.decimate`), encodes and serves; it publishes its counters, its newest errors and a heartbeat in the shared memory;
 * whoever asks for statistics (the daemon's housekeeping, every ``metrics.period_s``) reads
   them there and finds out whether the process stalled (no loop for :data:`STALL_S`); its
   death is seen at once (the pipe closes). Either is reported once through ``on_error``,
@@ -19,7 +18,6 @@ wake-up (docs/live.md).
 
 from __future__ import annotations
 
-import pickle
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -30,10 +28,10 @@ from cmm_comp.compensation.errors import CmmCompError
 
 from ..childproc import ChildProcess, ChildProcessError
 from ..ring import ring_bytes
-from .decimate import DECIMATED_TOPICS, is_not_ok
+from ..sessionlog.encoding import Packer
 from .server import LiveStartError
 from .settings import LiveSection
-from .sink import CORRECTED, LATCHED_TOPICS, STREAMED_TOPICS, TOPIC_BITS, LiveSink, LiveStats
+from .sink import LATCHED_TOPICS, STREAMED_TOPICS, TOPIC_BITS, LiveSink, LiveStats
 
 START_TIMEOUT_S = 20.0
 """How long :meth:`LiveProcessSink.start` waits for the child's server, s."""
@@ -41,7 +39,6 @@ STALL_S = 3.0
 """A child that has not looped for this long is reported as stalled (stopped, or starved of
 CPU: it runs at ``SCHED_IDLE``), s."""
 _LATCHED_BITS = sum(TOPIC_BITS[t] for t in LATCHED_TOPICS)
-_DECIMATED_BITS = sum(TOPIC_BITS[t] for t in DECIMATED_TOPICS)
 _EMPTY = LiveStats(0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
 
 
@@ -74,11 +71,7 @@ class LiveProcessSink(LiveSink):
         self._port = 0
         self._child: LiveStats = _EMPTY
         self._forwarded = 0
-        self._predecimated = 0
-        self._last_ns: dict[str, int] = {}
-        self._last_bad_ns = 0
-        self._gap_ns = int(1e9 / (settings.update_rate_hz * settings.max_per_update))
-        self._parent_errors = 0
+        self._pack = Packer()
         self._down: str | None = None
         self._dead = False
         self._errors_seen = 0
@@ -149,11 +142,8 @@ class LiveProcessSink(LiveSink):
     # ------------------------------------------------------------------ producers
     def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
         """Offer ``payloads`` of ``topic`` (as :meth:`LiveSink.log_many`). A topic no client
-        watches is counted and dropped at once. A batch of ``/cmm/raw`` or ``/cmm/corrected``
-        less than ``1 / (update_rate_hz × max_per_update)`` after the last one taken (by log
-        time) is counted as decimated and dropped (an answer not ``ok`` has a gate of its own,
-        :meth:`_gate`): the child could not send more. Else the batch is pickled and copied
-        into the shared ring (a full ring drops it, counted). Never blocks on the child."""
+        watches is counted and dropped at once; else the batch is pickled and copied into the
+        shared ring (a full ring drops it, counted). Never blocks on the child."""
         n = len(payloads)
         bit = TOPIC_BITS.get(topic)
         proc = self._proc
@@ -168,55 +158,16 @@ class LiveProcessSink(LiveSink):
             return n
         if log_time_ns is None:
             log_time_ns = time.time_ns()
-        if bit & _DECIMATED_BITS and not self._gate(topic, payloads, log_time_ns):
-            with self._lock:  # the child would decimate it: not even pickled
-                self._offered += n
-                self._predecimated += n
-            return n
-        try:
-            data = pickle.dumps((topic, payloads, log_time_ns), protocol=pickle.HIGHEST_PROTOCOL)
-            bad = 0
-        except Exception:  # something not plain data in a payload: find it, keep the rest
-            data, bad = self._picklable(topic, payloads, log_time_ns)
-        with self._lock:
+        with self._lock:  # objects not plain data go as their repr: encode errors in the child
             self._offered += n
-            self._parent_errors += bad
             if self._stopped:
-                self._idle += n - bad
-            elif proc.write(data, n - bad):
-                self._forwarded += n - bad
+                self._idle += n
+            elif proc.write(self._pack((topic, payloads, log_time_ns)), n):
+                self._forwarded += n
             else:
-                self._dropped += n - bad
-                self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n - bad
+                self._dropped += n
+                self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n
         return n
-
-    def _gate(self, topic: str, payloads: Sequence[Any], t_ns: int) -> bool:
-        """True to hand over this batch of a decimated topic: the first one at least one gap
-        (``1 / (update_rate_hz × max_per_update)``, by log time) after the last one taken;
-        within a gap, a ``/cmm/corrected`` batch holding an answer not ok, if no such batch
-        was taken within a gap either (so a blip always passes, a flood at most doubles)."""
-        gap = self._gap_ns
-        if not 0 < t_ns - self._last_ns.get(topic, 0) < gap:
-            self._last_ns[topic] = t_ns
-            return True
-        if topic != CORRECTED or 0 < t_ns - self._last_bad_ns < gap:
-            return False
-        if any(map(is_not_ok, payloads)):
-            self._last_bad_ns = t_ns
-            return True
-        return False
-
-    def _picklable(self, topic: str, payloads: Sequence[Any], t_ns: int) -> tuple[bytes, int]:
-        keep: list[Any] = []
-        for p in payloads:
-            try:
-                pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL)
-            except Exception as exc:
-                self._report(ValueError(f"live view: {topic} message not sent: {exc}"))
-                continue
-            keep.append(p)
-        data = pickle.dumps((topic, keep, t_ns), protocol=pickle.HIGHEST_PROTOCOL)
-        return data, len(payloads) - len(keep)
 
     # ------------------------------------------------------------------ statistics, health
     def stats(self) -> LiveStats:
@@ -227,7 +178,6 @@ class LiveProcessSink(LiveSink):
         with self._lock:
             offered, idle, dropped = self._offered, self._idle, self._dropped
             by_topic, forwarded = dict(self._dropped_by), self._forwarded
-            errors, predecimated = self._parent_errors, self._predecimated
         c = self._child
         for topic, k in c.dropped_by_topic.items():
             by_topic[topic] = by_topic.get(topic, 0) + k
@@ -235,9 +185,7 @@ class LiveProcessSink(LiveSink):
             c,
             offered=offered,
             not_encoded=idle + c.not_encoded,
-            decimated=predecimated + c.decimated,
             dropped=dropped + c.dropped,
-            encode_errors=errors + c.encode_errors,
             queue_len=max(0, forwarded - c.offered) + c.queue_len,
             dropped_by_topic=by_topic,
             up=self._down is None and not self._dead,

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any, Self
 
 from ..sessionlog.encoding import message_struct, struct_json
+from ..sessionlog.logger import Stoppable
 from .decimate import kept
 from .server import LiveServer, LiveStartError, open_live_server
 from .settings import LiveSection, host_problem
@@ -113,7 +114,7 @@ class LiveStats:
         }
 
 
-class LiveSink:
+class LiveSink(Stoppable):
     """Stream the session-log topics and ``/cmm/scene`` to Foxglove WebSocket clients.
 
     ``with LiveSink(settings).start() as live: live.log_many(topic, records); live.tick()``;
@@ -233,16 +234,6 @@ class LiveSink:
             self._report(exc)
             return False
         return True
-
-    def close(self) -> None:
-        """Stop with the default timeout."""
-        self.stop()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # ------------------------------------------------------------------ producers
     def log(self, topic: str, payload: Any, log_time_ns: int | None = None) -> bool:

@@ -5,13 +5,13 @@
 * :mod:`.encoding` - one message to the JSON of its Struct, or the error record that replaces it;
 * :mod:`.logger` - :class:`SessionLogger`, the protocol the daemon types against,
   :class:`LogSettings`, :class:`LoggerStats` and what the writers share;
-* :mod:`.writer` - one session file: naming (and rotating an existing name), opening, finishing;
+* :mod:`.writer` - session files: naming (and rotating an existing name), opening, finishing,
+  and :class:`SessionWriter`, which writes messages into them in the calling thread;
 * :mod:`.mcapfile` - :class:`McapFileWriter`, a chunked MCAP file with every index, written from
   the format's specification (:mod:`.mcapwire`: the records as bytes; :mod:`.summary`: the chunk
   index spooled to disk, the summary section);
-* :mod:`.thread_writer` - :class:`McapLogger`, a queue and a writer thread: what writes the file;
-* :mod:`.process_writer` - :class:`McapProcessLogger`, the daemon's log: a :class:`McapLogger` in
-  a child process (:mod:`..childproc`), fed through shared memory;
+* :mod:`.process_writer` - :class:`McapProcessLogger`, the daemon's log: a :class:`SessionWriter`
+  in a child process (:mod:`..childproc`), fed straight from shared memory;
 * :mod:`.reader` - read sessions back (rolled sets, files cut by a crash);
 * :mod:`.recover` - rewrite a file cut by a crash as a complete, indexed file;
 * :mod:`.replay` - re-correct a session offline, or re-send what the controller sent to a bus.

@@ -17,7 +17,7 @@ from .schemas import (
     ns_from_stamp,
     stamp_from_ns,
 )
-from .thread_writer import McapLogger
+from .writer import SessionWriter
 
 __all__ = [
     "ERROR_TOPIC",
@@ -30,7 +30,6 @@ __all__ = [
     "LoggedMessage",
     "LoggerStats",
     "McapFileWriter",
-    "McapLogger",
     "McapProcessLogger",
     "McapWriterProcessError",
     "RecoverReport",
@@ -38,6 +37,7 @@ __all__ = [
     "ReplayReport",
     "Session",
     "SessionLogger",
+    "SessionWriter",
     "TopicSchema",
     "check_message",
     "load_session",

@@ -15,7 +15,10 @@ message with the number as ``null`` (:func:`struct_json`), and counts it.
 
 from __future__ import annotations
 
+import io
 import math
+import numbers
+import pickle
 from typing import Any
 
 import msgspec
@@ -146,3 +149,52 @@ def error_payload(topic: str, payload: Any, t_ns: Any, exc: BaseException) -> di
 def encode_error(record: dict[str, Any]) -> bytes:
     """The JSON bytes of an :func:`error_payload` record (with its ``stamp``)."""
     return _ENCODER.encode(record)
+
+
+class _PlainPickler(pickle.Pickler):
+    """Plain data pickles as usual; numpy-like numbers become Python numbers; any other object
+    becomes a :class:`NotJson` holding its repr, so the child never imports a class
+    and a bad payload still becomes an error record there."""
+
+    def reducer_override(self, obj: Any) -> Any:
+        if isinstance(obj, numbers.Integral) and not isinstance(obj, bool):
+            return int, (int(obj),)
+        if isinstance(obj, numbers.Real) and not isinstance(obj, bool):
+            return float, (float(obj),)
+        if isinstance(obj, type):
+            return NotImplemented  # classes pickle by reference (NotJson itself)
+        return NotJson, (safe_repr(obj),)
+
+
+class Packer:
+    """Pickles ring records ``(topic, payloads, *more)`` (the MCAP writer's and the live view's
+    children read them) with one reused :class:`_PlainPickler` (a new pickler per record cost twice as much). A payload that
+    cannot be pickled at all (nested too deep) becomes a :class:`NotJson`. Not
+    thread-safe: the caller holds its lock."""
+
+    def __init__(self) -> None:
+        self._buf = io.BytesIO()
+        self._pickler = _PlainPickler(self._buf, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def __call__(self, batch: tuple[Any, ...]) -> bytes:
+        try:
+            return self._dump(batch)
+        except Exception:
+            pass
+        topic, payloads, *more = batch
+        safe: list[Any] = []
+        for p in payloads:
+            try:
+                self._dump(p)
+                safe.append(p)
+            except Exception as exc:
+                safe.append(NotJson(f"<not picklable: {type(exc).__name__}> {safe_repr(p, 200)}"))
+        return self._dump((topic, safe, *more))
+
+    def _dump(self, obj: Any) -> bytes:
+        buf = self._buf
+        buf.seek(0)
+        buf.truncate()
+        self._pickler.clear_memo()
+        self._pickler.dump(obj)
+        return buf.getvalue()

@@ -4,8 +4,8 @@ against, the :class:`LogSettings` of a log (one definition, validated once), the
 topic, the error reporting and the lifecycle.
 
 :class:`~cmm_comp.daemon.sessionlog.process_writer.McapProcessLogger` is the daemon's log (the
-writing in a child process); :class:`~cmm_comp.daemon.sessionlog.thread_writer.McapLogger`
-writes the file, with a writer thread (in that child, or in any program that logs).
+writing in a child process); :class:`~cmm_comp.daemon.sessionlog.writer.SessionWriter` writes
+the files in the calling thread (in that child, or in any program that may wait for its disk).
 """
 
 from __future__ import annotations
@@ -25,8 +25,6 @@ _log = logging.getLogger(__name__)
 
 Payload = dict[str, Any] | tuple[Any, ...]
 """A logged payload: the JSON object, or a compact record tuple (``schemas.RECORD_FIELDS``)."""
-QueuedMessage = tuple[str, Payload, int]
-"""``(topic, payload, log_time_ns)`` as it waits in a queue."""
 
 
 LOW_PRIORITY_TOPICS: frozenset[str] = frozenset({"/cmm/can_rx", "/cmm/can_tx", "/cmm/modbus"})
@@ -170,7 +168,26 @@ class LogSettings:
         return self.target.suffix == ".mcap"
 
 
-class LoggerBase:
+class Stoppable:
+    """``close()`` and ``with`` for a class with ``stop(timeout_s)``: the loggers, the live
+    view, their fan-out."""
+
+    def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - the classes override
+        """End the work (drain, finish); True if done within ``timeout_s`` (s)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Stop with the default timeout (the SIGTERM path)."""
+        self.stop()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class LoggerBase(Stoppable):
     """The part every writer shares: topic checks, drop counts per topic, error reporting (first
     error kept, ``on_error`` called, never raised into the producer) and the lifecycle."""
 
@@ -229,17 +246,3 @@ class LoggerBase:
                 self._on_error(exc)
             except Exception:  # the handler's own failure is logged, never raised here
                 _log.exception("MCAP on_error handler raised")
-
-    def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - the writers override
-        """Drain, finish the file, end the writer; True if done within ``timeout_s`` (s)."""
-        raise NotImplementedError
-
-    def close(self) -> None:
-        """Stop with the default timeout (the SIGTERM path)."""
-        self.stop()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

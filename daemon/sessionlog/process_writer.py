@@ -7,11 +7,12 @@ long work, no system call, no wake-up. Under overload a batch that does not fit 
 counted per topic; the frame topics (:data:`.logger.LOW_PRIORITY_TOPICS`) already once the
 ring is half full, so answers and readings keep the other half.
 
-The child (:func:`child_main`) runs an ordinary :class:`.thread_writer.McapLogger`: its main
-thread (normal priority) reads the ring every :data:`POLL_S` and hands the messages over; the
-writer thread runs at Linux ``SCHED_IDLE``, so the JSON + MCAP + zstd work only takes CPU time
-no other task wants; when :data:`HELP_HIGH` messages wait (a machine loaded to 100 % starves
-an idle thread) the main thread writes itself. Counters, files and health reach the daemon
+The child (:func:`child_main`) writes straight from the ring into a
+:class:`.writer.SessionWriter`: its writer thread runs at Linux ``SCHED_IDLE`` and polls the
+ring every :data:`POLL_S`, so the JSON + MCAP + zstd work only takes CPU time no other task
+wants; when :data:`HELP_HIGH` messages' worth of bytes wait (a machine loaded to 100 % starves
+an idle thread) the main thread (normal priority) writes too. Either thread holds the lock
+they share for at most :data:`BATCH` messages: a starved idle thread never holds it long. Counters, files and health reach the daemon
 through the shared status block (``stats()``: ≤ :data:`REPORT_S` old while running, exact
 after ``stop()``), errors through the pipe (``on_error`` in the watch thread).
 
@@ -24,16 +25,14 @@ the file: nothing the daemon had handed over is lost. See docs/mcap.md.
 from __future__ import annotations
 
 import collections
-import dataclasses
-import io
 import logging
-import numbers
 import os
 import pickle
 import sys
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -43,9 +42,9 @@ from .. import memory
 from ..childproc import ChildEnd, ChildProcess, ChildProcessError, portable
 from ..osthread import expected_priority, lower_priority, name_os_thread
 from ..ring import ring_bytes
-from .encoding import NotJson, safe_repr
+from .encoding import Packer
 from .logger import LOW_PRIORITY_TOPICS, LoggerBase, LoggerStats, LogSettings, Payload
-from .thread_writer import McapLogger
+from .writer import SessionWriter
 
 _log = logging.getLogger(__name__)
 
@@ -55,9 +54,11 @@ POLL_S = 0.01
 """The child reads the ring this often, s (bounds how long a message waits to be written)."""
 REPORT_S = 0.1
 """The child publishes its counters at most this often while they change, s."""
+BATCH = 32
+"""Messages written per hold of the child's lock."""
 HELP_HIGH, HELP_LOW = 8192, 1024
-"""Backlog (messages) at which the child's main thread starts writing itself, and until
-how many are left."""
+"""Ring backlog (in messages of :data:`MESSAGE_BYTES`) at which the child's main thread starts
+writing itself, and until how many are left."""
 MESSAGE_BYTES = 64
 """Ring bytes per message of ``queue_size``: the daemon logs batches of compact records, which
 pickle to ~40-70 bytes a message."""
@@ -69,55 +70,6 @@ _EMPTY = LoggerStats(0, 0, 0, 0, (), 0)
 class McapWriterProcessError(ChildProcessError):
     """An error of the writer child that could not be passed on as its own exception type, its
     death, or a stop it did not finish in time."""
-
-
-class _PlainPickler(pickle.Pickler):
-    """Plain data pickles as usual; numpy-like numbers become Python numbers; any other object
-    becomes a :class:`.encoding.NotJson` holding its repr, so the child never imports a class
-    and a bad payload still becomes an error record there."""
-
-    def reducer_override(self, obj: Any) -> Any:
-        if isinstance(obj, numbers.Integral) and not isinstance(obj, bool):
-            return int, (int(obj),)
-        if isinstance(obj, numbers.Real) and not isinstance(obj, bool):
-            return float, (float(obj),)
-        if isinstance(obj, type):
-            return NotImplemented  # classes pickle by reference (NotJson itself)
-        return NotJson, (safe_repr(obj),)
-
-
-class Packer:
-    """Pickles ring records ``(topic, payloads, log_time_ns, parent drops or None)`` with one
-    reused :class:`_PlainPickler` (a new pickler per record cost twice as much). A payload that
-    cannot be pickled at all (nested too deep) becomes a :class:`.encoding.NotJson`. Not
-    thread-safe: the caller holds its lock."""
-
-    def __init__(self) -> None:
-        self._buf = io.BytesIO()
-        self._pickler = _PlainPickler(self._buf, protocol=pickle.HIGHEST_PROTOCOL)
-
-    def __call__(self, batch: tuple[str, Sequence[Payload], int, dict[str, int] | None]) -> bytes:
-        try:
-            return self._dump(batch)
-        except Exception:
-            pass
-        topic, payloads, t_ns, drops = batch
-        safe: list[Any] = []
-        for p in payloads:
-            try:
-                self._dump(p)
-                safe.append(p)
-            except Exception as exc:
-                safe.append(NotJson(f"<not picklable: {type(exc).__name__}> {safe_repr(p, 200)}"))
-        return self._dump((topic, safe, t_ns, drops))
-
-    def _dump(self, obj: Any) -> bytes:
-        buf = self._buf
-        buf.seek(0)
-        buf.truncate()
-        self._pickler.clear_memo()
-        self._pickler.dump(obj)
-        return buf.getvalue()
 
 
 class McapProcessLogger(LoggerBase):
@@ -268,7 +220,7 @@ class McapProcessLogger(LoggerBase):
         for topic, n in c.dropped_by_topic.items():
             dropped_by[topic] = dropped_by.get(topic, 0) + n
         in_ring = 0 if self._done else max(0, self._enqueued - self._child["received"])
-        return dataclasses.replace(
+        return replace(
             c,
             enqueued=self._enqueued,
             dropped=sum(dropped_by.values()),
@@ -315,8 +267,8 @@ def tune_malloc() -> bool:
 
 
 def child_main(end: ChildEnd) -> None:
-    """The writer child: a :class:`McapLogger` fed from the ring until the daemon asks to stop
-    or is gone; see the module docstring. Exits the interpreter at once when done."""
+    """The writer child: a :class:`.writer.SessionWriter` fed from the ring until the daemon
+    asks to stop or is gone; see the module docstring. Exits the interpreter at once when done."""
     name_os_thread("mcap-child")
     tune_malloc()
     if end.settings is not None:
@@ -337,53 +289,70 @@ def _serve(end: ChildEnd) -> None:
         "writer_priority": expected_priority("idle"),
     }
     errors: collections.deque[BaseException] = collections.deque()
-
-    def writer_setup() -> None:
-        took = lower_priority("idle")
-        if took != expected_priority("idle"):
-            _log.warning("MCAP writer priority idle not available: %s", took)
-
     try:
-        logger = McapLogger.from_settings(
-            dataclasses.replace(settings, metadata=metadata),
-            errors.append,
-            writer_setup=writer_setup,
-        )
+        writer = SessionWriter.from_settings(replace(settings, metadata=metadata), errors.append)
     except BaseException as exc:
         end.send("start_error", portable(exc))
         return
+    lock = threading.Lock()  # one ring reader and file writer at a time
+    done = threading.Event()
     received = 0
+    current: collections.deque[tuple[str, Any, int]] = collections.deque()
+    """The messages of the ring record being written (one record, taken whole from the ring)."""
+
+    def step(limit: int = BATCH) -> int:
+        """Write at most ``limit`` messages: the current record's, else the ring's next (lock
+        held; short, so a starved idle thread never holds the lock long). 0: nothing waits."""
+        nonlocal received
+        if not current:
+            for n, data in end.ring.read():
+                topic, payloads, t_ns, drops = pickle.loads(data)
+                if drops is not None:
+                    writer.set_upstream_drops(drops)
+                current.extend((topic, p, t_ns) for p in payloads)
+                received += n
+                break
+        k = min(limit, len(current))
+        for _ in range(k):
+            writer.write(*current.popleft())
+        return k
+
+    def idle_writer() -> None:
+        name_os_thread()
+        took = lower_priority("idle")
+        if took != expected_priority("idle"):
+            _log.warning("MCAP writer priority idle not available: %s", took)
+        while not done.is_set():
+            with lock:
+                n = 0 if done.is_set() else step()
+                writer.tick()
+            if not n:
+                done.wait(POLL_S)
 
     def status() -> dict[str, Any]:
-        st = logger.stats(upstream=False)  # the daemon adds its own drops
-        st = dataclasses.replace(st, files=st.files[-FILES_REPORTED:])
-        return {"stats": st, "healthy": logger.healthy, "received": received}
-
-    def read() -> None:
-        nonlocal received
-        for n, data in end.ring.read():
-            topic, payloads, t_ns, drops = pickle.loads(data)
-            if drops is not None:
-                logger.set_upstream_drops(drops)
-            logger.enqueue([(topic, p, t_ns) for p in payloads])
-            received += n
+        st = writer.stats(upstream=False)  # the daemon adds its own drops
+        st = replace(st, files=st.files[-FILES_REPORTED:])
+        return {"stats": st, "healthy": writer.healthy, "received": received}
 
     def forward_errors() -> None:
         while errors:
             exc = errors.popleft()
-            # the logger's error stops it; anything else (a message that could not be
+            # the writer's error stops it; anything else (a message that could not be
             # encoded) is a warning: counted, recorded, the log goes on
-            end.send("error" if exc is logger.error else "warning", portable(exc))
+            end.send("error" if exc is writer.error else "warning", portable(exc))
 
+    threading.Thread(target=idle_writer, name="mcap-writer", daemon=True).start()
     end.send("ready", status())
     last_report, last = 0.0, None
     try:
         while True:
             stop, last = end.stop_requested(POLL_S)
-            read()
-            logger.kick()  # write now
-            if logger.backlog > HELP_HIGH:
-                logger.drain_to(HELP_LOW)
+            if end.ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
+                until = time.monotonic() + REPORT_S  # then report, and help again
+                while end.ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
+                    with lock:
+                        if not step() or time.monotonic() > until:
+                            break
             forward_errors()
             now = time.monotonic()
             if now - last_report >= REPORT_S:
@@ -392,11 +361,15 @@ def _serve(end: ChildEnd) -> None:
             if stop:
                 break
     finally:
-        read()  # what the daemon handed over before it stopped (or died)
-        if last is not None:
-            logger.set_upstream_drops(last)
-        # drain and finish the file here, at this thread's normal priority: the writer thread
-        # at SCHED_IDLE gets next to no CPU on a saturated machine (the daemon bounds the wait)
-        logger.finish_here(1.0)
+        # what the daemon handed over before it stopped (or died), written and the file
+        # finished here, at this thread's normal priority: the writer thread at SCHED_IDLE
+        # gets next to no CPU on a saturated machine (the daemon bounds the wait)
+        done.set()
+        with lock:
+            while step(1 << 30):
+                pass
+            if last is not None:
+                writer.set_upstream_drops(last)
+            writer.stop()
         forward_errors()
         end.send("stopped", status())
