@@ -81,7 +81,8 @@ def _run_lines(work: Path, realdata: Path, lines: list[str]) -> dict[str, Any]:
             described.clear()
             run = run_cli(line, work)
             runs["lines"][line] = {
-                "code": run.code, "err": run.err, "cpu_s": run.cpu_s, "figures": list(described),
+                "code": run.code, "out": run.out, "err": run.err, "cpu_s": run.cpu_s,
+                "figures": list(described),
             }  # fmt: skip
     finally:
         plots.save_png = real
@@ -90,7 +91,8 @@ def _run_lines(work: Path, realdata: Path, lines: list[str]) -> dict[str, Any]:
 
 def ess_x(tmp_path_factory: Any, realdata: Path) -> tuple[Path, dict[str, Any]]:
     """The folder where the README's real-data lines ran (the clone's layout inside it), and
-    their record: per line its exit code, stderr, CPU seconds and the figures it wrote."""
+    their record: per line its exit code, stdout, stderr, CPU seconds and the figures it
+    wrote."""
     base = tmp_path_factory.getbasetemp()
     shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
     work = shared / "ess-x-record"
