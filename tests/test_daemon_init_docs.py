@@ -3,7 +3,9 @@
 The three fenced blocks after the ``first-daemon`` markers are read from the page; every line is
 run, in a fresh folder holding ``examples/machines/`` (the paths the page uses, from a clone),
 with the ``cmm-comp`` of this environment: terminal 1's ``init`` and ``--check`` to completion,
-its daemon in the background; terminal 2 (the demo, its readings re-sent to the daemon over
+its daemon in the background (a real process: Ctrl-C and its exit are what the page shows; the
+other lines run in this process through the CLI's own ``main()``, tests/README.md rule 6);
+terminal 2 (the demo, its readings re-sent to the daemon over
 ``udp_multicast``); SIGINT (the page's Ctrl-C); then the afterwards block. The one change: the
 ``udp_multicast`` port the page prints (``port=43113``, python-can's default) is replaced by a
 free port, so two test runs on one host never hear each other.
@@ -27,6 +29,7 @@ from pathlib import Path
 
 import pytest
 from daemon_process import check_answers, controller_on, stop, wait_ready
+from doc_commands import CliRun, run_cli
 from test_daemon_support import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,9 +57,10 @@ def _argv(line: str, port: int) -> list[str]:
     return [str(CMM), *(w.replace(f"port={PRINTED_PORT}", f"port={port}") for w in words[1:])]
 
 
-def _run(line: str, port: int, cwd: Path) -> subprocess.CompletedProcess[str]:
-    run = subprocess.run(_argv(line, port), cwd=cwd, capture_output=True, text=True, timeout=600)
-    assert run.returncode == 0, f"{line}\n{run.stdout}\n{run.stderr}"
+def _run(line: str, port: int, cwd: Path) -> CliRun:
+    """``line`` with the free port, run in this process (:func:`doc_commands.run_cli`)."""
+    run = run_cli(line.replace(f"port={PRINTED_PORT}", f"port={port}"), cwd)
+    assert run.code == 0, f"{line}\n{run.out}\n{run.err}"
     return run
 
 
@@ -80,10 +84,10 @@ def test_first_daemon_as_documented(tmp_path: Path) -> None:
     port = free_udp_port()
     *setup, start = blocks["terminal 1"]
     init = _run(setup[0], port, tmp_path)
-    assert "start the daemon with:\n  cmm-comp daemon --config my-daemon/daemon.toml" in init.stdout
+    assert "start the daemon with:\n  cmm-comp daemon --config my-daemon/daemon.toml" in init.out
     assert start == "cmm-comp daemon --config my-daemon/daemon.toml"  # the printed command
     check = _run(setup[1], port, tmp_path)
-    assert ": ok" in check.stdout and "the grid's probe offset" in check.stdout, check.stdout
+    assert ": ok" in check.out and "the grid's probe offset" in check.out, check.out
     log = tmp_path / "daemon.out"
     with open(log, "w") as out:
         proc = subprocess.Popen(
@@ -100,10 +104,8 @@ def test_first_daemon_as_documented(tmp_path: Path) -> None:
     assert code == 0, log.read_text()
     assert "NOT CORRECTING" not in log.read_text()
     (after,) = blocks["afterwards"]
-    mine = _run(after, port, tmp_path).stdout
-    demo = subprocess.run(
-        [str(CMM), "replay", "demo.mcap"], cwd=tmp_path, capture_output=True, text=True
-    ).stdout  # the demo's own session: how many readings it sent
+    mine = _run(after, port, tmp_path).out
+    demo = run_cli("cmm-comp replay demo.mcap", tmp_path).out  # the demo's session: its readings
     readings = int(_field(mine, "readings"))
     # the replay reaches the daemon at the recorded pace over UDP: on a loaded host some frames
     # are lost (the readings then never complete); the 20 lock-step readings always arrive

@@ -2,8 +2,13 @@
 injected, and every session's diagnosis equals ``cmm-comp diagnose`` run on its own.
 
 Oracles: ``ROOT/fleet-truth.json`` (what the generator injected: the machines, causes, dates and
-rates) and the one-by-one ``cmm-comp diagnose`` subprocess (no Dask, no store, no streaming).
-Every command runs as docs/fleet.md prints it, through the installed ``cmm-comp`` entry point.
+rates) and the one-by-one ``cmm-comp diagnose`` (no Dask, no store, no streaming).
+Every command runs as docs/fleet.md prints it. A run that starts a Dask cluster runs through the
+installed ``cmm-comp`` entry point as a subprocess (:func:`cmm`): its worker processes and their
+shutdown are part of what is tested, and a cluster in the test process would leave Dask's
+process-wide threads behind. The other commands (generate, the one-by-one diagnosis, a run whose
+sessions are all stored, errors found before any cluster starts) run in this process through the
+CLI's own ``main()`` (:func:`cmm_here`; tests/README.md rule 6).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from doc_commands import cli
 
 CMM = str(Path(sys.executable).parent / "cmm-comp")
 ENV = {**os.environ, "PYTHONWARNINGS": "ignore"}
@@ -35,11 +41,21 @@ def cmm(*argv: str, cwd: Path | None = None, check: bool = True) -> subprocess.C
     return proc
 
 
+def cmm_here(
+    *argv: str, cwd: Path | None = None, check: bool = True
+) -> subprocess.CompletedProcess:
+    """:func:`cmm` in this process (the CLI's ``main()``): for commands that start no cluster."""
+    proc = cli(*argv, cwd=cwd)
+    if check and proc.returncode != 0:
+        pytest.fail(f"cmm-comp {' '.join(argv)} → {proc.returncode}\n{proc.stdout}\n{proc.stderr}")
+    return proc
+
+
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """4 machines × 12 weekly sessions of 200 points, diagnosed on 2 workers (docs/fleet.md)."""
     work = tmp_path_factory.mktemp("fleet")
-    cmm("fleet", "generate", "plant", "--machines", "4", "--dates", "12", "--points", "200",
+    cmm_here("fleet", "generate", "plant", "--machines", "4", "--dates", "12", "--points", "200",
         cwd=work)  # fmt: skip
     proc = cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--report", "report",
                "--workers", "2", cwd=work)  # fmt: skip
@@ -68,7 +84,7 @@ def test_trend_names_exactly_the_injected_changes(fleet: dict[str, Any]) -> None
 def test_trend_names_exactly_the_injected_changes_other_seed_and_size(tmp_path: Path) -> None:
     """Another fleet than the worked example's: other noise and points (seed 1), five machines
     (the reversal on cmm-05, two clean machines), the reversal on another date."""
-    cmm("fleet", "generate", "plant", "--machines", "5", "--dates", "12", "--points", "200",
+    cmm_here("fleet", "generate", "plant", "--machines", "5", "--dates", "12", "--points", "200",
         "--seed", "1", "--start", "2026-04-06", cwd=tmp_path)  # fmt: skip
     cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--workers", "2", "--quiet",
         cwd=tmp_path)  # fmt: skip
@@ -148,7 +164,7 @@ def test_sessions_equal_diagnose_run_one_by_one(fleet: dict[str, Any]) -> None:
     ]  # fmt: skip
     for path in picks:
         session = work / "plant" / path
-        cmm("diagnose", str(session / "machine.toml"), str(session / "measurements.csv"),
+        cmm_here("diagnose", str(session / "machine.toml"), str(session / "measurements.csv"),
             "--json", str(work / "one.json"))  # fmt: skip
         alone = json.loads((work / "one.json").read_text())
         assert by_path[path]["machine"] == path.split("/")[0]
@@ -163,7 +179,10 @@ def test_report_and_rerun_skips_finished_sessions(fleet: dict[str, Any]) -> None
     run = fleet["out"]["run"]
     assert run["sessions_run"] == 48 and run["stored_before"] == 0
     # again: nothing to run; the same sessions and machines
-    again = cmm("fleet", "diagnose", "plant", "--json", "fleet.json", "--workers", "2", cwd=work)
+    # (all stored: no cluster starts)
+    again = cmm_here(
+        "fleet", "diagnose", "plant", "--json", "fleet.json", "--workers", "2", cwd=work
+    )
     assert "0 run, 48 stored before, 0 failed" in again.stdout
     second = json.loads((work / "fleet.json").read_text())
     assert second["sessions"] == fleet["out"]["sessions"]
@@ -202,7 +221,7 @@ def test_bad_session_is_reported_and_the_rest_completes(
     assert set(failed) == {"cmm-04/2026-01-19", "cmm-01/2026-13-01"}
     assert "measurements.csv missing" in failed["cmm-01/2026-13-01"]
     # the same one-line message as the one-by-one command
-    alone = cmm("diagnose", str(bad.parent / "machine.toml"), str(bad), "--json",
+    alone = cmm_here("diagnose", str(bad.parent / "machine.toml"), str(bad), "--json",
                 str(tmp_path / "x.json"), check=False)  # fmt: skip
     assert alone.returncode == 2
     assert failed["cmm-04/2026-01-19"] in alone.stderr
@@ -211,25 +230,20 @@ def test_bad_session_is_reported_and_the_rest_completes(
     assert not (tmp_path / "x.json").exists()
 
 
-def test_dask_missing_says_how_to_install(tmp_path: Path) -> None:
-    code = (
-        "import sys; sys.modules['distributed'] = None\n"
-        "from cmm_comp.cli import main\n"
-        f"sys.exit(main(['fleet', 'diagnose', {str(tmp_path)!r}, '--json', 'o.json']))"
-    )
+def test_dask_missing_says_how_to_install(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "distributed", None)  # ``import distributed`` fails
     (tmp_path / "m" / "2026-01-01").mkdir(parents=True)
-    proc = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120
-    )
+    proc = cmm_here("fleet", "diagnose", str(tmp_path), "--json", "o.json", cwd=tmp_path,
+                    check=False)  # fmt: skip
     assert proc.returncode == 2
     assert "pip install 'cmm-comp[fleet]'" in proc.stderr
     assert "Traceback" not in proc.stderr
 
 
 def test_bad_root_and_flags(tmp_path: Path) -> None:
-    proc = cmm("fleet", "diagnose", str(tmp_path / "nope"), "--json", "o.json", check=False)
+    proc = cmm_here("fleet", "diagnose", str(tmp_path / "nope"), "--json", "o.json", check=False)
     assert proc.returncode == 2 and "no such directory" in proc.stderr
-    proc = cmm("fleet", "diagnose", str(tmp_path), "--json", "o.json", "--workers", "0",
+    proc = cmm_here("fleet", "diagnose", str(tmp_path), "--json", "o.json", "--workers", "0",
                check=False)  # fmt: skip
     assert proc.returncode == 2
     assert "no session" in proc.stderr or "--workers 0" in proc.stderr

@@ -1,7 +1,7 @@
 """``cmm-comp fleet replay``: every session log re-corrected on Dask equals ``cmm-comp replay``
 run on its own, with the session's grid or the new one a grid map names.
 
-Oracles: the one-by-one ``cmm-comp replay`` subprocess (its JSON report), the machine totals
+Oracles: the one-by-one ``cmm-comp replay`` (its JSON report), the machine totals
 recomputed here from those reports, and physics: a grid built with a 5 µrad larger squareness
 alpha moves the answers by up to alpha × the travel, the session's own grid by nothing.
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_fleet import cmm
+from test_fleet import cmm, cmm_here
 
 pytestmark = pytest.mark.timeout(900)
 
@@ -24,14 +24,14 @@ pytestmark = pytest.mark.timeout(900)
 def plant(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """3 machines × 4 dates with one daemon log each; a new grid (with U) for cmm-02."""
     work = tmp_path_factory.mktemp("fleet-replay")
-    cmm("fleet", "generate", "plant", "--machines", "3", "--dates", "4", "--points", "100",
+    cmm_here("fleet", "generate", "plant", "--machines", "3", "--dates", "4", "--points", "100",
         "--logs", "--readings", "20", cwd=work)  # fmt: skip
     text = (work / "plant" / "cmm-02" / "2026-01-05" / "machine.toml").read_text()
     new = work / "new"
     new.mkdir()
     assert "alpha = 12.0" in text
     (new / "cmm-02.toml").write_text(text.replace("alpha = 12.0", "alpha = 17.0"))
-    cmm("grid", "build", "new/cmm-02.toml", "-o", "new/cmm-02.grid", "--steps", "7", "8", "5",
+    cmm_here("grid", "build", "new/cmm-02.toml", "-o", "new/cmm-02.grid", "--steps", "7", "8", "5",
         "--uncertainty", "--uncertainty-trials", "8", cwd=work)  # fmt: skip
     (work / "map.toml").write_text('[grids]\n"cmm-02" = "new/cmm-02.grid"\n')
     rolled = work / "plant" / "cmm-01" / "rolled"
@@ -48,7 +48,7 @@ def _alone(work: Path, source: str, grid: str | None = None) -> dict[str, Any]:
     argv = ["replay", source, "--json", str(work / "one.json")]
     if grid:
         argv += ["--grid", grid]
-    cmm(*argv, cwd=work)
+    cmm_here(*argv, cwd=work)
     return json.loads((work / "one.json").read_text())
 
 
@@ -99,12 +99,12 @@ def test_rolled_files_are_one_session(plant: dict[str, Any]) -> None:
 
 def test_rerun_keys_on_grid_content_and_reports_a_bad_log(plant: dict[str, Any]) -> None:
     work = plant["work"]
-    again = cmm("fleet", "replay", "plant", "--grid-map", "map.toml", "--json", "replay.json",
+    again = cmm_here("fleet", "replay", "plant", "--grid-map", "map.toml", "--json", "replay.json",
                 "--workers", "2", cwd=work)  # fmt: skip
     assert "0 run, 13 stored before, 0 failed" in again.stdout
     # cmm-01's own grid rebuilt differently: its 5 sessions run again, the rest stay stored
     grid = work / "plant" / "cmm-01" / "grid" / "cmm-01.grid"
-    cmm("grid", "build", "plant/cmm-01/2026-01-05/machine.toml", "-o", str(grid),
+    cmm_here("grid", "build", "plant/cmm-01/2026-01-05/machine.toml", "-o", str(grid),
         "--steps", "6", "7", "4", cwd=work)  # fmt: skip
     bad = work / "plant" / "cmm-03" / "2026-01-05" / "shift-2.mcap"
     bad.write_bytes(b"\x89MCAP0\r\n" + b"not a log" * 10)
@@ -115,7 +115,7 @@ def test_rerun_keys_on_grid_content_and_reports_a_bad_log(plant: dict[str, Any])
     out = json.loads((work / "replay.json").read_text())
     (failed,) = out["failed"]
     assert failed["path"] == "cmm-03/2026-01-05/shift-2.mcap"
-    alone = cmm("replay", str(bad), "--json", str(work / "x.json"), check=False)
+    alone = cmm_here("replay", str(bad), "--json", str(work / "x.json"), check=False)
     assert alone.returncode == 2 and failed["error"] in alone.stderr
     assert len(out["sessions"]) == 13
     bad.unlink()
@@ -125,11 +125,11 @@ def test_grid_map_errors_name_the_key(plant: dict[str, Any], tmp_path: Path) -> 
     work = plant["work"]
     bad = tmp_path / "map.toml"
     bad.write_text('[grids]\n"cmm-99" = "x.grid"\n')
-    proc = cmm("fleet", "replay", "plant", "--grid-map", str(bad), "--json", str(tmp_path / "o.json"),
+    proc = cmm_here("fleet", "replay", "plant", "--grid-map", str(bad), "--json", str(tmp_path / "o.json"),
                cwd=work, check=False)  # fmt: skip
     assert proc.returncode == 2 and "grids.cmm-99: no such machine" in proc.stderr
     bad.write_text('[grids]\n"cmm-01" = "missing.grid"\n')
-    proc = cmm("fleet", "replay", "plant", "--grid-map", str(bad), "--json", str(tmp_path / "o.json"),
+    proc = cmm_here("fleet", "replay", "plant", "--grid-map", str(bad), "--json", str(tmp_path / "o.json"),
                cwd=work, check=False)  # fmt: skip
     assert (
         proc.returncode == 2

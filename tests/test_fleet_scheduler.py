@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from test_fleet import ENV, cmm
+from test_fleet import ENV, cmm, cmm_here
 
 DASK = str(Path(sys.executable).parent / "dask")
 pytestmark = pytest.mark.timeout(900)
@@ -90,7 +90,7 @@ def cluster(tmp_path: Path) -> Iterator[str]:
 
 
 def test_fleet_on_a_real_scheduler_equals_local_cluster(tmp_path: Path, cluster: str) -> None:
-    cmm(
+    cmm_here(
         "fleet",
         "generate",
         "plant",
@@ -120,7 +120,7 @@ def test_fleet_on_a_real_scheduler_equals_local_cluster(tmp_path: Path, cluster:
     assert strip(remote) == strip(local)
     assert remote["machines"] == local["machines"]
     session = tmp_path / "plant" / "cmm-02" / "2026-01-26"
-    cmm(
+    cmm_here(
         "diagnose",
         str(session / "machine.toml"),
         str(session / "measurements.csv"),

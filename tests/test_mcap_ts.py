@@ -7,7 +7,8 @@ the Python reader read them. ``McapStreamReader`` is what a stream gets. Both re
 (``tests/mcap_ts/read_mcap.mjs``, packages pinned in its ``package-lock.json``; the ``mcap_ts``
 fixture runs ``npm ci`` once per session) the logs of:
 
-* the demo, run as documented (``cmm-comp demo --mcap … --json …``): counts against the
+* the demo, run as documented (``cmm-comp demo --mcap … --json …``, in this process through the
+  CLI's own ``main()``; the recoveries too): counts against the
   demo's own summary (readings the simulated controller sent);
 * the daemon, a real run (``udp_session``: the daemon as a subprocess on ``udp_multicast``):
   counts against what the controller's bus sent, frame by frame;
@@ -20,13 +21,12 @@ None of the expected counts comes from the project's Python reader.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
+from doc_commands import cli
 from test_mcap_recover import acknowledged, session_writer
 
 from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS
@@ -36,7 +36,6 @@ ROOT = Path(__file__).resolve().parents[1]
 # the session fixtures (npm ci, a daemon run of 300 readings, the demo) run inside the first
 # test that uses them: more than the suite's default 120 s on a loaded 2-core machine
 pytestmark = pytest.mark.timeout(900)
-CLI = [sys.executable, "-m", "cmm_comp.cli"]
 
 
 def both_readers(read: Any, path: Path, end_metadata: str = "session_end") -> dict[str, Any]:
@@ -65,13 +64,7 @@ def directions(view: dict[str, Any], topic: str) -> dict[str, int]:
 
 
 def test_demo_log_reads_in_foxglove_s_reader(mcap_ts, tmp_path) -> None:
-    proc = subprocess.run(
-        [*CLI, "demo", "--mcap", "demo.mcap", "--json", "summary.json"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
+    proc = cli("demo", "--mcap", "demo.mcap", "--json", "summary.json", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     readings = json.loads((tmp_path / "summary.json").read_text())["readings"]
     view = both_readers(mcap_ts, tmp_path / "demo.mcap")
@@ -98,12 +91,7 @@ def test_daemon_log_reads_in_foxglove_s_reader(mcap_ts, udp_session) -> None:
 
 
 def _recover(cut: Path, fixed: Path) -> None:
-    proc = subprocess.run(
-        [*CLI, "mcap", "recover", str(cut), "-o", str(fixed)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    proc = cli("mcap", "recover", cut, "-o", fixed)
     assert proc.returncode == 0, proc.stderr
 
 

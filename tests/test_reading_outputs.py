@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import pytest
 from doc_commands import run_cli
+from ess_record import ess_x, panel_shows_data
 
 from cmm_comp.cli.main import main as cli_main
 from cmm_comp.compensation import Machine, ParametricErrors
@@ -67,13 +68,7 @@ def figures(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[Any]]:
     yield kept
 
 
-def _panel_shows_data(ax: Any) -> bool:
-    """A panel shows something when a line varies or a filled area / bar / image is drawn."""
-    for line in ax.get_lines():
-        y = np.asarray(line.get_ydata(), dtype=float)
-        if y.size and np.ptp(y[np.isfinite(y)]) > 0:
-            return True
-    return bool(ax.collections or ax.patches or ax.images)
+_panel_shows_data = panel_shows_data  # one definition (tests/ess_record.py)
 
 
 def _visible_panels(fig: Any) -> list[Any]:
@@ -285,26 +280,17 @@ def test_map_of_a_machine_without_errors_says_zero(tmp_path: Path, figures: list
 @pytest.mark.realdata
 @pytest.mark.timeout(900)
 def test_real_one_axis_record_plots_only_the_measured_axis(
-    realdata_dir: Path, tmp_path: Path, figures: list[Any]
+    realdata_dir: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
-    log = realdata_dir / "ess-target-b02" / "x_230_2.log"
-    run = run_cli(
-        f"cmm-comp import camonitor {log} --axis x --position TARGET_DU:X-PosAct "
-        f"--reference IOC_TEST:ILD_DownSample --out-dir ess-x",
-        tmp_path,
-    )
-    assert run.code == 0, run.err
-    figures.clear()
-    run = run_cli(
-        "cmm-comp diagnose ess-x/machine.toml ess-x/measurements.csv "
-        "--json ess-x/diagnosis.json --report ess-x/report",
-        tmp_path,
-    )
-    assert run.code == 0, run.err
-    residual_figs = [f for f in figures if f.axes and f.axes[0].get_title().startswith("residual")]
-    assert len(residual_figs) == len(
-        list((tmp_path / "ess-x" / "report").glob("residual_vs_*.png"))
-    )
+    """The dense ESS X record (one axis measured) imported and diagnosed with its report: the
+    README's lines, run once per test run (tests/ess_record.py), which describes every figure
+    the plotting wrote (visible panels, their titles, whether each shows data)."""
+    work, runs = ess_x(tmp_path_factory, realdata_dir)
+    (diagnose,) = [r for line, r in runs["lines"].items() if line.startswith("cmm-comp diagnose")]
+    assert diagnose["code"] == 0, diagnose["err"]
+    residual_figs = [f for f in diagnose["figures"] if f["first_title"].startswith("residual")]
+    assert len(residual_figs) == len(list((work / "ess-x" / "report").glob("residual_vs_*.png")))
+    assert residual_figs
     for fig in residual_figs:
-        assert [ax.get_title() for ax in _visible_panels(fig)] == ["residual x"]
-        assert all(_panel_shows_data(ax) for ax in _visible_panels(fig))
+        assert [p["title"] for p in fig["panels"]] == ["residual x"]
+        assert all(p["shows_data"] for p in fig["panels"])

@@ -7,7 +7,9 @@
 * ``.ci/run`` runs the README's test command (the same install target and pytest invocation).
 * "Your own machine" runs exactly as printed (read from README.md), its outputs read back with
   independent readers; the daemon's ``init`` line when this build has it, never the start line
-  (it runs until stopped on a real bus).
+  (it runs until stopped on a real bus). Its two ``calibrate`` lines are the calibration worked
+  example's, character for character: they run once per test run for both pages
+  (tests/worked_example.py) and their outputs are copied here.
 * The real-data lines run as printed against the public repository's layout (the clone is laid
   out from the project's checkout, ``../shared/realdata``; skipped without it).
 * The tables of what is where name files that exist; LICENSE is the Apache-2.0 text pyproject
@@ -29,7 +31,9 @@ from pathlib import Path
 
 import pytest
 from doc_commands import bash_blocks, run_cli
+from ess_record import ess_x, readme_lines
 from matplotlib.image import imread
+from worked_example import LINES, calibrated_example, take
 
 from cmm_comp.compensation import CorrectionGrid
 
@@ -118,7 +122,9 @@ sys.exit(main(["demo", "--json", sys.argv[1]]))
 
 
 @pytest.mark.timeout(1800)
-def test_your_own_machine_runs_as_printed(tmp_path: Path) -> None:
+def test_your_own_machine_runs_as_printed(
+    tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
+) -> None:
     (tmp_path / "examples").symlink_to(ROOT / "examples", target_is_directory=True)
     lines = _block_with("cmm-comp calibrate examples/")
     ran = []
@@ -127,9 +133,14 @@ def test_your_own_machine_runs_as_printed(tmp_path: Path) -> None:
             continue  # starts the daemon on the user's bus: runs until stopped
         if line.startswith("cmm-comp daemon init") and _lacks("daemon", "init"):
             continue  # comes with issue 25 item 5 (daemon init): run once it is merged
-        run = run_cli(line, tmp_path)
-        print(f"{run.wall_s:7.1f} s wall {run.cpu_s:7.1f} s CPU  {line}")
-        assert run.code == 0, f"{line}\n{run.err}"
+        if line in LINES:  # the worked example's line: run once per test run, outputs copied
+            shared = take(line, calibrated_example(tmp_path_factory), tmp_path)
+            code, err = shared["code"], shared["err"]
+        else:
+            run = run_cli(line, tmp_path)
+            print(f"{run.wall_s:7.1f} s wall {run.cpu_s:7.1f} s CPU  {line}")
+            code, err = run.code, run.err
+        assert code == 0, f"{line}\n{err}"
         ran.append(line)
     assert len(ran) >= 8
     calibration = json.loads((tmp_path / "calibration-report" / "calibration.json").read_text())
@@ -171,23 +182,25 @@ def _lacks(command: str, sub: str) -> bool:
 
 @pytest.mark.realdata
 @pytest.mark.timeout(900)
-def test_real_data_lines_run_as_printed(realdata_dir: Path, tmp_path: Path) -> None:
+def test_real_data_lines_run_as_printed(
+    realdata_dir: Path, tmp_path_factory: pytest.TempPathFactory
+) -> None:
     """The public repository's layout at the named commit, laid out from the project's own
-    checkout of the same files; the git lines are the user's, the cmm-comp lines run here."""
+    checkout of the same files; the git lines are the user's, the cmm-comp lines run here (once
+    per test run, shared with the other tests of this record: tests/ess_record.py)."""
     lines = _block_with("git clone")
+    assert lines == readme_lines()
     clone, folder = re.match(r"git clone (\S+) (\S+)", lines[0]).groups()  # type: ignore[union-attr]
     assert clone == "https://github.com/anderssandstrom/ecmc_target_muts_logger"
     assert lines[1] == f"git -C {folder} checkout ee350e4c813139fde4608dd0edd331f8d3546028"
-    layout = tmp_path / folder / "b02" / "x" / "rawdata"
-    layout.mkdir(parents=True)
-    (layout / "x_230_2.log").symlink_to(realdata_dir / "ess-target-b02" / "x_230_2.log")
-    for line in lines[2:]:
-        run = run_cli(line, tmp_path)
-        assert run.code == 0, f"{line}\n{run.err}"
-    d = json.loads((tmp_path / "ess-x" / "diagnosis.json").read_text())
+    work, runs = ess_x(tmp_path_factory, realdata_dir)
+    assert list(runs["lines"]) == lines[2:]
+    for line, run in runs["lines"].items():
+        assert run["code"] == 0, f"{line}\n{run['err']}"
+    d = json.loads((work / "ess-x" / "diagnosis.json").read_text())
     causes = {(e["cause"], e.get("component") or e.get("axis")) for e in d["effects"]}
     assert {("parametric", "dx_x"), ("reversal", "x")} <= causes
-    assert (tmp_path / "ess-x" / "report" / "index.html").is_file()
+    assert (work / "ess-x" / "report" / "index.html").is_file()
 
 
 # ------------------------------------------------------------------ tables, licence, changelog
