@@ -160,6 +160,31 @@ def _twin_fit(
     return Term(cand, theta), rss
 
 
+def _best_twin_shape(
+    problem: Problem,
+    others: list[Term],
+    term: Term,
+    twin: Candidate,
+    rss_full: float,
+    sigma2: float,
+) -> tuple[Term, float]:
+    """The twin at its default and at its rich shape (when it has one), each charged one σ² per
+    parameter beyond the term's: the better of the two and its Δχ² (in units of σ²). The twin's
+    fair shape is not the term's: a drift selected with its rich (position-dependent) shape has
+    a reference drift as twin that is the same everywhere, and a default reading-locked shape
+    may imitate a rich positional one with fewer parameters."""
+    shapes = [False] + ([True] if twin.rich is not None else [])
+    best: tuple[Term, float] | None = None
+    for rich in shapes:
+        t_term, rss = _twin_fit(problem, others, term, twin, rich)
+        extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
+        delta = (rss - rss_full) / sigma2 + extra
+        if best is None or delta < best[1]:
+            best = (t_term, delta)
+    assert best is not None
+    return best
+
+
 #: Largest variance inflation for dependent neighbours (ρ ≈ 0.95).
 MAX_DEPENDENCE = 40.0
 
@@ -206,9 +231,7 @@ def decide_sources(
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
-                t_term, rss = _twin_fit(problem, others, term, twin, term.candidate is not root)
-                extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
-                delta = (rss - rss_full) / sigma2 + extra
+                t_term, delta = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
                 misfit = _imitation_misfit(problem, others, t_term, target)
                 apart = misfit / sigma2
                 # separable only by a difference that is a sizeable part of the term itself
