@@ -6,7 +6,8 @@ reference's reading with the same period law; a positional table and a smooth no
 the reading (or a scale of the reference); a reversal and a latency (an error ∝ velocity); a
 drift that changes along the axis and a reference drift the same everywhere. After selection,
 each named term is refitted as each of its twins (the other named terms kept, the twin's
-nonlinear parameter re-profiled about the term's), and the residual sums of squares compared
+nonlinear parameter re-profiled about the term's; the twin at its default and at its rich shape,
+the better kept), and the residual sums of squares compared
 (a twin with more parameters charged one noise variance σ² per extra parameter, as
 :mod:`.alternatives` does; σ² per *effective* observation: neighbouring residuals of a dense
 record are correlated, and a difference of fits is then worth fewer independent points — the
@@ -145,7 +146,7 @@ class SourceCall:
 def _twin_fit(
     problem: Problem, others: list[Term], term: Term, twin: Candidate, rich: bool
 ) -> tuple[Term, float]:
-    """The twin at the term's shape level (``rich``), its parameter profiled about the term's;
+    """The twin at its default or rich shape (``rich``), its parameter profiled about the term's;
     a twin in the other coordinate (position ↔ reading) through the session's map between them
     (:func:`.reference_candidates.through_map`: a function of the reading beside functions of
     the position would otherwise span the observed error itself)."""
