@@ -430,8 +430,9 @@ def test_real_ess_import(realdata_dir: Path) -> None:
 
 @pytest.fixture(scope="module")
 def ess_imported(realdata_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Path]:
-    """The ESS X record imported once, as a user does it (the installed CLI, a subprocess):
-    (the finished process, its output folder); the diagnosis test reads the same files."""
+    """The ESS X record imported once per module with ``cmm-comp import camonitor`` (in this
+    process, tests/doc_commands.py): (its result, the output folder); the diagnosis test reads
+    the same files instead of importing the record again."""
     log = realdata_dir / "ess-target-b02" / "x_230_2.log"
     out = tmp_path_factory.mktemp("ess-import") / "ess"
     proc = cli("import", "camonitor", log, "--axis", "x", *ESS_ARGS, "--out-dir", out)
@@ -455,7 +456,7 @@ def test_real_ess_cli(ess_imported: tuple[Any, Path]) -> None:
 @pytest.mark.realdata
 @pytest.mark.timeout(400)
 def test_real_ess_dense_diagnosis_names_what_is_in_it(
-    ess_imported: tuple[Any, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    ess_imported: tuple[Any, Path], tmp_path: Path
 ) -> None:
     """Issue 24, as a user runs it: the dense ESS X record (import camonitor + diagnose). Its
     truths, from the signal analysis in docs/discovery.md (done by hand, apart from the
@@ -465,16 +466,22 @@ def test_real_ess_dense_diagnosis_names_what_is_in_it(
     the reference's; a reversal of 23–27 µm at the stops; a drift that depends on the position
     (thermal, temperature not logged); a smooth curve no session of one sensor can assign; and
     no cyclic error of the machine. Held-out RMS ≤ 8 µm (was 15.7). The import is the
-    fixture's (the CLI in a subprocess); ``cmm-comp diagnose`` runs in this process (its
-    process boundary adds nothing to test here: test_real_ess_cli and the CLI tests have it)."""
+    module fixture's (shared with test_real_ess_cli)."""
     imp, imported = ess_imported
     assert imp.returncode == 0, imp.stderr
     out = tmp_path / "ess"
+    out.mkdir()
     result = out / "diagnosis.json"
-    argv = [str(imported / "machine.toml"), str(imported / "measurements.csv")]
-    code = main(["diagnose", *argv, "--json", str(result), "--report", str(out / "report")])
-    stdout = capsys.readouterr().out
-    assert code == 0
+    proc = cli(
+        "diagnose",
+        imported / "machine.toml",
+        imported / "measurements.csv",
+        "--json",
+        result,
+        "--report",
+        out / "report",
+    )
+    assert proc.returncode == 0, proc.stderr
     d = json.loads(result.read_text())
     by_cause = {e["cause"]: e for e in d["effects"]}
     ripple = by_cause["reference_ripple"]
@@ -496,6 +503,6 @@ def test_real_ess_dense_diagnosis_names_what_is_in_it(
     smooth = [e for e in d["effects"] if e.get("component") == "dx_x"]
     assert smooth and smooth[0]["source"] == "either"
     assert d["heldout_rms_um"]["after"] <= 8.0 < d["heldout_rms_um"]["before"]
-    assert "reference ripple" in stdout and "[reference]" in stdout  # the verdict line
+    assert "reference ripple" in proc.stdout and "[reference]" in proc.stdout  # the verdict line
     words = (out / "report" / "report.md").read_text()
     assert "triangulation" in words and "E_XX" in words
