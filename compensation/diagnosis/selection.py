@@ -384,12 +384,12 @@ def _resume_after_replacement(
         old = slots[i].root
         search.excluded |= {id(c) for c in pool if c.cause == old.cause and c.keys == old.keys}
         slots[i] = Slot(roots[i], accepted[i])
-    n_before = [id(s.root) for s in slots]
+    before = [id(s.root) for s in slots]
     say("a term replaced by its twin: the search resumed")
     _after_change(problem, search, say)
     _rounds(problem, pool, search, max_effects, say)
     _final_periods(problem, search, say)  # a cyclic error named now is tested like the others
-    return [id(s.root) for s in slots] != n_before
+    return [id(s.root) for s in slots] != before
 
 
 def _one_blas_thread(fn: Callable[..., Diagnosis]) -> Callable[..., Diagnosis]:
