@@ -135,7 +135,7 @@ def _no_leaked_threads() -> Iterator[None]:
     assert not leaked, f"test leaked threads: {[t.name for t in leaked]}"
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def realdata_dir() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"real data folder {REALDATA} is absent (a user's checkout has no ../shared)")

@@ -428,11 +428,20 @@ def test_real_ess_import(realdata_dir: Path) -> None:
     assert moving - raw == pytest.approx(rev["latency_part_um"], rel=0.2)
 
 
-@pytest.mark.realdata
-def test_real_ess_cli(realdata_dir: Path, tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def ess_imported(realdata_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Path]:
+    """The ESS X record imported once per module with ``cmm-comp import camonitor`` (in this
+    process, tests/doc_commands.py): (its result, the output folder); the diagnosis test reads
+    the same files instead of importing the record again."""
     log = realdata_dir / "ess-target-b02" / "x_230_2.log"
-    out = tmp_path / "ess"
+    out = tmp_path_factory.mktemp("ess-import") / "ess"
     proc = cli("import", "camonitor", log, "--axis", "x", *ESS_ARGS, "--out-dir", out)
+    return proc, out
+
+
+@pytest.mark.realdata
+def test_real_ess_cli(ess_imported: tuple[Any, Path]) -> None:
+    proc, out = ess_imported
     assert proc.returncode == 0, proc.stderr
     assert "reading" in proc.stderr  # progress
     for name in ("machine.toml", "measurements.csv", "summary.json", "import.png"):
@@ -446,7 +455,9 @@ def test_real_ess_cli(realdata_dir: Path, tmp_path: Path) -> None:
 
 @pytest.mark.realdata
 @pytest.mark.timeout(400)
-def test_real_ess_dense_diagnosis_names_what_is_in_it(realdata_dir: Path, tmp_path: Path) -> None:
+def test_real_ess_dense_diagnosis_names_what_is_in_it(
+    ess_imported: tuple[Any, Path], tmp_path: Path
+) -> None:
     """Issue 24, as a user runs it: the dense ESS X record (import camonitor + diagnose). Its
     truths, from the signal analysis in docs/discovery.md (done by hand, apart from the
     diagnosis): a ripple whose local period follows the triangulation sensor's distance law
@@ -454,16 +465,17 @@ def test_real_ess_dense_diagnosis_names_what_is_in_it(realdata_dir: Path, tmp_pa
     moving by the reversal in axis coordinates and by ~0 in the sensor's between directions:
     the reference's; a reversal of 23–27 µm at the stops; a drift that depends on the position
     (thermal, temperature not logged); a smooth curve no session of one sensor can assign; and
-    no cyclic error of the machine. Held-out RMS ≤ 8 µm (was 15.7)."""
-    log = realdata_dir / "ess-target-b02" / "x_230_2.log"
-    out = tmp_path / "ess"
-    imp = cli("import", "camonitor", log, "--axis", "x", *ESS_ARGS, "--out-dir", out)
+    no cyclic error of the machine. Held-out RMS ≤ 8 µm (was 15.7). The import is the
+    module fixture's (shared with test_real_ess_cli)."""
+    imp, imported = ess_imported
     assert imp.returncode == 0, imp.stderr
+    out = tmp_path / "ess"
+    out.mkdir()
     result = out / "diagnosis.json"
     proc = cli(
         "diagnose",
-        out / "machine.toml",
-        out / "measurements.csv",
+        imported / "machine.toml",
+        imported / "measurements.csv",
         "--json",
         result,
         "--report",

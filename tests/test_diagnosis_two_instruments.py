@@ -26,7 +26,7 @@ from cmm_comp.compensation.formats.measurements import read_measurements
 
 
 def _run(tmp: Path, truth: Truth, **kw: Any) -> tuple[Any, Path, Path]:
-    session = simulate(truth, rate_hz=5.0, **kw)
+    session = simulate(truth, **{"rate_hz": 5.0, **kw})
     machine, csv = session.write(tmp)
     d = diagnose(Machine.from_toml(machine), read_measurements(csv))
     return d, machine, csv
@@ -115,8 +115,9 @@ def test_bidirectional_reversal_drift_and_smooth_curve(bidirectional) -> None:
 
 def test_one_directional_session_cannot_tell_which_instrument(tmp_path: Path) -> None:
     """Passes in one direction only: a position has one reading, so a cyclic error of the
-    reading is a cyclic error of the position with another law — either."""
-    d, _, _ = _run(tmp_path, Truth(), seed=4, both_directions=False)
+    reading is a cyclic error of the position with another law — either. Six passes (not ten:
+    their random sampling phases still cover the shortest ripple period, 0.12 mm, many times)."""
+    d, _, _ = _run(tmp_path, Truth(), seed=4, both_directions=False, passes=6)
     # the ripple (chirped) and the screw, each named once, as either instrument's
     cyclic = [e for e in d.entries if e["cause"] in ("periodic", "reference_ripple")]
     assert len(cyclic) == 2, [(e["cause"], e.get("source")) for e in d.entries]
@@ -128,8 +129,12 @@ def test_one_directional_session_cannot_tell_which_instrument(tmp_path: Path) ->
 
 
 def test_latency_with_rest_and_two_speeds_is_the_reference(tmp_path: Path) -> None:
-    truth = Truth(latency_s=0.02)
-    d, _, _ = _run(tmp_path, truth, seed=1, speeds_mm_s=(0.5, 1.0))
+    """Without the cyclic errors (the ripple's law and locking are the bidirectional fixture's
+    claim; here the latency's and the reversal's): four passes at 2 Hz, ~640 rows. A latency of
+    20 ms is 10 or 20 µm at these speeds against 0.5 µm noise: the session still separates a
+    latency from a reversal by the rest points and the two speeds, or fails."""
+    truth = Truth(latency_s=0.02, ripple_um=0.0, screw_um=0.0)
+    d, _, _ = _run(tmp_path, truth, seed=1, speeds_mm_s=(0.5, 1.0), passes=4, rate_hz=2.0)
     lat = _one(d, "latency")
     assert lat["source"] == "reference" and lat["locked_to"] == "velocity"
     assert lat["parameters"]["latency_ms"] == pytest.approx(1000 * truth.latency_s, abs=2)
@@ -140,9 +145,10 @@ def test_latency_with_rest_and_two_speeds_is_the_reference(tmp_path: Path) -> No
 
 def test_latency_at_one_speed_without_rest_is_either(tmp_path: Path) -> None:
     """Bidirectional at one speed, no samples at rest: a late reference reads v·τ behind in each
-    direction — exactly a reversal. The contract's answer: either."""
+    direction — exactly a reversal. The contract's answer: either. Four passes at 2 Hz (~640
+    rows): the claim is about motion, not density."""
     truth = Truth(latency_s=0.02, ripple_um=0.0, screw_um=0.0, expansion_um=0.0)
-    d, _, _ = _run(tmp_path, truth, seed=2, rest_s=0.0)
+    d, _, _ = _run(tmp_path, truth, seed=2, rest_s=0.0, passes=4, rate_hz=2.0)
     hits = [e for e in d.entries if e["cause"] in ("latency", "reversal")]
     assert len(hits) == 1, [e["cause"] for e in d.entries]
     e = hits[0]
@@ -155,8 +161,11 @@ def test_latency_at_one_speed_without_rest_is_either(tmp_path: Path) -> None:
 
 
 def test_reference_drift_the_same_everywhere_is_either(tmp_path: Path) -> None:
+    """Ten passes at 2 Hz (~1800 rows, not 4500 at 5 Hz: no cyclic error here needs the
+    density); the drift's time structure (ten passes) is kept — with four passes the diagnosis
+    has called this drift the machine's (a position-dependent shape fitted to too few passes)."""
     truth = Truth(reference_drift_um=8.0, expansion_um=0.0, ripple_um=0.0, screw_um=0.0)
-    d, _, _ = _run(tmp_path, truth, seed=3)
+    d, _, _ = _run(tmp_path, truth, seed=3, rate_hz=2.0)
     drift = [e for e in d.entries if e["cause"] in ("drift", "reference_drift")]
     assert len(drift) == 1 and drift[0]["source"] == "either"
     assert {"drift", "reference_drift"} <= {drift[0]["cause"]} | {

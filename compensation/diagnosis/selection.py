@@ -361,6 +361,37 @@ def _final_periods(problem: Problem, search: _Search, say: Callable[[str], None]
     return removed
 
 
+def _resume_after_replacement(
+    problem: Problem,
+    pool: list[Candidate],
+    search: _Search,
+    roots: list[Candidate],
+    accepted: list[Term],
+    max_effects: int,
+    say: Callable[[str], None],
+) -> bool:
+    """Where a named term was replaced by its twin (:func:`.sources.decide_sources`), the model
+    changed shape: what the first term's rich shape absorbed (a drift that changes along the
+    axis soaks up part of a smooth curve; a reference drift the same everywhere does not) may now
+    be a cause of its own. The replacement is put in place, the first term's family excluded,
+    and the forward search resumed; True when it named anything more (then the sources are to be
+    decided again)."""
+    slots = search.slots
+    replaced = [i for i, s in enumerate(slots) if s.root is not roots[i]]
+    if not replaced:
+        return False
+    for i in replaced:
+        old = slots[i].root
+        search.excluded |= {id(c) for c in pool if c.cause == old.cause and c.keys == old.keys}
+        slots[i] = Slot(roots[i], accepted[i])
+    before = [id(s.root) for s in slots]
+    say("a term replaced by its twin: the search resumed")
+    _after_change(problem, search, say)
+    _rounds(problem, pool, search, max_effects, say)
+    _final_periods(problem, search, say)  # a cyclic error named now is tested like the others
+    return [id(s.root) for s in slots] != before
+
+
 def _one_blas_thread(fn: Callable[..., Diagnosis]) -> Callable[..., Diagnosis]:
     """Run ``fn`` with BLAS on one thread: the matrices are a few thousand rows by tens of
     columns, where threads only cost (measured on a busy 2-core machine: an SVD of 2100 × 132
@@ -428,6 +459,10 @@ def diagnose(
     twins = all_twins(res)
     say("sources: each term against its twins")
     calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
+    if _resume_after_replacement(problem, pool, search, roots, accepted, max_effects, say):
+        accepted, roots = terms_of(slots), [s.root for s in slots]
+        say("sources: each term against its twins, again")
+        calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
     for s, t, root in zip(slots, accepted, roots, strict=True):
         s.root, s.term = root, t
     finding = Finding(problem, accepted, roots, calls, [*pool, *twins], alpha, refused, pool)

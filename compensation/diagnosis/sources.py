@@ -6,7 +6,8 @@ reference's reading with the same period law; a positional table and a smooth no
 the reading (or a scale of the reference); a reversal and a latency (an error ∝ velocity); a
 drift that changes along the axis and a reference drift the same everywhere. After selection,
 each named term is refitted as each of its twins (the other named terms kept, the twin's
-nonlinear parameter re-profiled about the term's), and the residual sums of squares compared
+nonlinear parameter re-profiled about the term's; the twin at its default and at its rich shape,
+the better kept), and the residual sums of squares compared
 (a twin with more parameters charged one noise variance σ² per extra parameter, as
 :mod:`.alternatives` does; σ² per *effective* observation: neighbouring residuals of a dense
 record are correlated, and a difference of fits is then worth fewer independent points — the
@@ -145,7 +146,7 @@ class SourceCall:
 def _twin_fit(
     problem: Problem, others: list[Term], term: Term, twin: Candidate, rich: bool
 ) -> tuple[Term, float]:
-    """The twin at the term's shape level (``rich``), its parameter profiled about the term's;
+    """The twin at its default or rich shape (``rich``), its parameter profiled about the term's;
     a twin in the other coordinate (position ↔ reading) through the session's map between them
     (:func:`.reference_candidates.through_map`: a function of the reading beside functions of
     the position would otherwise span the observed error itself)."""
@@ -158,6 +159,31 @@ def _twin_fit(
         cand = replace(cand, thetas=(term.theta,), _cache={}, _statics={})
     theta, rss, _ = best_theta(problem, others, cand, near=near)
     return Term(cand, theta), rss
+
+
+def _best_twin_shape(
+    problem: Problem,
+    others: list[Term],
+    term: Term,
+    twin: Candidate,
+    rss_full: float,
+    sigma2: float,
+) -> tuple[Term, float]:
+    """The twin at its default and at its rich shape (when it has one), each charged one σ² per
+    parameter beyond the term's: the better of the two and its Δχ² (in units of σ²). The twin's
+    fair shape is not the term's: a drift selected with its rich (position-dependent) shape has
+    a reference drift as twin that is the same everywhere, and a default reading-locked shape
+    may imitate a rich positional one with fewer parameters."""
+    shapes = [False] + ([True] if twin.rich is not None else [])
+    best: tuple[Term, float] | None = None
+    for rich in shapes:
+        t_term, rss = _twin_fit(problem, others, term, twin, rich)
+        extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
+        delta = (rss - rss_full) / sigma2 + extra
+        if best is None or delta < best[1]:
+            best = (t_term, delta)
+    assert best is not None
+    return best
 
 
 #: Largest variance inflation for dependent neighbours (ρ ≈ 0.95).
@@ -206,9 +232,7 @@ def decide_sources(
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
-                t_term, rss = _twin_fit(problem, others, term, twin, term.candidate is not root)
-                extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
-                delta = (rss - rss_full) / sigma2 + extra
+                t_term, delta = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
                 misfit = _imitation_misfit(problem, others, t_term, target)
                 apart = misfit / sigma2
                 # separable only by a difference that is a sizeable part of the term itself
