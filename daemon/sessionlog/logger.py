@@ -11,11 +11,12 @@ the files in the calling thread (in that child, or in any program that may wait 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Protocol, Self
+from typing import Any, Protocol, Self, TypedDict, cast
 
 from mcap.writer import CompressionType
 
@@ -148,6 +149,15 @@ class LogSettings:
     fsync: bool = False
     metadata: Mapping[str, str] = field(default_factory=dict)
 
+    @classmethod
+    def of(cls, target: str | os.PathLike[str], options: LogOptions) -> LogSettings:
+        """The checked settings of a log at ``target`` (the writers' keyword arguments)."""
+        return cls(Path(target), **options)
+
+    def options(self) -> LogOptions:
+        """Every field but the first, ``target``: the writers' keyword arguments."""
+        return cast(LogOptions, {f.name: getattr(self, f.name) for f in fields(self)[1:]})
+
     def __post_init__(self) -> None:
         target = Path(self.target)
         object.__setattr__(self, "target", target)
@@ -166,6 +176,20 @@ class LogSettings:
     def single(self) -> bool:
         """True for one explicit ``*.mcap`` file (no rolling)."""
         return self.target.suffix == ".mcap"
+
+
+class LogOptions(TypedDict, total=False):
+    """The keyword arguments of both writers: the fields of :class:`LogSettings` (documented
+    there) but ``target``."""
+
+    roll_bytes: int | None
+    roll_s: float | None
+    flush_period_s: float
+    chunk_size: int
+    queue_size: int
+    compression: CompressionType
+    fsync: bool
+    metadata: Mapping[str, str]
 
 
 class Stoppable:

@@ -31,19 +31,24 @@ import pickle
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
-
-from mcap.writer import CompressionType
+from typing import Any, Unpack
 
 from .. import memory
 from ..childproc import ChildEnd, ChildProcess, ChildProcessError, portable
 from ..osthread import expected_priority, lower_priority, name_os_thread
 from ..ring import ring_bytes
 from .encoding import Packer
-from .logger import LOW_PRIORITY_TOPICS, LoggerBase, LoggerStats, LogSettings, Payload
+from .logger import (
+    LOW_PRIORITY_TOPICS,
+    LoggerBase,
+    LoggerStats,
+    LogOptions,
+    LogSettings,
+    Payload,
+)
 from .writer import SessionWriter
 
 _log = logging.getLogger(__name__)
@@ -92,25 +97,15 @@ class McapProcessLogger(LoggerBase):
         self,
         target: str | os.PathLike[str],
         *,
-        roll_bytes: int | None = None,
-        roll_s: float | None = None,
-        flush_period_s: float = 1.0,
-        chunk_size: int = 256 * 1024,
-        queue_size: int = 100_000,
-        compression: CompressionType = CompressionType.ZSTD,
-        fsync: bool = False,
-        metadata: Mapping[str, str] | None = None,
         on_error: Callable[[BaseException], None] | None = None,
+        **options: Unpack[LogOptions],
     ) -> None:
-        meta = {"pid": str(os.getpid()), "writer": WRITER_NAME, **dict(metadata or {})}
-        settings = LogSettings(
-            Path(target), roll_bytes, roll_s, flush_period_s, chunk_size, queue_size,
-            compression, fsync, meta,
-        )  # fmt: skip
+        meta = {"pid": str(os.getpid()), "writer": WRITER_NAME, **options.get("metadata", {})}
+        settings = LogSettings.of(target, {**options, "metadata": meta})
         super().__init__(settings, on_error, "MCAP writer process")
         self._lock = threading.Lock()
         self._pack = Packer()
-        self._capacity = ring_bytes(queue_size, MESSAGE_BYTES)
+        self._capacity = ring_bytes(settings.queue_size, MESSAGE_BYTES)
         self._sent_by: dict[str, int] = {}
         self._drops_sent = 0
         self._child: dict[str, Any] = {"stats": _EMPTY, "healthy": True, "received": 0}

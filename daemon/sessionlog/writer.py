@@ -22,12 +22,12 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, Unpack
 
 from mcap.writer import CompressionType
 
 from .encoding import ERROR_TOPIC, encode_error, encode_message, error_payload, safe_str
-from .logger import LoggerBase, LoggerStats, LogSettings, Payload
+from .logger import LoggerBase, LoggerStats, LogOptions, LogSettings, Payload
 from .mcapfile import McapFileWriter
 from .schemas import (
     MESSAGE_ENCODING,
@@ -163,21 +163,11 @@ class SessionWriter(LoggerBase):
         self,
         target: str | os.PathLike[str],
         *,
-        roll_bytes: int | None = None,
-        roll_s: float | None = None,
-        flush_period_s: float = 1.0,
-        chunk_size: int = 256 * 1024,
-        queue_size: int = 100_000,
-        compression: CompressionType = CompressionType.ZSTD,
-        fsync: bool = False,
-        metadata: Mapping[str, str] | None = None,
         on_error: Callable[[BaseException], None] | None = None,
         opener: Callable[[Path], IO[bytes]] = open_exclusive,
+        **options: Unpack[LogOptions],
     ) -> None:
-        settings = LogSettings(
-            Path(target), roll_bytes, roll_s, flush_period_s, chunk_size, queue_size,
-            compression, fsync, metadata or {},
-        )  # fmt: skip
+        settings = LogSettings.of(target, options)
         super().__init__(settings, on_error, "MCAP writer")
         self._single = settings.single
         self._opener = opener
@@ -215,12 +205,7 @@ class SessionWriter(LoggerBase):
         cls, settings: LogSettings, on_error: Callable[[BaseException], None] | None = None
     ) -> SessionWriter:
         """A writer for ``settings`` (what the writer child runs)."""
-        return cls(
-            settings.target, roll_bytes=settings.roll_bytes, roll_s=settings.roll_s,
-            flush_period_s=settings.flush_period_s, chunk_size=settings.chunk_size,
-            queue_size=settings.queue_size, compression=settings.compression,
-            fsync=settings.fsync, metadata=settings.metadata, on_error=on_error,
-        )  # fmt: skip
+        return cls(settings.target, on_error=on_error, **settings.options())
 
     # ------------------------------------------------------------------ messages
     def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
