@@ -178,7 +178,6 @@ class CanEndpoint(can.Listener):
         self._own_tx_ids = self.ids.daemon_tx_ids()  # received back: our own frames (echo)
         self._send_u = config.send_uncertainty
         self._stop = threading.Event()
-        self._connected = threading.Event()
         self._sent_state: DaemonState | None = None
         self._next_heartbeat = 0.0
         self.last_error: BaseException | None = None
@@ -190,10 +189,6 @@ class CanEndpoint(can.Listener):
         self._open()
         self._thread.start()
         return self
-
-    def wait_connected(self, timeout_s: float) -> bool:
-        """True once the bus is open (within ``timeout_s``)."""
-        return self._connected.wait(timeout_s)
 
     def stop(self, timeout_s: float = 2.0) -> bool:  # type: ignore[override]
         """Stop the thread and shut the bus down; True if the thread ended in ``timeout_s``."""
@@ -241,12 +236,10 @@ class CanEndpoint(can.Listener):
             self._bus = self._bus_factory(self.config, self.ids)
         except Exception as exc:
             self._bus = None
-            self._connected.clear()
             message = can_open_error(self.config, exc)
             self.on_error(exc, message)
             self.state.set_condition("can", message)
             return False
-        self._connected.set()
         self.state.set_condition("can", None)
         self.events.emit(
             "can_open", interface=self.config.interface, channel=str(self.config.channel)
@@ -256,7 +249,6 @@ class CanEndpoint(can.Listener):
 
     def _close(self) -> None:
         bus, self._bus = self._bus, None
-        self._connected.clear()
         if bus is not None:
             try:
                 bus.shutdown()
