@@ -180,7 +180,7 @@ class CorrectionEngine:
             temps = None  # geometry only: the grid flags the missing thermal terms
         else:
             self.last_temperature_fault = None
-        if temps and (filters := getattr(loaded.grid, "signal_filters", None)):
+        if temps and (filters := loaded.grid.signal_filters):
             temps = self.temperatures.effective(temps, filters, now_s)
         inputs: dict[str, float] = {}
         for key, sign in zip(_DIR_KEYS, r.directions, strict=True):
@@ -194,11 +194,8 @@ class CorrectionEngine:
         u: tuple[float, float, float] | None = None
         if unknown is not None:  # the grid carries U: correction and U in one call
             c, label, u = grid.correct_point_with_uncertainty(p, stylus, temps, inputs or None)
-        elif hasattr(grid, "correct_point"):  # the grid's single-reading fast path
-            c, label = grid.correct_point(p, stylus, temps, inputs or None)
         else:
-            out, st = grid.correct(np.array([p]), np.array(stylus), temps, inputs or None)
-            c, label = tuple(out[0].tolist()), str(st[0])
+            c, label = grid.correct_point(p, stylus, temps, inputs or None)
         has_dir = r.directions != (0, 0, 0)
         return self._finish(r, p, c, label, loaded, temps, has_dir, r.probe is not None, u)
 
@@ -257,14 +254,14 @@ class CorrectionEngine:
 
     def _correct_batch(self, readings: Sequence[Reading], now_s: float) -> list[Answer]:
         loaded = self.grids.current
-        if loaded is None or not hasattr(loaded.grid, "correct_point"):
+        if loaded is None:
             return [self.correct(r, now_s) for r in readings]
         verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
         if verdict.status is not None:  # faults, geometry-only: the single path says why
             return [self.correct(r, now_s) for r in readings]
         self.last_temperature_fault = None
         temps: dict[str, float] = verdict.temps_C
-        if temps and (filters := getattr(loaded.grid, "signal_filters", None)):
+        if temps and (filters := loaded.grid.signal_filters):
             temps = self.temperatures.effective(temps, filters, now_s)
         answers: list[Answer | None] = [None] * len(readings)
         with_u = loaded.has_uncertainty
