@@ -5,7 +5,8 @@ threads inherit it: they run only on CPU time nothing else wants).
 
 Its loop runs ``update_rate_hz`` times a second (:data:`IDLE_PERIOD_S` while no client watches):
 a heartbeat and the watched topics into the shared memory, the daemon's records from the ring
-into an ordinary :class:`LiveSink`, :meth:`LiveSink.tick` (decimate, encode, send, scene), and
+straight into the update of an ordinary :class:`LiveSink` (:meth:`LiveSink.tick`: decimate,
+encode, send, scene; its own queue stays empty), and
 every :data:`STATUS_PERIOD_S` its status ``(LiveStats, errors so far, the newest error
 texts)``. It ends when the daemon asks, or when the daemon is gone.
 """
@@ -16,6 +17,7 @@ import logging
 import pickle
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -23,7 +25,7 @@ from ..childproc import ChildEnd
 from ..osthread import lower_priority, name_os_thread
 from ..ring import SharedRing
 from .server import LiveStartError
-from .sink import TOPIC_BITS, LiveSink
+from .sink import TOPIC_BITS, Batch, LiveSink
 
 STATUS_PERIOD_S = 0.1
 """The child publishes its status this often, s."""
@@ -90,16 +92,15 @@ class _Feed:
         self.errors += 1
         self.texts = [*self.texts[-(ERROR_TEXTS - 1) :], str(exc)[:ERROR_TEXT_MAX]]
 
-    def read(self) -> None:
+    def read(self) -> Iterator[Batch]:
+        """The daemon's batches waiting in the ring (for :meth:`LiveSink.tick`)."""
         for n, data in self.ring.read():
             self.taken += n
             try:
-                topic, payloads, t_ns = pickle.loads(data)
+                yield pickle.loads(data)
             except Exception as exc:  # cannot happen with the daemon's pickles; counted
                 self.bad += n
                 self.error(ValueError(f"live view: a record could not be read: {exc!r}"))
-                continue
-            self.sink.log_many(topic, payloads, t_ns)
 
     def status(self) -> tuple[Any, int, list[str]]:
         st = self.sink.stats()
@@ -142,8 +143,7 @@ def child_main(end: ChildEnd) -> None:
         t0 = time.monotonic()
         end.ring.beat(time.monotonic_ns())
         feed.wanted()
-        feed.read()
-        sink.tick()
+        sink.tick(batches=feed.read())
         if t0 >= next_status:
             next_status = t0 + STATUS_PERIOD_S
             feed.publish(end)
@@ -152,7 +152,7 @@ def child_main(end: ChildEnd) -> None:
         if stop:
             break
     if end.parent_alive:
-        feed.read()  # what the daemon wrote before it asked to stop
+        sink.tick(batches=feed.read())  # what the daemon wrote before it asked to stop
     sink.stop(5.0)
     feed.publish(end)
     end.send("stopped", feed.status())

@@ -30,7 +30,7 @@ import collections
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Self
 
@@ -61,6 +61,8 @@ SCENE_TOPIC = "/cmm/scene"
 CORRECTED = "/cmm/corrected"
 STATUS_PERIOD_S = 1.0
 """Drops are reported to clients (a protocol ``status`` message) at most this often, s."""
+Batch = tuple[str, Sequence[Any], int]
+"""``(topic, payloads, log_time_ns)``: what one ``log_many`` call offers."""
 _TIME_NS_MAX = 2**64 - 1
 _PENDING_MAX = 4096
 """Scene points kept between two scene updates (older ones are decimated away)."""
@@ -140,7 +142,7 @@ class LiveSink(Stoppable):
         self._name = name
         self._on_error = on_error
         self._lock = threading.Lock()
-        self._batches: collections.deque[tuple[str, Sequence[Any], int]] = collections.deque()
+        self._batches: collections.deque[Batch] = collections.deque()
         self._queued = 0
         self._limit = int(settings.queue)
         self._wanted: frozenset[str] = frozenset()
@@ -355,23 +357,40 @@ class LiveSink(Stoppable):
         return self.stats().counters()
 
     # ------------------------------------------------------------------ updates
-    def tick(self, final: bool = False) -> None:
+    def tick(self, final: bool = False, batches: Iterable[Batch] | None = None) -> None:
         """One update: send what waits (decimated), greet new subscribers, the scene (forced
-        when ``final``), the drop warning. Never raises (a bug is reported)."""
+        when ``final``), the drop warning. Never raises (a bug is reported). What waits is the
+        queue's, or ``batches`` when given: ``(topic, payloads, log_time_ns)`` offered straight
+        to this update, as :meth:`log_many` would (the view's process hands it what it read
+        from shared memory: no second queue)."""
         try:
-            self._drain()
+            self._drain(self._take() if batches is None else self._offer(batches))
             self._replay_latched()
             self._scene_tick(time.monotonic(), force=final)
             self._status_tick(time.monotonic())
         except Exception as exc:  # a bug: reported, the loop goes on
             self._report(exc)
 
-    def _drain(self) -> None:
+    def _take(self) -> Sequence[Batch]:
+        """The queue's batches, the queue emptied."""
         with self._lock:
-            if not self._batches:
-                return
             batches, self._batches = self._batches, collections.deque()
             self._queued = 0
+        return batches
+
+    def _offer(self, batches: Iterable[Batch]) -> list[Batch]:
+        """``batches`` counted as offered, the latched topics' newest kept."""
+        out = [b for b in batches if b[1] and b[0] in self._topics]
+        for topic, payloads, t_ns in out:
+            if topic in LATCHED_TOPICS:
+                self._latest[topic] = (payloads[-1], t_ns)
+        with self._lock:
+            self._offered += sum(len(b[1]) for b in out)
+        return out
+
+    def _drain(self, batches: Sequence[Batch]) -> None:
+        if not batches:
+            return
         keep = self._decimation(batches)
         index: dict[str, int] = dict.fromkeys(keep, 0)  # running index per decimated topic
         for topic, payloads, t_ns in batches:
@@ -399,9 +418,7 @@ class LiveSink(Stoppable):
                             continue
                 self._one(topic, channel, payload, t_ns, send, scene, counted=live)
 
-    def _decimation(
-        self, batches: collections.deque[tuple[str, Sequence[Any], int]]
-    ) -> dict[str, set[int]]:
+    def _decimation(self, batches: Sequence[Batch]) -> dict[str, set[int]]:
         """Per decimated topic with more messages than an update takes: the indices (over
         this update's messages of the topic, oldest first) to send."""
         per_topic: dict[str, list[Any]] = {}
