@@ -435,7 +435,7 @@ class CanEndpoint(can.Listener):
             one: list[can.Message] = []
             latency_us = self._answer_frames(answer, reading.received_s, one)
             self._send_msgs(one)
-            self.engine.count(answer, latency_us)
+            self.engine.count_many((answer,), (latency_us,))
             self._deferred.append((reading, answer, latency_us))
             return
         answers = self.engine.correct_many(ready)

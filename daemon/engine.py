@@ -352,17 +352,12 @@ class CorrectionEngine:
     # ------------------------------------------------------------------ after the reply
     def record(self, reading: Reading, answer: Answer, latency_us: float) -> None:
         """Count, log to MCAP and report one answered reading (call after replying)."""
-        self.count(answer, latency_us)
+        self.count_many((answer,), (latency_us,))
         self.report_many(((reading, answer, latency_us),))
 
-    def count(self, answer: Answer, latency_us: float) -> None:
-        """The counters of one answer (cheap: right after replying, so they are never behind
-        what the peer has seen)."""
-        warning = bool(answer.detail) and answer.status == Status.OK
-        self.metrics.reading_answered(answer.status.label, latency_us, warning)
-
     def count_many(self, answers: Sequence[Answer], latencies_us: Sequence[float]) -> None:
-        """:meth:`count` of each answer (with its latency, µs), under one lock."""
+        """The counters of the answers (with their latencies, µs), under one lock (cheap:
+        right after replying, so they are never behind what the peer has seen)."""
         self.metrics.readings_answered(
             [
                 (a.status.label, lat, bool(a.detail) and a.status == Status.OK)

@@ -104,21 +104,10 @@ class Metrics:
             self.latency.add(latency_us)
             self._period.add(latency_us)
 
-    def reading_answered(self, status_label: str, latency_us: float, warning: bool) -> None:
-        """One answered reading, under one lock: counts ``readings``, the answer with its
-        status and latency (µs) and, if ``warning``, ``correction_warnings``."""
-        with self._lock:
-            c = self.counters
-            c["readings"] = c.get("readings", 0) + 1
-            if warning:
-                c["correction_warnings"] = c.get("correction_warnings", 0) + 1
-            self.answers[status_label] = self.answers.get(status_label, 0) + 1
-            self.latency.add(latency_us)
-            self._period.add(latency_us)
-
     def readings_answered(self, answers: list[tuple[str, float, bool]]) -> None:
-        """:meth:`reading_answered` of each ``(status_label, latency_us, warning)``, under one
-        lock (the answers of one CAN wake-up)."""
+        """Answered readings, each ``(status_label, latency_us, warning)``, under one lock:
+        counts ``readings``, each answer with its status and latency (µs) and, if ``warning``,
+        ``correction_warnings``."""
         with self._lock:
             c, by_status = self.counters, self.answers
             c["readings"] = c.get("readings", 0) + len(answers)
