@@ -22,6 +22,7 @@ from dataclasses import replace
 from typing import Any
 
 from ..childproc import ChildEnd
+from ..events import Throttle
 from ..osthread import lower_priority, name_os_thread
 from ..ring import SharedRing
 from .server import LiveStartError
@@ -48,21 +49,14 @@ class RateLimit(logging.Filter):
 
     def __init__(self, per_s: float) -> None:
         super().__init__()
-        self._interval_s = 1.0 / per_s
-        self._next = 0.0
-        self._suppressed = 0
+        self._throttle = Throttle(1.0 / per_s)
 
     def filter(self, record: logging.LogRecord) -> bool:
-        now = time.monotonic()
-        if now < self._next:
-            self._suppressed += 1
-            return False
-        self._next = now + self._interval_s
-        if self._suppressed:
-            record.msg = f"{record.getMessage()} ({self._suppressed} similar lines suppressed)"
+        suppressed = self._throttle.passes()
+        if suppressed:
+            record.msg = f"{record.getMessage()} ({suppressed} similar lines suppressed)"
             record.args = None
-            self._suppressed = 0
-        return True
+        return suppressed is not None
 
 
 def limit_sdk_log(per_s: float = SDK_LOG_LINES_PER_S) -> None:

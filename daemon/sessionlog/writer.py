@@ -26,6 +26,7 @@ from typing import IO, Any, Unpack
 
 from mcap.writer import CompressionType
 
+from ..events import Throttle
 from .encoding import ERROR_TOPIC, encode_error, encode_message, error_payload, safe_str
 from .logger import LoggerBase, LoggerStats, LogOptions, LogSettings, Payload
 from .mcapfile import McapFileWriter
@@ -180,7 +181,7 @@ class SessionWriter(LoggerBase):
         self._encode_errors = 0
         self._encode_errors_by: dict[str, int] = {}
         self._upstream_dropped: dict[str, int] = {}
-        self._error_reports: list[float] = []
+        self._error_reports = Throttle(1.0 / _ERROR_REPORTS_PER_S)
         self._files: list[Path] = []
         started = datetime.now(UTC)
         self._session_tag = started.strftime("%Y%m%dT%H%M%S")
@@ -411,14 +412,10 @@ class SessionWriter(LoggerBase):
             record = {**error_payload(topic, payload, t_ns, exc), "stamp": stamp_from_ns(now_ns)}
             self._writer.add_message(channel, now_ns, encode_error(record), now_ns)
             self._written_by[ERROR_TOPIC] = self._written_by.get(ERROR_TOPIC, 0) + 1
-        now = time.monotonic()
-        recent = [t for t in self._error_reports if now - t < 1.0]
-        if len(recent) < _ERROR_REPORTS_PER_S:
-            recent.append(now)
+        if self._error_reports.passes() is not None:
             self._report_quietly(
                 ValueError(f"{topic}: payload not JSON-encodable: {safe_str(exc)}")
             )
-        self._error_reports = recent
 
     def _flush(self) -> None:
         assert self._writer is not None and self._stream is not None
