@@ -136,7 +136,7 @@ class LiveProcessSink(LiveSink):
                 self._went_down("live view: its process did not stop in time")
             self._dead = True
             self._lose_in_flight()
-        self._proc.close_ring()
+        self._proc.ring.close()
         return final is not None
 
     # ------------------------------------------------------------------ producers
@@ -162,7 +162,7 @@ class LiveProcessSink(LiveSink):
             self._offered += n
             if self._stopped:
                 self._idle += n
-            elif proc.write(self._pack((topic, payloads, log_time_ns)), n):
+            elif proc.ring.write(self._pack((topic, payloads, log_time_ns)), n):
                 self._forwarded += n
             else:
                 self._dropped += n
@@ -197,7 +197,7 @@ class LiveProcessSink(LiveSink):
         if proc is None or self._dead or not self._check_lock.acquire(blocking=False):
             return
         try:
-            status = proc.status()
+            status = proc.ring.status()
             if status is not None:
                 self._take_status(status)
             age_s = proc.stalled(STALL_S)

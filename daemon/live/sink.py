@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any, Self
 
 from ..sessionlog.encoding import message_struct, struct_json
-from ..sessionlog.logger import Stoppable
+from ..sessionlog.logger import LogConsumer
 from .decimate import kept
 from .server import LiveServer, LiveStartError, open_live_server
 from .settings import LiveSection, host_problem
@@ -116,7 +116,7 @@ class LiveStats:
         }
 
 
-class LiveSink(Stoppable):
+class LiveSink(LogConsumer):
     """Stream the session-log topics and ``/cmm/scene`` to Foxglove WebSocket clients.
 
     ``with LiveSink(settings).start() as live: live.log_many(topic, records); live.tick()``;
@@ -238,11 +238,6 @@ class LiveSink(Stoppable):
         return True
 
     # ------------------------------------------------------------------ producers
-    def log(self, topic: str, payload: Any, log_time_ns: int | None = None) -> bool:
-        """Offer one message (as :meth:`log_many` with one payload). Never blocks. Returns True
-        when it was taken or not wanted, False when the sink is stopped."""
-        return self.log_many(topic, (payload,), log_time_ns) > 0
-
     def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
         """Offer ``payloads`` of ``topic`` (record tuples or dicts, as the session log takes
         them) with one log time (integer ns since the epoch; now if None). Never blocks; the

@@ -192,9 +192,27 @@ class LogOptions(TypedDict, total=False):
     metadata: Mapping[str, str]
 
 
-class Stoppable:
-    """``close()`` and ``with`` for a class with ``stop(timeout_s)``: the loggers, the live
-    view, their fan-out."""
+class LogConsumer:
+    """What every taker of the session log's messages shares (the writers, the live view, their
+    fan-out): ``log`` as ``log_many`` of one message, ``close()`` and ``with`` from ``stop``."""
+
+    def log_many(
+        self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
+    ) -> int:  # pragma: no cover - the classes override
+        """Take ``payloads`` of ``topic`` with one log time (integer ns since the Unix epoch;
+        now if None); returns how many were taken."""
+        raise NotImplementedError
+
+    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
+        """:meth:`log_many` of one message: False when it was dropped (counted).
+
+        :param topic: one of the logged topics (KeyError for the writers otherwise: a
+            programming error).
+        :param payload: the JSON object, or for the topics of :data:`.schemas.RECORD_FIELDS`
+            a compact record tuple. ``stamp`` is added from ``log_time_ns`` when absent.
+        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
+        """
+        return self.log_many(topic, (payload,), log_time_ns) == 1
 
     def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - the classes override
         """End the work (drain, finish); True if done within ``timeout_s`` (s)."""
@@ -211,7 +229,7 @@ class Stoppable:
         self.close()
 
 
-class LoggerBase(Stoppable):
+class LoggerBase(LogConsumer):
     """The part every writer shares: topic checks, drop counts per topic, error reporting (first
     error kept, ``on_error`` called, never raised into the producer) and the lifecycle."""
 

@@ -117,10 +117,6 @@ class McapProcessLogger(LoggerBase):
         self._take(self._proc.info)
 
     # ------------------------------------------------------------------ producers
-    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
-        """Hand one message over; never blocks. False when it was dropped (counted)."""
-        return self.log_many(topic, (payload,), log_time_ns) == 1
-
     def log_many(
         self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
     ) -> int:
@@ -142,7 +138,7 @@ class McapProcessLogger(LoggerBase):
         if self._dropped != self._drops_sent:  # the file's counters include ours
             drops, self._drops_sent = self._dropped_snapshot(), self._dropped
         with self._lock:
-            ok = not self._closed and self._proc.write(
+            ok = not self._closed and self._proc.ring.write(
                 self._pack((topic, payloads, log_time_ns, drops)), n
             )
             if ok:
@@ -176,13 +172,13 @@ class McapProcessLogger(LoggerBase):
         elif kind == "warning":
             self._report_quietly(body)
         elif kind == "lost":
-            self._take(self._proc.status())
+            self._take(self._proc.ring.status())
             self._report(McapWriterProcessError(body))
             self._closed = True
 
     def _refresh(self) -> None:
         if not self._done:
-            self._take(self._proc.status())
+            self._take(self._proc.ring.status())
 
     @property
     def healthy(self) -> bool:
@@ -247,7 +243,7 @@ class McapProcessLogger(LoggerBase):
             lost = sent - c.written_by_topic.get(topic, 0) - c.dropped_by_topic.get(topic, 0)
             if lost > 0:
                 self._count_drop(topic, lost)
-        self._proc.close_ring()
+        self._proc.ring.close()
         return final is not None
 
 

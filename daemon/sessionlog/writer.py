@@ -209,23 +209,12 @@ class SessionWriter(LoggerBase):
         return cls(settings.target, on_error=on_error, **settings.options())
 
     # ------------------------------------------------------------------ messages
-    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
-        """Write one message now. Returns False when it was dropped (counted: stopped or
-        failed); a message that cannot be encoded is taken: its error record is written.
-
-        :param topic: one of the logged topics (KeyError otherwise: a programming error).
-        :param payload: the JSON object, or for the topics of :data:`.schemas.RECORD_FIELDS`
-            a compact record tuple. ``stamp`` is added from ``log_time_ns`` when absent.
-        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
-        """
-        self._check(topic, (payload,))
-        return self.write(topic, payload, time.time_ns() if log_time_ns is None else log_time_ns)
-
     def log_many(
         self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
     ) -> int:
-        """Write ``payloads`` of ``topic`` with one log time (integer ns; now if None), as
-        :meth:`log` each; returns how many were taken."""
+        """Write ``payloads`` of ``topic`` now, with one log time (integer ns; now if None).
+        Returns how many were taken: a message is dropped (counted) once the writer stopped
+        or failed; one that cannot be encoded is taken: its error record is written."""
         self._check(topic, payloads)
         t_ns = time.time_ns() if log_time_ns is None else log_time_ns
         return sum(self.write(topic, p, t_ns) for p in payloads)
