@@ -48,6 +48,10 @@ class Throttle:
         self._last[key] = now
         return self._held.pop(key, 0)
 
+    def flush(self, key: object = None) -> int:
+        """How many of ``key`` are held back now (the count starts again)."""
+        return self._held.pop(key, 0)
+
 
 class EventLog:
     """Write events as single lines to ``stream`` (None = discard).

@@ -7,8 +7,9 @@ Its loop runs ``update_rate_hz`` times a second (:data:`IDLE_PERIOD_S` while no 
 a heartbeat and the watched topics into the shared memory, the daemon's records from the ring
 straight into the update of an ordinary :class:`LiveSink` (:meth:`LiveSink.tick`: decimate,
 encode, send, scene; its own queue stays empty), and
-every :data:`STATUS_PERIOD_S` its status ``(LiveStats, errors so far, the newest error
-texts)``. It ends when the daemon asks, or when the daemon is gone.
+every :data:`STATUS_PERIOD_S` its status (:class:`LiveStats`); errors go to the daemon as
+``warning`` events on the pipe, at most :data:`ERRORS_PER_S` a second (the next one says how
+many were held back). It ends when the daemon asks, or when the daemon is gone.
 """
 
 from __future__ import annotations
@@ -19,22 +20,20 @@ import sys
 import time
 from collections.abc import Iterator
 from dataclasses import replace
-from typing import Any
 
 from ..childproc import ChildEnd
 from ..events import Throttle
 from ..osthread import lower_priority, name_os_thread
-from ..ring import SharedRing
 from .server import LiveStartError
-from .sink import TOPIC_BITS, Batch, LiveSink
+from .sink import TOPIC_BITS, Batch, LiveSink, LiveStats
 
 STATUS_PERIOD_S = 0.1
 """The child publishes its status this often, s."""
 IDLE_PERIOD_S = 0.1
 """The child's loop period while no client watches anything (else ``1 / update_rate_hz``), s:
 fewer wake-ups beside the daemon; a new subscriber is seen within it."""
-ERROR_TEXTS = 8
-"""Newest error texts kept in the status (older ones are only counted)."""
+ERRORS_PER_S = 10.0
+"""Errors passed to the daemon per second at most (the rest are counted, and said)."""
 ERROR_TEXT_MAX = 300
 SDK_LOG_LINES_PER_S = 1.0
 """Lines of the SDK's own log the child writes per second at most (to stderr, the daemon's)."""
@@ -72,23 +71,31 @@ def limit_sdk_log(per_s: float = SDK_LOG_LINES_PER_S) -> None:
 
 
 class _Feed:
-    """The child's side of the ring: records into the sink, its status out."""
+    """The child's side of the ring: the daemon's records out of it, its status and errors
+    back."""
 
-    def __init__(self, ring: SharedRing, sink: LiveSink) -> None:
-        self.ring = ring
+    def __init__(self, end: ChildEnd, sink: LiveSink) -> None:
+        self.end = end
         self.sink = sink
         self.taken = 0
         self.bad = 0
-        self.errors = 0
-        self.texts: list[str] = []
+        self._errors = Throttle(1.0 / ERRORS_PER_S)
 
     def error(self, exc: BaseException) -> None:
-        self.errors += 1
-        self.texts = [*self.texts[-(ERROR_TEXTS - 1) :], str(exc)[:ERROR_TEXT_MAX]]
+        held = self._errors.passes()
+        if held is not None:
+            more = f" ({held} more errors before this one)" if held else ""
+            self.end.send("warning", f"{str(exc)[:ERROR_TEXT_MAX]}{more}")
+
+    def error_count(self) -> None:
+        """Tell the daemon how many errors were held back at the end."""
+        held = self._errors.flush()
+        if held:
+            self.end.send("warning", f"live view: {held} more errors in its process")
 
     def read(self) -> Iterator[Batch]:
         """The daemon's batches waiting in the ring (for :meth:`LiveSink.tick`)."""
-        for n, data in self.ring.read():
+        for n, data in self.end.ring.read():
             self.taken += n
             try:
                 yield pickle.loads(data)
@@ -96,21 +103,15 @@ class _Feed:
                 self.bad += n
                 self.error(ValueError(f"live view: a record could not be read: {exc!r}"))
 
-    def status(self) -> tuple[Any, int, list[str]]:
+    def status(self) -> LiveStats:
         st = self.sink.stats()
-        st = replace(st, offered=self.taken, encode_errors=st.encode_errors + self.bad)
-        return st, self.errors, list(self.texts)
-
-    def publish(self, end: ChildEnd) -> None:
-        status = self.status()
-        if not end.publish(status):
-            end.publish((status[0], status[1], []))
+        return replace(st, offered=self.taken, encode_errors=st.encode_errors + self.bad)
 
     def wanted(self) -> None:
         mask = 0
         for topic in self.sink.wanted_topics:
             mask |= TOPIC_BITS.get(topic, 0)
-        self.ring.set_wanted(mask)
+        self.end.ring.set_wanted(mask)
 
 
 def child_main(end: ChildEnd) -> None:
@@ -124,7 +125,7 @@ def child_main(end: ChildEnd) -> None:
     feed: _Feed
     try:
         sink = LiveSink(settings, on_error=lambda exc: feed.error(exc), name=name)
-        feed = _Feed(end.ring, sink)
+        feed = _Feed(end, sink)
         sink.start()
     except LiveStartError as exc:
         end.send("start_error", exc)
@@ -140,7 +141,7 @@ def child_main(end: ChildEnd) -> None:
         sink.tick(batches=feed.read())
         if t0 >= next_status:
             next_status = t0 + STATUS_PERIOD_S
-            feed.publish(end)
+            end.publish(feed.status())
         wait_s = period_s if sink.wanted_topics else max(period_s, IDLE_PERIOD_S)
         stop, _ = end.stop_requested(max(0.0, wait_s - (time.monotonic() - t0)))
         if stop:
@@ -148,6 +149,6 @@ def child_main(end: ChildEnd) -> None:
     if end.parent_alive:
         sink.tick(batches=feed.read())  # what the daemon wrote before it asked to stop
     sink.stop(5.0)
-    feed.publish(end)
+    feed.error_count()
     end.send("stopped", feed.status())
     end.close()
