@@ -139,7 +139,6 @@ class CorrectionEngine:
         self._warn_um = config.limits.warn_um
         self._error_um = config.limits.error_um
         self._geometry_only = config.temperatures.on_fault == "geometry_only"
-        self.last_temperature_fault: str | None = None
 
     # ------------------------------------------------------------------ hot path
     def _raw(
@@ -174,12 +173,9 @@ class CorrectionEngine:
         verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
         temps: dict[str, float] | None = verdict.temps_C
         if verdict.status is not None:
-            self.last_temperature_fault = verdict.detail
             if not self._geometry_only:
                 return self._raw(r, verdict.status, verdict.detail, unknown)
             temps = None  # geometry only: the grid flags the missing thermal terms
-        else:
-            self.last_temperature_fault = None
         if temps and (filters := loaded.grid.signal_filters):
             temps = self.temperatures.effective(temps, filters, now_s)
         inputs: dict[str, float] = {}
@@ -259,7 +255,6 @@ class CorrectionEngine:
         verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
         if verdict.status is not None:  # faults, geometry-only: the single path says why
             return [self.correct(r, now_s) for r in readings]
-        self.last_temperature_fault = None
         temps: dict[str, float] = verdict.temps_C
         if temps and (filters := loaded.grid.signal_filters):
             temps = self.temperatures.effective(temps, filters, now_s)
