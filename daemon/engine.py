@@ -36,7 +36,7 @@ from .metrics import Metrics
 from .sessionlog.logger import SessionLogger
 from .temperatures import TemperatureTable
 
-_GRID_STATUS = {
+GRID_STATUS = {
     "ok": Status.OK,
     "outside_volume": Status.OUTSIDE_VOLUME,
     "clamped_outside_volume": Status.OUTSIDE_VOLUME,
@@ -210,7 +210,7 @@ class CorrectionEngine:
         """The answer from the grid's corrected position ``c`` (mm), status ``label`` and U
         ``u`` (µm; None: the grid carries no U) of indicated ``p`` (mm): limits, applied
         terms, rounding to nm; U is kept only for a final status ``ok`` and finite values."""
-        status = _GRID_STATUS.get(label, Status.INTERNAL_ERROR)
+        status = GRID_STATUS.get(label, Status.INTERNAL_ERROR)
         unknown = None if u is None else U_UNKNOWN
         if not status.geometric_correction_applied:
             return self._raw(r, status, f"grid status {label}", unknown)

@@ -45,11 +45,6 @@ from .state import StateBoard
 from .temperatures import TemperatureTable
 
 _TICK_S = 0.1
-_COMPRESSION = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
 
 
 SIGTERM_STOP_S = 12.0
@@ -118,7 +113,7 @@ class DaemonService:
                     flush_period_s=cfg.mcap.flush_s,
                     metadata={"config": cfg.source},
                     on_error=self._on_mcap_error,
-                    compression=_COMPRESSION[cfg.mcap.compression],
+                    compression=CompressionType[cfg.mcap.compression.upper()],
                 )
                 if cfg.mcap.path.endswith(".mcap"):
                     first = self.logger.files[0] if self.logger.files else None
