@@ -188,15 +188,7 @@ class LiveSink(LogConsumer):
         """Create the channels and the server (the owner calls :meth:`tick` from then on).
         Raises :class:`LiveStartError` (one line) when ``foxglove-sdk`` is missing or the
         address cannot be bound; nothing is left running then."""
-        try:
-            from . import scene
-        except ImportError as exc:
-            raise LiveStartError(
-                f"live view: the foxglove-sdk package is not installed ({exc}); install it "
-                "with pip install 'cmm-comp[live]' or set live.enabled = false"
-            ) from None
-        self._scene_mod = scene
-        self._server = open_live_server(
+        self._server = open_live_server(  # the one clear error when foxglove-sdk is missing
             self.settings,
             STREAMED_TOPICS,
             SCENE_TOPIC,
@@ -204,6 +196,9 @@ class LiveSink(LogConsumer):
             self._name,
             self._topic_of,
         )
+        from . import scene  # imports foxglove: only once it is known to be there
+
+        self._scene_mod = scene
         self._scene_channel = self._server.scene
         self._channels = self._server.channels
         self._topics = frozenset(STREAMED_TOPICS)  # producers start taking messages now
