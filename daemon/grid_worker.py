@@ -31,8 +31,8 @@ from .grid_trust import GridTrust
 
 _WORKER_CODE = (  # the priority first, so the grid code is imported at it too
     "import sys\n"
-    "from cmm_comp.daemon.osthread import set_worker_priority\n"
-    "set_worker_priority(sys.argv[1])\n"
+    "from cmm_comp.daemon.osthread import lower_priority\n"
+    "lower_priority(sys.argv[1])\n"
     "from cmm_comp.daemon.grid_worker import main\n"
     "sys.exit(main(int(sys.argv[2])))"
 )
