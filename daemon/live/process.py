@@ -221,15 +221,17 @@ class LiveProcessSink(LiveSink):
         with self._check_lock:
             if self._dead:
                 return
+            # reported first (a stall seen before is superseded): whoever then sees
+            # live_up 0 finds the death reported
+            self._report(LiveDownError(str(body)))
             self._dead = True
-            self._down = None  # a stall seen before is superseded: report the death
-            self._went_down(str(body))
+            self._down = str(body)
             self._lose_in_flight()
 
     def _went_down(self, why: str) -> None:
         if self._down is None:
+            self._report(LiveDownError(why))  # first, as for a death
             self._down = why
-            self._report(LiveDownError(why))
 
     def _lose_in_flight(self) -> None:
         """The child is gone: what it never took from the ring is dropped (counted in
