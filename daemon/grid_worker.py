@@ -170,21 +170,22 @@ class ProcessGridLoader:
 
 def main(fd: int) -> int:
     """Worker process (the priority was set before the imports, :data:`_WORKER_CODE`): answer
-    load requests on the pipe ``fd`` until it closes."""
+    load requests on the pipe ``fd`` until it closes (the daemon stopped or died: an EOF, or a
+    reset when it left an answer unread)."""
     conn = Connection(fd)
-    while True:
-        try:
+    try:
+        while True:
             request = conn.recv()
-        except EOFError:
-            return 0
-        if request is None:  # a ping: the imports are done
-            conn.send(("ready", None))
-            continue
-        path, trust = request
-        try:
-            answer: tuple[str, Any] = ("ok", load_grid(path, trust))
-        except GridLoadError as exc:
-            answer = ("refused", str(exc))
-        except Exception as exc:  # a refusal with the reason, never a dead worker
-            answer = ("refused", f"{path}: grid loader failed: {exc!r}")
-        conn.send(answer)
+            if request is None:  # a ping: the imports are done
+                conn.send(("ready", None))
+                continue
+            path, trust = request
+            try:
+                answer: tuple[str, Any] = ("ok", load_grid(path, trust))
+            except GridLoadError as exc:
+                answer = ("refused", str(exc))
+            except Exception as exc:  # a refusal with the reason, never a dead worker
+                answer = ("refused", f"{path}: grid loader failed: {exc!r}")
+            conn.send(answer)
+    except (EOFError, OSError):
+        return 0
