@@ -241,6 +241,32 @@ class ChildEnd:
             return True, None
         return False, None
 
+    def serve(
+        self,
+        ready: Any,
+        tick: Callable[[], float],
+        status: Callable[[], Any],
+        status_period_s: float,
+    ) -> Any:
+        """The child's loop, for every child: a heartbeat, ``("ready", ready)`` to the parent,
+        then rounds of ``tick()`` (one round of work; returns how long to wait for the parent
+        after it, s), a heartbeat each, ``status()`` published at most every
+        ``status_period_s`` (s); until the parent asks to stop or is gone. Returns the
+        ``last`` of the stop request (None when the parent is gone)."""
+        self.ring.beat(time.monotonic_ns())
+        self.send("ready", ready)
+        next_status = 0.0
+        while True:
+            t0 = time.monotonic()
+            self.ring.beat(time.monotonic_ns())
+            wait_s = tick()
+            if t0 >= next_status:
+                next_status = t0 + status_period_s
+                self.publish(status())
+            stop, last = self.stop_requested(wait_s)
+            if stop:
+                return last
+
     def publish(self, status: Any) -> bool:
         """Publish ``status`` in the shared memory; False when its pickle is too large."""
         return self.ring.set_status(pickle.dumps(status, protocol=pickle.HIGHEST_PROTOCOL))

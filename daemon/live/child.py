@@ -131,21 +131,15 @@ def child_main(end: ChildEnd) -> None:
         end.send("start_error", exc)
         return
     period_s = 1.0 / settings.update_rate_hz
-    next_status = 0.0
-    end.ring.beat(time.monotonic_ns())
-    end.send("ready", sink.port)
-    while True:
+
+    def tick() -> float:
         t0 = time.monotonic()
-        end.ring.beat(time.monotonic_ns())
         feed.wanted()
         sink.tick(batches=feed.read())
-        if t0 >= next_status:
-            next_status = t0 + STATUS_PERIOD_S
-            end.publish(feed.status())
         wait_s = period_s if sink.wanted_topics else max(period_s, IDLE_PERIOD_S)
-        stop, _ = end.stop_requested(max(0.0, wait_s - (time.monotonic() - t0)))
-        if stop:
-            break
+        return max(0.0, wait_s - (time.monotonic() - t0))
+
+    end.serve(sink.port, tick, feed.status, STATUS_PERIOD_S)
     if end.parent_alive:
         sink.tick(batches=feed.read())  # what the daemon wrote before it asked to stop
     sink.stop(5.0)

@@ -332,25 +332,22 @@ def _serve(end: ChildEnd) -> None:
             # encoded) is a warning: counted, recorded, the log goes on
             end.send("error" if exc is writer.error else "warning", portable(exc))
 
+    def help_writer() -> float:
+        """The main thread writes too while the ring's backlog is high (for at most
+        :data:`REPORT_S`, then the loop reports and helps again)."""
+        if end.ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
+            until = time.monotonic() + REPORT_S
+            while end.ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
+                with lock:
+                    if not step() or time.monotonic() > until:
+                        break
+        forward_errors()
+        return POLL_S
+
     threading.Thread(target=idle_writer, name="mcap-writer", daemon=True).start()
-    end.send("ready", status())
-    last_report, last = 0.0, None
+    last = None
     try:
-        while True:
-            stop, last = end.stop_requested(POLL_S)
-            if end.ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
-                until = time.monotonic() + REPORT_S  # then report, and help again
-                while end.ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
-                    with lock:
-                        if not step() or time.monotonic() > until:
-                            break
-            forward_errors()
-            now = time.monotonic()
-            if now - last_report >= REPORT_S:
-                end.publish(status())
-                last_report = now
-            if stop:
-                break
+        last = end.serve(status(), help_writer, status, REPORT_S)
     finally:
         # what the daemon handed over before it stopped (or died), written and the file
         # finished here, at this thread's normal priority: the writer thread at SCHED_IDLE
