@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any, Self
 
 from ..sessionlog.encoding import message_struct, struct_json
-from ..sessionlog.logger import LogConsumer
+from ..sessionlog.logger import ReportingConsumer
 from .decimate import kept
 from .server import LiveServer, LiveStartError, open_live_server
 from .settings import LiveSection, host_problem
@@ -116,7 +116,7 @@ class LiveStats:
         }
 
 
-class LiveSink(LogConsumer):
+class LiveSink(ReportingConsumer):
     """Stream the session-log topics and ``/cmm/scene`` to Foxglove WebSocket clients.
 
     ``with LiveSink(settings).start() as live: live.log_many(topic, records); live.tick()``;
@@ -129,6 +129,8 @@ class LiveSink(LogConsumer):
     :param name: server name shown by clients.
     """
 
+    _report_level = logging.WARNING  # a problem of the view: the daemon corrects on
+
     def __init__(
         self,
         settings: LiveSection,
@@ -138,9 +140,9 @@ class LiveSink(LogConsumer):
         why = host_problem(settings.host, settings.allow_remote)
         if why is not None:
             raise LiveStartError(f"live.host = {why}")
+        super().__init__(on_error, "live view")
         self.settings = settings
         self._name = name
-        self._on_error = on_error
         self._lock = threading.Lock()
         self._batches: collections.deque[Batch] = collections.deque()
         self._queued = 0
@@ -172,7 +174,6 @@ class LiveSink(LogConsumer):
         self._last_scene = 0.0
         self._last_status = 0.0
         self._reported_drops = 0
-        self.error: BaseException | None = None
         self.upstream_dropped = 0
         """Messages dropped before they reached this sink (the daemon's queue, when this sink
         runs in the child of :class:`.process.LiveProcessSink`): told to clients with ours."""
@@ -518,13 +519,3 @@ class LiveSink(LogConsumer):
             )
         except Exception as exc:
             self._report(exc)
-
-    def _report(self, exc: BaseException) -> None:
-        if self.error is None:
-            self.error = exc
-        _log.warning("%s", exc)
-        if self._on_error is not None:
-            try:
-                self._on_error(exc)
-            except Exception:  # the handler's own failure is logged, never raised here
-                _log.exception("live view on_error handler raised")

@@ -229,21 +229,61 @@ class LogConsumer:
         self.close()
 
 
-class LoggerBase(LogConsumer):
-    """The part every writer shares: topic checks, drop counts per topic, error reporting (first
-    error kept, ``on_error`` called, never raised into the producer) and the lifecycle."""
+class ReportingConsumer(LogConsumer):
+    """A taker that reports its problems (the writers, the live view): the first error kept
+    (:attr:`error`), each one logged and passed to ``on_error``, whose own failure is logged,
+    never raised into the producer.
+
+    :param what: names the taker in the Python log lines.
+    """
+
+    _report_level = logging.ERROR
+    """The Python log level of :meth:`_report`."""
+
+    def __init__(self, on_error: Callable[[BaseException], None] | None, what: str) -> None:
+        self._on_error = on_error
+        self._what = what
+        self._error: BaseException | None = None
+
+    @property
+    def error(self) -> BaseException | None:
+        """The first error met, or None."""
+        return self._error
+
+    def _report(self, exc: BaseException) -> None:
+        """Keep the first error, log it, pass it to ``on_error``."""
+        if self._error is None:
+            self._error = exc
+        _log.log(self._report_level, "%s: %s", self._what, exc)
+        self._tell(exc)
+
+    def _report_quietly(self, exc: BaseException) -> None:
+        """Pass a problem that does not stop the work (a message that could not be encoded)
+        to ``on_error`` and the Python log, without keeping it as :attr:`error`."""
+        _log.warning("%s: %s", self._what, exc)
+        self._tell(exc)
+
+    def _tell(self, exc: BaseException) -> None:
+        if self._on_error is not None:
+            try:
+                self._on_error(exc)
+            except Exception:  # the handler's own failure is logged, never raised here
+                _log.exception("%s: its on_error handler raised", self._what)
+
+
+class LoggerBase(ReportingConsumer):
+    """The part every writer shares: topic checks, drop counts per topic, error reporting
+    (:class:`ReportingConsumer`) and the lifecycle."""
 
     def __init__(
         self, settings: LogSettings, on_error: Callable[[BaseException], None] | None, what: str
     ) -> None:
+        super().__init__(on_error, what)
         self._settings = settings
-        self._on_error = on_error
-        self._what = what
         self._drop_lock = threading.Lock()
         self._dropped = 0
         self._dropped_by: dict[str, int] = {}
         self._enqueued = 0
-        self._error: BaseException | None = None
         self._closed = False
 
     @staticmethod
@@ -263,28 +303,3 @@ class LoggerBase(LogConsumer):
     def _dropped_snapshot(self) -> dict[str, int]:
         with self._drop_lock:
             return dict(self._dropped_by)
-
-    @property
-    def error(self) -> BaseException | None:
-        """The first error the writer met, or None."""
-        return self._error
-
-    def _report(self, exc: BaseException) -> None:
-        """Keep the first error, log it, pass it to ``on_error`` (whose own failure is logged)."""
-        if self._error is None:
-            self._error = exc
-        _log.error("%s: %r", self._what, exc)
-        self._tell(exc)
-
-    def _report_quietly(self, exc: BaseException) -> None:
-        """Pass a problem that does not stop the log (a message that could not be encoded)
-        to ``on_error`` and the Python log, without making the logger unhealthy."""
-        _log.warning("%s: %s", self._what, exc)
-        self._tell(exc)
-
-    def _tell(self, exc: BaseException) -> None:
-        if self._on_error is not None:
-            try:
-                self._on_error(exc)
-            except Exception:  # the handler's own failure is logged, never raised here
-                _log.exception("MCAP on_error handler raised")
