@@ -432,9 +432,7 @@ class CanEndpoint(can.Listener):
         if len(ready) == 1:  # one reading (the paced case): no batch bookkeeping on its path
             reading = ready[0]
             answer = self.engine.correct(reading)  # = correct_many([reading])
-            one: list[can.Message] = []
-            latency_us = self._answer_frames(answer, reading.received_s, one)
-            self._send_msgs(one)
+            latency_us = self._send_answer(answer, reading.received_s)
             self.engine.count_many((answer,), (latency_us,))
             self._deferred.append((reading, answer, latency_us))
             return
@@ -477,10 +475,6 @@ class CanEndpoint(can.Listener):
         return latency_us
 
     def _send(self, frames: list[Any]) -> None:
-        bus = self._bus
-        if bus is None:
-            self.metrics.fault("send_without_bus", len(frames))
-            return
         self._send_msgs([encode_message(f, self.ids) for f in frames])
 
     def _send_msgs(self, msgs: list[can.Message]) -> None:
