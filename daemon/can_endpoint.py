@@ -178,7 +178,6 @@ class CanEndpoint(can.Listener):
         self._own_tx_ids = self.ids.daemon_tx_ids()  # received back: our own frames (echo)
         self._send_u = config.send_uncertainty
         self._stop = threading.Event()
-        self._connected = threading.Event()
         self._sent_state: DaemonState | None = None
         self._next_heartbeat = 0.0
         self.last_error: BaseException | None = None
@@ -190,10 +189,6 @@ class CanEndpoint(can.Listener):
         self._open()
         self._thread.start()
         return self
-
-    def wait_connected(self, timeout_s: float) -> bool:
-        """True once the bus is open (within ``timeout_s``)."""
-        return self._connected.wait(timeout_s)
 
     def stop(self, timeout_s: float = 2.0) -> bool:  # type: ignore[override]
         """Stop the thread and shut the bus down; True if the thread ended in ``timeout_s``."""
@@ -241,12 +236,10 @@ class CanEndpoint(can.Listener):
             self._bus = self._bus_factory(self.config, self.ids)
         except Exception as exc:
             self._bus = None
-            self._connected.clear()
             message = can_open_error(self.config, exc)
             self.on_error(exc, message)
             self.state.set_condition("can", message)
             return False
-        self._connected.set()
         self.state.set_condition("can", None)
         self.events.emit(
             "can_open", interface=self.config.interface, channel=str(self.config.channel)
@@ -256,7 +249,6 @@ class CanEndpoint(can.Listener):
 
     def _close(self) -> None:
         bus, self._bus = self._bus, None
-        self._connected.clear()
         if bus is not None:
             try:
                 bus.shutdown()
@@ -440,10 +432,8 @@ class CanEndpoint(can.Listener):
         if len(ready) == 1:  # one reading (the paced case): no batch bookkeeping on its path
             reading = ready[0]
             answer = self.engine.correct(reading)  # = correct_many([reading])
-            one: list[can.Message] = []
-            latency_us = self._answer_frames(answer, reading.received_s, one)
-            self._send_msgs(one)
-            self.engine.count(answer, latency_us)
+            latency_us = self._send_answer(answer, reading.received_s)
+            self.engine.count_many((answer,), (latency_us,))
             self._deferred.append((reading, answer, latency_us))
             return
         answers = self.engine.correct_many(ready)
@@ -485,10 +475,6 @@ class CanEndpoint(can.Listener):
         return latency_us
 
     def _send(self, frames: list[Any]) -> None:
-        bus = self._bus
-        if bus is None:
-            self.metrics.fault("send_without_bus", len(frames))
-            return
         self._send_msgs([encode_message(f, self.ids) for f in frames])
 
     def _send_msgs(self, msgs: list[can.Message]) -> None:

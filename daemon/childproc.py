@@ -4,11 +4,11 @@ a fresh interpreter, fed through shared memory (:mod:`.ring`), off the reply pat
 Parent side, :class:`ChildProcess`: starts ``python -c`` (exec, like the ``spawn`` start
 method; never ``fork``: the daemon has threads) with one end of a duplex pipe and the shared
 memory; sends the child its settings; waits for ``("ready", info)``. Then the daemon's
-producers copy pickled batches into the ring (:meth:`ChildProcess.write`: no thread, no system
-call, no wake-up; a full ring refuses, the caller drops and counts) and the child reads them at
-its own pace. The child publishes its status (a pickled object) and a heartbeat in the same
-shared memory (:meth:`ChildProcess.status`, :meth:`ChildProcess.stalled`). The pipe carries
-only rare events, child → parent: ``("error" | "warning", exception)``, the final
+producers copy pickled batches into the ring (``ChildProcess.ring.write``: no thread, no system
+call, no wake-up; a full ring refuses, the caller drops and counts; one writer at a time) and
+the child reads them at its own pace. The child publishes its status (a pickled object) and a
+heartbeat in the same shared memory (``ring.status()``, :meth:`ChildProcess.stalled`). The pipe
+carries only rare events, child → parent: ``("error" | "warning", exception)``, the final
 ``("stopped", status)``; one parent thread (``<name>-watch``) waits on it in a system call and
 wakes only for them, or when the child dies (EOF: reported once, with its exit code).
 
@@ -161,15 +161,6 @@ class ChildProcess:
             self._done.set()
 
     # ------------------------------------------------------------------ the producers
-    def write(self, data: bytes, messages: int) -> bool:
-        """Copy one record into the ring; False when it does not fit (the caller holds its
-        own lock: one writer at a time)."""
-        return self.ring.write(data, messages)
-
-    def status(self) -> Any:
-        """The newest status the child published, or None (none yet, or being written)."""
-        return self.ring.status()
-
     def stalled(self, limit_s: float) -> float | None:
         """Seconds since the child's last heartbeat when more than ``limit_s``, else None."""
         age_s = (time.monotonic_ns() - self.ring.heartbeat_ns()) / 1e9
@@ -208,10 +199,6 @@ class ChildProcess:
             return self._proc.wait(5.0)
         except subprocess.TimeoutExpired:  # pragma: no cover - a process stuck in the kernel
             return None
-
-    def close_ring(self) -> None:
-        """Unmap the shared memory (after :meth:`stop`; nothing may write any more)."""
-        self.ring.close()
 
 
 class ChildEnd:
@@ -253,6 +240,32 @@ class ChildEnd:
             self.parent_alive = False
             return True, None
         return False, None
+
+    def serve(
+        self,
+        ready: Any,
+        tick: Callable[[], float],
+        status: Callable[[], Any],
+        status_period_s: float,
+    ) -> Any:
+        """The child's loop, for every child: a heartbeat, ``("ready", ready)`` to the parent,
+        then rounds of ``tick()`` (one round of work; returns how long to wait for the parent
+        after it, s), a heartbeat each, ``status()`` published at most every
+        ``status_period_s`` (s); until the parent asks to stop or is gone. Returns the
+        ``last`` of the stop request (None when the parent is gone)."""
+        self.ring.beat(time.monotonic_ns())
+        self.send("ready", ready)
+        next_status = 0.0
+        while True:
+            t0 = time.monotonic()
+            self.ring.beat(time.monotonic_ns())
+            wait_s = tick()
+            if t0 >= next_status:
+                next_status = t0 + status_period_s
+                self.publish(status())
+            stop, last = self.stop_requested(wait_s)
+            if stop:
+                return last
 
     def publish(self, status: Any) -> bool:
         """Publish ``status`` in the shared memory; False when its pickle is too large."""

@@ -36,7 +36,7 @@ from .metrics import Metrics
 from .sessionlog.logger import SessionLogger
 from .temperatures import TemperatureTable
 
-_GRID_STATUS = {
+GRID_STATUS = {
     "ok": Status.OK,
     "outside_volume": Status.OUTSIDE_VOLUME,
     "clamped_outside_volume": Status.OUTSIDE_VOLUME,
@@ -139,7 +139,6 @@ class CorrectionEngine:
         self._warn_um = config.limits.warn_um
         self._error_um = config.limits.error_um
         self._geometry_only = config.temperatures.on_fault == "geometry_only"
-        self.last_temperature_fault: str | None = None
 
     # ------------------------------------------------------------------ hot path
     def _raw(
@@ -174,13 +173,10 @@ class CorrectionEngine:
         verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
         temps: dict[str, float] | None = verdict.temps_C
         if verdict.status is not None:
-            self.last_temperature_fault = verdict.detail
             if not self._geometry_only:
                 return self._raw(r, verdict.status, verdict.detail, unknown)
             temps = None  # geometry only: the grid flags the missing thermal terms
-        else:
-            self.last_temperature_fault = None
-        if temps and (filters := getattr(loaded.grid, "signal_filters", None)):
+        if temps and (filters := loaded.grid.signal_filters):
             temps = self.temperatures.effective(temps, filters, now_s)
         inputs: dict[str, float] = {}
         for key, sign in zip(_DIR_KEYS, r.directions, strict=True):
@@ -194,11 +190,8 @@ class CorrectionEngine:
         u: tuple[float, float, float] | None = None
         if unknown is not None:  # the grid carries U: correction and U in one call
             c, label, u = grid.correct_point_with_uncertainty(p, stylus, temps, inputs or None)
-        elif hasattr(grid, "correct_point"):  # the grid's single-reading fast path
-            c, label = grid.correct_point(p, stylus, temps, inputs or None)
         else:
-            out, st = grid.correct(np.array([p]), np.array(stylus), temps, inputs or None)
-            c, label = tuple(out[0].tolist()), str(st[0])
+            c, label = grid.correct_point(p, stylus, temps, inputs or None)
         has_dir = r.directions != (0, 0, 0)
         return self._finish(r, p, c, label, loaded, temps, has_dir, r.probe is not None, u)
 
@@ -217,7 +210,7 @@ class CorrectionEngine:
         """The answer from the grid's corrected position ``c`` (mm), status ``label`` and U
         ``u`` (µm; None: the grid carries no U) of indicated ``p`` (mm): limits, applied
         terms, rounding to nm; U is kept only for a final status ``ok`` and finite values."""
-        status = _GRID_STATUS.get(label, Status.INTERNAL_ERROR)
+        status = GRID_STATUS.get(label, Status.INTERNAL_ERROR)
         unknown = None if u is None else U_UNKNOWN
         if not status.geometric_correction_applied:
             return self._raw(r, status, f"grid status {label}", unknown)
@@ -257,14 +250,13 @@ class CorrectionEngine:
 
     def _correct_batch(self, readings: Sequence[Reading], now_s: float) -> list[Answer]:
         loaded = self.grids.current
-        if loaded is None or not hasattr(loaded.grid, "correct_point"):
+        if loaded is None:
             return [self.correct(r, now_s) for r in readings]
         verdict = self.temperatures.inputs(self.required_roles(loaded), now_s)
         if verdict.status is not None:  # faults, geometry-only: the single path says why
             return [self.correct(r, now_s) for r in readings]
-        self.last_temperature_fault = None
         temps: dict[str, float] = verdict.temps_C
-        if temps and (filters := getattr(loaded.grid, "signal_filters", None)):
+        if temps and (filters := loaded.grid.signal_filters):
             temps = self.temperatures.effective(temps, filters, now_s)
         answers: list[Answer | None] = [None] * len(readings)
         with_u = loaded.has_uncertainty
@@ -355,17 +347,12 @@ class CorrectionEngine:
     # ------------------------------------------------------------------ after the reply
     def record(self, reading: Reading, answer: Answer, latency_us: float) -> None:
         """Count, log to MCAP and report one answered reading (call after replying)."""
-        self.count(answer, latency_us)
+        self.count_many((answer,), (latency_us,))
         self.report_many(((reading, answer, latency_us),))
 
-    def count(self, answer: Answer, latency_us: float) -> None:
-        """The counters of one answer (cheap: right after replying, so they are never behind
-        what the peer has seen)."""
-        warning = bool(answer.detail) and answer.status == Status.OK
-        self.metrics.reading_answered(answer.status.label, latency_us, warning)
-
     def count_many(self, answers: Sequence[Answer], latencies_us: Sequence[float]) -> None:
-        """:meth:`count` of each answer (with its latency, µs), under one lock."""
+        """The counters of the answers (with their latencies, µs), under one lock (cheap:
+        right after replying, so they are never behind what the peer has seen)."""
         self.metrics.readings_answered(
             [
                 (a.status.label, lat, bool(a.detail) and a.status == Status.OK)

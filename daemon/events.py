@@ -27,6 +27,32 @@ def _logfmt_value(value: Any) -> str:
     return text
 
 
+class Throttle:
+    """At most one pass per key every ``interval_s`` (s; 0: every time); each pass tells how
+    many of its key were held back since the one before. The daemon's one rate limit (event
+    lines, Modbus log lines, the writer's and the live view's error reports); not thread-safe:
+    callers that share one hold their own lock."""
+
+    def __init__(self, interval_s: float) -> None:
+        self.interval_s = interval_s
+        self._last: dict[object, float] = {}
+        self._held: dict[object, int] = {}
+
+    def passes(self, key: object = None) -> int | None:
+        """None when ``key`` is held back now (counted), else how many were held back before."""
+        now = time.monotonic()
+        last = self._last.get(key)
+        if last is not None and now - last < self.interval_s:
+            self._held[key] = self._held.get(key, 0) + 1
+            return None
+        self._last[key] = now
+        return self._held.pop(key, 0)
+
+    def flush(self, key: object = None) -> int:
+        """How many of ``key`` are held back now (the count starts again)."""
+        return self._held.pop(key, 0)
+
+
 class EventLog:
     """Write events as single lines to ``stream`` (None = discard).
 
@@ -47,24 +73,18 @@ class EventLog:
         self._stream = stream
         self._fmt = fmt
         self._min_level = LEVELS[level]
-        self._interval_s = 1.0 / max_per_s if max_per_s > 0 else 0.0
+        self._throttle = Throttle(1.0 / max_per_s if max_per_s > 0 else 0.0)
         self._lock = threading.Lock()
-        self._last: dict[str, float] = {}
-        self._suppressed: dict[str, int] = {}
         self.write_errors = 0
 
     def emit(self, event: str, level: str = "info", **fields: Any) -> None:
         """Write one event line (unless below the level or rate-limited)."""
         if LEVELS[level] < self._min_level or self._stream is None:
             return
-        now = time.monotonic()
         with self._lock:
-            last = self._last.get(event)
-            if last is not None and now - last < self._interval_s:
-                self._suppressed[event] = self._suppressed.get(event, 0) + 1
+            suppressed = self._throttle.passes(event)
+            if suppressed is None:
                 return
-            self._last[event] = now
-            suppressed = self._suppressed.pop(event, 0)
             record: dict[str, Any] = {
                 "ts": datetime.now(UTC).isoformat(),
                 "level": level,

@@ -37,6 +37,17 @@ if TYPE_CHECKING:
     from .config import GridSection
 
 
+NO_KEY = (
+    "grid.public_key is not set, so a grid's signature cannot be verified (set it: `cmm-comp "
+    "grid keygen` makes a key pair, `cmm-comp daemon init` all of it; or grid.allow_unsigned = "
+    "true)"
+)
+NO_MACHINE = (
+    "no machine bound: set grid.machine (the machine TOML) or grid.expect_machine_sha256, or "
+    "grid.allow_any_machine = true"
+)
+
+
 class GridTrustError(GridFileError):
     """A grid is not trusted (unsigned, bad signature, other machine, volume too large)."""
 
@@ -99,6 +110,28 @@ class GridTrust:
             return TrustedMachine(self.expect_machine_sha256, "grid.expect_machine_sha256")
         return None
 
+    def setting_problems(self) -> tuple[TrustedMachine | None, dict[str, str]]:
+        """The machine (:meth:`resolve_machine`) and the problems of the settings themselves,
+        by the check they make unusable (``"machine"``: a machine file that does not read,
+        none bound; ``"signature"``: no key set, a key that does not load). Every grid would
+        be refused for each; :meth:`problems` leaves such a check out."""
+        found: dict[str, str] = {}
+        machine = None
+        try:
+            machine = self.resolve_machine()
+        except GridTrustError as exc:
+            found["machine"] = str(exc)
+        if machine is None and "machine" not in found and not self.allow_any_machine:
+            found["machine"] = NO_MACHINE
+        if not self.public_key and not self.allow_unsigned:
+            found["signature"] = NO_KEY
+        elif self.public_key:
+            try:
+                load_public_key(self.public_key)
+            except CmmCompError as exc:
+                found["signature"] = f"grid.public_key: {exc}"
+        return machine, found
+
     def check(self, contents: GridContents, machine: TrustedMachine | None) -> str:
         """Refuse (GridTrustError) unless the grid is trusted; return the signer's key id
         (empty when unsigned grids are allowed and none was verified)."""
@@ -134,10 +167,7 @@ class GridTrust:
         where = contents.source
         if not self.public_key:
             if not self.allow_unsigned:
-                raise GridTrustError(
-                    f"{where}: grid.public_key is not set, so the grid's signature cannot be "
-                    "verified (set it, or grid.allow_unsigned = true)"
-                )
+                raise GridTrustError(f"{where}: {NO_KEY}")
             signature_info(contents)  # still refuse a malformed signature member
             return ""
         key = load_public_key(self.public_key)  # GridSignatureError names the key file
@@ -152,10 +182,7 @@ class GridTrust:
         built_for = built_for if isinstance(built_for, dict) else {}
         if machine is None:
             if not self.allow_any_machine:
-                raise GridTrustError(
-                    f"{where}: no machine bound: set grid.machine (the machine TOML) or "
-                    "grid.expect_machine_sha256, or grid.allow_any_machine = true"
-                )
+                raise GridTrustError(f"{where}: {NO_MACHINE}")
             return
         if built_for.get("sha256") != machine.sha256:
             raise GridTrustError(

@@ -4,60 +4,37 @@ Reading a grid, checking its trust and building its interpolation tables takes 6
 a second of CPU, much of it inside compiled calls that hold Python's GIL for tens of ms; in a
 thread of the daemon that shows up directly in the reply latency. :class:`ProcessGridLoader`
 runs :func:`.grid_slot.load_grid` (the same checks, the same code) in one worker process
-(``python -m cmm_comp.daemon.grid_worker``, started on the first reload, kept for the next ones,
-at Linux ``SCHED_IDLE``, nice 19 where that is missing) and returns the built, checked :class:`.grid_slot.LoadedGrid`
+(a fresh interpreter, started on the first reload, kept for the next ones, at Linux
+``SCHED_IDLE``, nice 19 where that is missing) and returns the built, checked :class:`.grid_slot.LoadedGrid`
 (pickled: ~2 ms to unpickle a 19×23×16 grid). A worker that dies is reported as a refused
-reload (the old grid stays) and replaced on the next one; it exits when its stdin closes (the
-daemon stopped or died).
+reload (the old grid stays) and replaced on the next one; it exits when its end of the pipe
+closes (the daemon stopped or died).
 
-Protocol on the worker's stdin/stdout: frames of an 8-byte little-endian length and a pickle;
-requests ``(path, GridTrust | None)``, answers ``("ok", LoadedGrid)`` or ``("refused", message)``;
-the request ``None`` (a ping) is answered ``("ready", None)``: the worker's imports are done.
+Protocol over a ``multiprocessing`` pipe (pickles): requests ``(path, GridTrust | None)``,
+answers ``("ok", LoadedGrid)`` or ``("refused", message)``; the request ``None`` (a ping) is
+answered ``("ready", None)``: the worker's imports are done.
 """
 
 from __future__ import annotations
 
-import contextlib
+import multiprocessing
 import pickle
-import select
-import struct
 import subprocess
 import sys
 import threading
+from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from .grid_slot import GridLoadError, LoadedGrid, load_grid
 from .grid_trust import GridTrust
-from .osthread import set_worker_priority
-
-_LENGTH = struct.Struct("<Q")  # frame length, bytes
-
-
-def _send(fh: IO[bytes], obj: Any) -> None:
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    fh.write(_LENGTH.pack(len(data)))
-    fh.write(data)
-    fh.flush()
-
-
-def _recv(fh: IO[bytes]) -> Any:
-    head = fh.read(_LENGTH.size)
-    if len(head) < _LENGTH.size:
-        raise EOFError("grid worker pipe closed")
-    (size,) = _LENGTH.unpack(head)
-    data = fh.read(size)
-    if len(data) < size:
-        raise EOFError("grid worker pipe closed mid-frame")
-    return pickle.loads(data)
-
 
 _WORKER_CODE = (  # the priority first, so the grid code is imported at it too
     "import sys\n"
-    "from cmm_comp.daemon.osthread import set_worker_priority\n"
-    "set_worker_priority(sys.argv[1])\n"
+    "from cmm_comp.daemon.osthread import lower_priority\n"
+    "lower_priority(sys.argv[1])\n"
     "from cmm_comp.daemon.grid_worker import main\n"
-    "sys.exit(main())"
+    "sys.exit(main(int(sys.argv[2])))"
 )
 IDLE_GRACE_S = 3.0
 """How long a reload may wait for the ``SCHED_IDLE`` worker before it is redone by a worker at
@@ -79,6 +56,7 @@ class ProcessGridLoader:
     def __init__(self, idle_grace_s: float = IDLE_GRACE_S) -> None:
         self._lock = threading.Lock()
         self._proc: subprocess.Popen[bytes] | None = None
+        self._conn: Connection | None = None
         self._priority = "idle"
         self._stopped = False
         self._ready = False  # the worker answered a ping: its imports are done
@@ -87,19 +65,28 @@ class ProcessGridLoader:
         self.escalations = 0
         """Reloads that had to be redone at normal priority (the machine was saturated)."""
 
-    def _worker(self, priority: str) -> subprocess.Popen[bytes]:
+    def _worker(self, priority: str) -> Connection:
         if self._proc is not None and (self._proc.poll() is not None or self._priority != priority):
-            self._end(self._proc, 1.0)
-            self._proc = None
-        if self._proc is None:
-            self._proc = subprocess.Popen(
-                [sys.executable, "-c", _WORKER_CODE, priority],
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-            )
+            self._end(1.0)
+        if self._proc is None or self._conn is None:
+            ours, theirs = multiprocessing.Pipe()
+            fd = theirs.fileno()
+            try:
+                self._proc = subprocess.Popen(
+                    [sys.executable, "-c", _WORKER_CODE, priority, str(fd)],
+                    pass_fds=(fd,),
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL,  # a stray print never reaches the event log
+                )
+            except BaseException:
+                ours.close()
+                raise
+            finally:
+                theirs.close()
+            self._conn = ours
             self._priority = priority
             self._ready = self._ping_sent = False
-        return self._proc
+        return self._conn
 
     def prewarm(self, wait_s: float = 0.0) -> bool:
         """Start the worker now (it imports the grid code at low priority, so the first reload
@@ -109,22 +96,18 @@ class ProcessGridLoader:
         with self._lock:
             if self._stopped:
                 return False
-            proc = self._worker("idle")
+            conn = self._worker("idle")
             if wait_s <= 0.0 or self._ready:
                 return self._ready
-            assert proc.stdin is not None and proc.stdout is not None
             try:
                 if not self._ping_sent:
-                    _send(proc.stdin, None)
+                    conn.send(None)
                     self._ping_sent = True
-                ready, _, _ = select.select([proc.stdout], [], [], wait_s)
-                if ready:
-                    self._ready = _recv(proc.stdout)[0] == "ready"
+                if conn.poll(wait_s):
+                    self._ready = conn.recv()[0] == "ready"
                     self._ping_sent = False
             except (OSError, EOFError, pickle.UnpicklingError, ValueError):
-                self._end(proc, 1.0)
-                self._proc = None
-                self._ping_sent = False
+                self._end(1.0)
             return self._ready
 
     def __call__(self, path: str | Path, trust: GridTrust | None) -> LoadedGrid:
@@ -146,75 +129,63 @@ class ProcessGridLoader:
     ) -> tuple[str, Any]:
         """One request to a worker at ``priority``; ``("starved", None)`` when no answer
         began within ``grace_s`` (s; None: wait as long as it takes)."""
-        proc = self._worker(priority)
-        assert proc.stdin is not None and proc.stdout is not None
+        conn = self._worker(priority)
         try:
-            _send(proc.stdin, (str(path), trust))
+            conn.send((str(path), trust))
             if self._ping_sent:  # first the answer to a ping prewarm() stopped waiting for
-                if grace_s is not None and not select.select([proc.stdout], [], [], grace_s)[0]:
+                if not conn.poll(grace_s):
                     return "starved", None
-                _recv(proc.stdout)
+                conn.recv()
                 self._ping_sent = False
-            if grace_s is not None:
-                ready, _, _ = select.select([proc.stdout], [], [], grace_s)
-                if not ready:
-                    return "starved", None
-            kind, value = _recv(proc.stdout)
+            if not conn.poll(grace_s):
+                return "starved", None
+            kind, value = conn.recv()
         except (OSError, EOFError, pickle.UnpicklingError, ValueError) as exc:
-            self._end(proc, 1.0)
-            self._proc = None
+            self._end(1.0)
             raise GridLoadError(
                 f"{path}: the grid loader process failed ({exc}); old grid kept"
             ) from None
         return str(kind), value
 
-    @staticmethod
-    def _end(proc: subprocess.Popen[bytes], timeout_s: float) -> bool:
-        if proc.stdin is not None:
-            with contextlib.suppress(OSError):
-                proc.stdin.close()
-        try:
-            proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        if proc.stdout is not None:
-            proc.stdout.close()
+    def _end(self, timeout_s: float) -> bool:
+        """End the worker: its pipe closed (it exits), killed after ``timeout_s`` (s)."""
+        proc, conn, self._proc, self._conn = self._proc, self._conn, None, None
+        self._ping_sent = False
+        if conn is not None:
+            conn.close()
+        if proc is not None:
+            try:
+                proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
         return True
 
     def stop(self, timeout_s: float = 5.0) -> bool:
-        """End the worker (it exits when its stdin closes; killed after ``timeout_s``)."""
+        """End the worker (it exits when its pipe closes; killed after ``timeout_s``)."""
         self._stopped = True
         with self._lock:  # after the load in progress, if any
-            proc, self._proc = self._proc, None
-        return True if proc is None else self._end(proc, timeout_s)
+            return self._end(timeout_s)
 
 
-def main() -> int:
-    """Worker process (argument: ``idle`` or ``normal``): answer load requests until stdin
-    closes."""
-    # the priority was set before the imports (_WORKER_CODE); run as a module, set it here
-    if __name__ == "__main__":
-        set_worker_priority(sys.argv[1] if len(sys.argv) > 1 else "idle")
-    requests, answers = sys.stdin.buffer, sys.stdout.buffer
-    sys.stdout = sys.stderr  # a stray print must not corrupt the answer stream
-    while True:
-        try:
-            request = _recv(requests)
-        except EOFError:
-            return 0
-        if request is None:  # a ping: the imports are done
-            _send(answers, ("ready", None))
-            continue
-        path, trust = request
-        try:
-            answer: tuple[str, Any] = ("ok", load_grid(path, trust))
-        except GridLoadError as exc:
-            answer = ("refused", str(exc))
-        except Exception as exc:  # a refusal with the reason, never a dead worker
-            answer = ("refused", f"{path}: grid loader failed: {exc!r}")
-        _send(answers, answer)
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def main(fd: int) -> int:
+    """Worker process (the priority was set before the imports, :data:`_WORKER_CODE`): answer
+    load requests on the pipe ``fd`` until it closes (the daemon stopped or died: an EOF, or a
+    reset when it left an answer unread)."""
+    conn = Connection(fd)
+    try:
+        while True:
+            request = conn.recv()
+            if request is None:  # a ping: the imports are done
+                conn.send(("ready", None))
+                continue
+            path, trust = request
+            try:
+                answer: tuple[str, Any] = ("ok", load_grid(path, trust))
+            except GridLoadError as exc:
+                answer = ("refused", str(exc))
+            except Exception as exc:  # a refusal with the reason, never a dead worker
+                answer = ("refused", f"{path}: grid loader failed: {exc!r}")
+            conn.send(answer)
+    except (EOFError, OSError):
+        return 0

@@ -39,7 +39,7 @@ from cmm_comp.protocol.modbus_devid import OBJ_GRID_SHA256, object_value
 
 from .config import ModbusSection
 from .engine import CorrectionEngine, Reading
-from .events import EventLog
+from .events import EventLog, Throttle
 from .metrics import Metrics
 from .osthread import name_os_thread
 from .sessionlog.logger import SessionLogger
@@ -72,20 +72,13 @@ class LogThrottle:
 
     def __init__(self, events: EventLog, interval_s: float = LOG_INTERVAL_S) -> None:
         self.events = events
-        self.interval_s = interval_s
-        self._last: dict[str, float] = {}
-        self._folded: dict[str, int] = {}
+        self._throttle = Throttle(interval_s)
 
     def emit(self, kind: str, level: str, **fields: Any) -> None:
         """Log ``kind`` now, or count it for the next line of that kind."""
-        now = time.monotonic()
-        last = self._last.get(kind)
-        if last is not None and now - last < self.interval_s:
-            self._folded[kind] = self._folded.get(kind, 0) + 1
-            return
-        self._last[kind] = now
-        folded = self._folded.pop(kind, 0)
-        self.events.emit(kind, level, **fields, not_logged=folded)
+        folded = self._throttle.passes(kind)
+        if folded is not None:
+            self.events.emit(kind, level, **fields, not_logged=folded)
 
 
 class _Listener(MbapListener):

@@ -56,7 +56,12 @@ def lower_priority(priority: str) -> str:
     """Lower the calling thread's CPU priority (Linux: policy and nice are per thread);
     returns what took effect. ``idle``: Linux ``SCHED_IDLE`` (a woken normal task always
     preempts it, so the writer never delays the daemon's reply path), else nice 19 where
-    SCHED_IDLE is missing; ``normal``: unchanged."""
+    SCHED_IDLE is missing; ``normal``: unchanged (the grid loader redoing a reload the idle
+    worker could not do on a saturated machine). Why not nice 19 alone: measured over
+    ``udp_multicast`` with SIGHUPs every ~0.2 s (a grid whose load takes ~0.5 s of CPU, so the
+    loader never rests), with the loader at nice 19 the daemon's reply p50 rose from 279 to
+    461 µs and its p99 4.8×; at ``SCHED_IDLE`` reloads made no difference (``bench_daemon.py``,
+    same run)."""
     if priority == "normal":
         return "normal"
     try:
@@ -69,14 +74,3 @@ def lower_priority(priority: str) -> str:
         return "nice 19"
     except (AttributeError, OSError):
         return "normal"
-
-
-def set_worker_priority(priority: str) -> str:
-    """The grid loader process's priority, for the calling thread and the threads it starts:
-    ``idle`` (:func:`lower_priority`) or ``normal`` (unchanged: a reload the idle worker
-    could not do on a saturated machine). Measured over ``udp_multicast`` with SIGHUPs every
-    ~0.2 s (a grid whose load takes ~0.5 s of CPU, so the worker never rests): with the worker
-    at nice 19 the daemon's reply p50 rose from 279 to 461 µs and its p99 4.8×; at
-    ``SCHED_IDLE`` reloads made no difference (``bench_daemon.py``, same run). Returns what
-    took effect."""
-    return lower_priority("idle") if priority == "idle" else "normal"

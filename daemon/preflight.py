@@ -102,12 +102,12 @@ def _check_grid(config: DaemonConfig, out: Preflight) -> None:
         return
     trust = GridTrust.from_section(g)
     before = len(out.problems)
-    machine, machine_ok = _trusted_machine(trust, out, where)
-    key_ok = _key_usable(trust, out, where)
+    machine, unusable = trust.setting_problems()
+    out.problems += [f"{where}: {line}" for p in unusable.values() for line in p.splitlines()]
     if not Path(g.path).is_file():
         out.problems.append(f"{where}: grid.path {g.path}: no such grid file")
     else:
-        _check_grid_file(Path(g.path), trust, machine, machine_ok, key_ok, out)
+        _check_grid_file(Path(g.path), trust, machine, unusable, out)
     if len(out.problems) > before:
         out.problems[-1] += f"; {NOT_CORRECTING}"
         return
@@ -121,49 +121,11 @@ def _check_grid(config: DaemonConfig, out: Preflight) -> None:
         out.warnings.append(f"{where}: {note}")
 
 
-def _trusted_machine(
-    trust: GridTrust, out: Preflight, where: str
-) -> tuple[TrustedMachine | None, bool]:
-    try:
-        machine = trust.resolve_machine()
-    except CmmCompError as exc:
-        out.problems += [f"{where}: {line}" for line in str(exc).splitlines()]
-        return None, False
-    if machine is None and not trust.allow_any_machine:
-        out.problems.append(
-            f"{where}: no machine bound: set grid.machine (the machine TOML) or "
-            "grid.expect_machine_sha256 (or grid.allow_any_machine = true): every grid is refused"
-        )
-        return None, False
-    return machine, True
-
-
-def _key_usable(trust: GridTrust, out: Preflight, where: str) -> bool:
-    from cmm_comp.compensation.grid.signing import load_public_key
-
-    if not trust.public_key:
-        if trust.allow_unsigned:
-            return True
-        out.problems.append(
-            f"{where}: grid.public_key is not set (and grid.allow_unsigned is false): every "
-            "grid is refused; `cmm-comp grid keygen` makes a key pair, `cmm-comp daemon init` "
-            "all of it"
-        )
-        return False
-    try:
-        load_public_key(trust.public_key)
-    except CmmCompError as exc:
-        out.problems.append(f"{where}: grid.public_key: {exc}")
-        return False
-    return True
-
-
 def _check_grid_file(
     path: Path,
     trust: GridTrust,
     machine: TrustedMachine | None,
-    machine_ok: bool,
-    key_ok: bool,
+    unusable: dict[str, str],
     out: Preflight,
 ) -> None:
     from cmm_comp.compensation.grid.file import read_grid_contents
@@ -173,7 +135,9 @@ def _check_grid_file(
     except (CmmCompError, OSError) as exc:
         out.problems.append(str(exc) if str(path) in str(exc) else f"{path}: {exc}")
         return
-    out.problems += trust.problems(contents, machine, key_ok, machine_ok)
+    out.problems += trust.problems(
+        contents, machine, "signature" not in unusable, "machine" not in unusable
+    )
 
 
 def _check_mcap(config: DaemonConfig, out: Preflight) -> None:

@@ -5,9 +5,11 @@ threads inherit it: they run only on CPU time nothing else wants).
 
 Its loop runs ``update_rate_hz`` times a second (:data:`IDLE_PERIOD_S` while no client watches):
 a heartbeat and the watched topics into the shared memory, the daemon's records from the ring
-into an ordinary :class:`LiveSink`, :meth:`LiveSink.tick` (decimate, encode, send, scene), and
-every :data:`STATUS_PERIOD_S` its status ``(LiveStats, errors so far, the newest error
-texts)``. It ends when the daemon asks, or when the daemon is gone.
+straight into the update of an ordinary :class:`LiveSink` (:meth:`LiveSink.tick`: decimate,
+encode, send, scene; its own queue stays empty), and
+every :data:`STATUS_PERIOD_S` its status (:class:`LiveStats`); errors go to the daemon as
+``warning`` events on the pipe, at most :data:`ERRORS_PER_S` a second (the next one says how
+many were held back). It ends when the daemon asks, or when the daemon is gone.
 """
 
 from __future__ import annotations
@@ -16,22 +18,22 @@ import logging
 import pickle
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import replace
-from typing import Any
 
 from ..childproc import ChildEnd
+from ..events import Throttle
 from ..osthread import lower_priority, name_os_thread
-from ..ring import SharedRing
 from .server import LiveStartError
-from .sink import TOPIC_BITS, LiveSink
+from .sink import TOPIC_BITS, Batch, LiveSink, LiveStats
 
 STATUS_PERIOD_S = 0.1
 """The child publishes its status this often, s."""
 IDLE_PERIOD_S = 0.1
 """The child's loop period while no client watches anything (else ``1 / update_rate_hz``), s:
 fewer wake-ups beside the daemon; a new subscriber is seen within it."""
-ERROR_TEXTS = 8
-"""Newest error texts kept in the status (older ones are only counted)."""
+ERRORS_PER_S = 10.0
+"""Errors passed to the daemon per second at most (the rest are counted, and said)."""
 ERROR_TEXT_MAX = 300
 SDK_LOG_LINES_PER_S = 1.0
 """Lines of the SDK's own log the child writes per second at most (to stderr, the daemon's)."""
@@ -46,21 +48,14 @@ class RateLimit(logging.Filter):
 
     def __init__(self, per_s: float) -> None:
         super().__init__()
-        self._interval_s = 1.0 / per_s
-        self._next = 0.0
-        self._suppressed = 0
+        self._throttle = Throttle(1.0 / per_s)
 
     def filter(self, record: logging.LogRecord) -> bool:
-        now = time.monotonic()
-        if now < self._next:
-            self._suppressed += 1
-            return False
-        self._next = now + self._interval_s
-        if self._suppressed:
-            record.msg = f"{record.getMessage()} ({self._suppressed} similar lines suppressed)"
+        suppressed = self._throttle.passes()
+        if suppressed:
+            record.msg = f"{record.getMessage()} ({suppressed} similar lines suppressed)"
             record.args = None
-            self._suppressed = 0
-        return True
+        return suppressed is not None
 
 
 def limit_sdk_log(per_s: float = SDK_LOG_LINES_PER_S) -> None:
@@ -76,46 +71,47 @@ def limit_sdk_log(per_s: float = SDK_LOG_LINES_PER_S) -> None:
 
 
 class _Feed:
-    """The child's side of the ring: records into the sink, its status out."""
+    """The child's side of the ring: the daemon's records out of it, its status and errors
+    back."""
 
-    def __init__(self, ring: SharedRing, sink: LiveSink) -> None:
-        self.ring = ring
+    def __init__(self, end: ChildEnd, sink: LiveSink) -> None:
+        self.end = end
         self.sink = sink
         self.taken = 0
         self.bad = 0
-        self.errors = 0
-        self.texts: list[str] = []
+        self._errors = Throttle(1.0 / ERRORS_PER_S)
 
     def error(self, exc: BaseException) -> None:
-        self.errors += 1
-        self.texts = [*self.texts[-(ERROR_TEXTS - 1) :], str(exc)[:ERROR_TEXT_MAX]]
+        held = self._errors.passes()
+        if held is not None:
+            more = f" ({held} more errors before this one)" if held else ""
+            self.end.send("warning", f"{str(exc)[:ERROR_TEXT_MAX]}{more}")
 
-    def read(self) -> None:
-        for n, data in self.ring.read():
+    def error_count(self) -> None:
+        """Tell the daemon how many errors were held back at the end."""
+        held = self._errors.flush()
+        if held:
+            self.end.send("warning", f"live view: {held} more errors in its process")
+
+    def read(self) -> Iterator[Batch]:
+        """The daemon's batches waiting in the ring (for :meth:`LiveSink.tick`)."""
+        for n, data in self.end.ring.read():
             self.taken += n
             try:
-                topic, payloads, t_ns = pickle.loads(data)
+                yield pickle.loads(data)
             except Exception as exc:  # cannot happen with the daemon's pickles; counted
                 self.bad += n
                 self.error(ValueError(f"live view: a record could not be read: {exc!r}"))
-                continue
-            self.sink.log_many(topic, payloads, t_ns)
 
-    def status(self) -> tuple[Any, int, list[str]]:
+    def status(self) -> LiveStats:
         st = self.sink.stats()
-        st = replace(st, offered=self.taken, encode_errors=st.encode_errors + self.bad)
-        return st, self.errors, list(self.texts)
-
-    def publish(self, end: ChildEnd) -> None:
-        status = self.status()
-        if not end.publish(status):
-            end.publish((status[0], status[1], []))
+        return replace(st, offered=self.taken, encode_errors=st.encode_errors + self.bad)
 
     def wanted(self) -> None:
         mask = 0
         for topic in self.sink.wanted_topics:
             mask |= TOPIC_BITS.get(topic, 0)
-        self.ring.set_wanted(mask)
+        self.end.ring.set_wanted(mask)
 
 
 def child_main(end: ChildEnd) -> None:
@@ -129,31 +125,24 @@ def child_main(end: ChildEnd) -> None:
     feed: _Feed
     try:
         sink = LiveSink(settings, on_error=lambda exc: feed.error(exc), name=name)
-        feed = _Feed(end.ring, sink)
+        feed = _Feed(end, sink)
         sink.start()
     except LiveStartError as exc:
         end.send("start_error", exc)
         return
     period_s = 1.0 / settings.update_rate_hz
-    next_status = 0.0
-    end.ring.beat(time.monotonic_ns())
-    end.send("ready", sink.port)
-    while True:
+
+    def tick() -> float:
         t0 = time.monotonic()
-        end.ring.beat(time.monotonic_ns())
         feed.wanted()
-        feed.read()
-        sink.tick()
-        if t0 >= next_status:
-            next_status = t0 + STATUS_PERIOD_S
-            feed.publish(end)
+        sink.tick(batches=feed.read())
         wait_s = period_s if sink.wanted_topics else max(period_s, IDLE_PERIOD_S)
-        stop, _ = end.stop_requested(max(0.0, wait_s - (time.monotonic() - t0)))
-        if stop:
-            break
+        return max(0.0, wait_s - (time.monotonic() - t0))
+
+    end.serve(sink.port, tick, feed.status, STATUS_PERIOD_S)
     if end.parent_alive:
-        feed.read()  # what the daemon wrote before it asked to stop
+        sink.tick(batches=feed.read())  # what the daemon wrote before it asked to stop
     sink.stop(5.0)
-    feed.publish(end)
+    feed.error_count()
     end.send("stopped", feed.status())
     end.close()

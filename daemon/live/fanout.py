@@ -14,23 +14,19 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..sessionlog.logger import LoggerStats, Payload, SessionLogger, Stoppable
+from ..sessionlog.logger import LogConsumer, LoggerStats, Payload, SessionLogger
 from .sink import LiveSink
 
 _EMPTY = LoggerStats(0, 0, 0, 0, (), 0)
 
 
-class LiveFanOut(Stoppable):
+class LiveFanOut(LogConsumer):
     """A :class:`SessionLogger` that hands every message to ``primary`` (the MCAP logger, or
     None) and to ``live``. ``stop`` stops both (the MCAP file first)."""
 
     def __init__(self, primary: SessionLogger | None, live: LiveSink) -> None:
         self.primary = primary
         self.live = live
-
-    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
-        """:meth:`log_many` of one message: True when the MCAP logger took it."""
-        return self.log_many(topic, (payload,), log_time_ns) == 1
 
     def log_many(
         self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None

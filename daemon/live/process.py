@@ -9,7 +9,9 @@ wake-up (docs/live.md).
   copies it into the ring; a full ring (the process stopped or starved) drops the batch,
   counted exactly;
 * the process polls the ring at ``update_rate_hz`` at ``SCHED_IDLE``, decimates (the one
-  gate of the high-rate topics, :mod:`.decimate`), encodes and serves; it publishes its counters, its newest errors and a heartbeat in the shared memory;
+  gate of the high-rate topics, :mod:`.decimate`), encodes and serves; it publishes its
+  counters and a heartbeat in the shared memory, its errors as the MCAP writer's child does
+  (events on the pipe, at most :data:`.child.ERRORS_PER_S` a second, the rest counted);
 * whoever asks for statistics (the daemon's housekeeping, every ``metrics.period_s``) reads
   them there and finds out whether the process stalled (no loop for :data:`STALL_S`); its
   death is seen at once (the pipe closes). Either is reported once through ``on_error``,
@@ -74,7 +76,6 @@ class LiveProcessSink(LiveSink):
         self._pack = Packer()
         self._down: str | None = None
         self._dead = False
-        self._errors_seen = 0
         self._check_lock = threading.Lock()
 
     # ------------------------------------------------------------------ lifecycle
@@ -131,12 +132,12 @@ class LiveProcessSink(LiveSink):
         final = self._proc.stop(timeout_s)
         with self._check_lock:
             if final is not None:
-                self._take_status(final)
+                self._child = final
             elif not self._dead:
                 self._went_down("live view: its process did not stop in time")
             self._dead = True
             self._lose_in_flight()
-        self._proc.close_ring()
+        self._proc.ring.close()
         return final is not None
 
     # ------------------------------------------------------------------ producers
@@ -162,7 +163,7 @@ class LiveProcessSink(LiveSink):
             self._offered += n
             if self._stopped:
                 self._idle += n
-            elif proc.write(self._pack((topic, payloads, log_time_ns)), n):
+            elif proc.ring.write(self._pack((topic, payloads, log_time_ns)), n):
                 self._forwarded += n
             else:
                 self._dropped += n
@@ -197,9 +198,9 @@ class LiveProcessSink(LiveSink):
         if proc is None or self._dead or not self._check_lock.acquire(blocking=False):
             return
         try:
-            status = proc.status()
+            status = proc.ring.status()
             if status is not None:
-                self._take_status(status)
+                self._child = status
             age_s = proc.stalled(STALL_S)
             if age_s is not None:
                 self._went_down(
@@ -220,27 +221,17 @@ class LiveProcessSink(LiveSink):
         with self._check_lock:
             if self._dead:
                 return
+            # reported first (a stall seen before is superseded): whoever then sees
+            # live_up 0 finds the death reported
+            self._report(LiveDownError(str(body)))
             self._dead = True
-            self._down = None  # a stall seen before is superseded: report the death
-            self._went_down(str(body))
+            self._down = str(body)
             self._lose_in_flight()
-
-    def _take_status(self, status: tuple[LiveStats, int, list[str]]) -> None:
-        stats, n_errors, texts = status
-        self._child = stats
-        new = n_errors - self._errors_seen
-        if new > len(texts):
-            self._report(
-                LiveChildError(f"live view: {new - len(texts)} more errors in its process")
-            )
-        for text in texts[max(0, len(texts) - new) :] if new > 0 else ():
-            self._report(LiveChildError(text))
-        self._errors_seen = n_errors
 
     def _went_down(self, why: str) -> None:
         if self._down is None:
+            self._report(LiveDownError(why))  # first, as for a death
             self._down = why
-            self._report(LiveDownError(why))
 
     def _lose_in_flight(self) -> None:
         """The child is gone: what it never took from the ring is dropped (counted in

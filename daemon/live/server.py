@@ -85,6 +85,7 @@ def open_live_server(
     not installed or the address cannot be bound (nothing is left open then)."""
     try:
         import foxglove
+        import foxglove.messages  # the scene's (.scene, imported once this passed)
         from foxglove.channels import SceneUpdateChannel
         from foxglove.websocket import ServerListener
     except ImportError as exc:

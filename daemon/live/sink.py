@@ -30,12 +30,12 @@ import collections
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Self
 
 from ..sessionlog.encoding import message_struct, struct_json
-from ..sessionlog.logger import Stoppable
+from ..sessionlog.logger import ReportingConsumer
 from .decimate import kept
 from .server import LiveServer, LiveStartError, open_live_server
 from .settings import LiveSection, host_problem
@@ -61,6 +61,8 @@ SCENE_TOPIC = "/cmm/scene"
 CORRECTED = "/cmm/corrected"
 STATUS_PERIOD_S = 1.0
 """Drops are reported to clients (a protocol ``status`` message) at most this often, s."""
+Batch = tuple[str, Sequence[Any], int]
+"""``(topic, payloads, log_time_ns)``: what one ``log_many`` call offers."""
 _TIME_NS_MAX = 2**64 - 1
 _PENDING_MAX = 4096
 """Scene points kept between two scene updates (older ones are decimated away)."""
@@ -114,7 +116,7 @@ class LiveStats:
         }
 
 
-class LiveSink(Stoppable):
+class LiveSink(ReportingConsumer):
     """Stream the session-log topics and ``/cmm/scene`` to Foxglove WebSocket clients.
 
     ``with LiveSink(settings).start() as live: live.log_many(topic, records); live.tick()``;
@@ -127,6 +129,8 @@ class LiveSink(Stoppable):
     :param name: server name shown by clients.
     """
 
+    _report_level = logging.WARNING  # a problem of the view: the daemon corrects on
+
     def __init__(
         self,
         settings: LiveSection,
@@ -136,11 +140,11 @@ class LiveSink(Stoppable):
         why = host_problem(settings.host, settings.allow_remote)
         if why is not None:
             raise LiveStartError(f"live.host = {why}")
+        super().__init__(on_error, "live view")
         self.settings = settings
         self._name = name
-        self._on_error = on_error
         self._lock = threading.Lock()
-        self._batches: collections.deque[tuple[str, Sequence[Any], int]] = collections.deque()
+        self._batches: collections.deque[Batch] = collections.deque()
         self._queued = 0
         self._limit = int(settings.queue)
         self._wanted: frozenset[str] = frozenset()
@@ -170,7 +174,6 @@ class LiveSink(Stoppable):
         self._last_scene = 0.0
         self._last_status = 0.0
         self._reported_drops = 0
-        self.error: BaseException | None = None
         self.upstream_dropped = 0
         """Messages dropped before they reached this sink (the daemon's queue, when this sink
         runs in the child of :class:`.process.LiveProcessSink`): told to clients with ours."""
@@ -186,15 +189,7 @@ class LiveSink(Stoppable):
         """Create the channels and the server (the owner calls :meth:`tick` from then on).
         Raises :class:`LiveStartError` (one line) when ``foxglove-sdk`` is missing or the
         address cannot be bound; nothing is left running then."""
-        try:
-            from . import scene
-        except ImportError as exc:
-            raise LiveStartError(
-                f"live view: the foxglove-sdk package is not installed ({exc}); install it "
-                "with pip install 'cmm-comp[live]' or set live.enabled = false"
-            ) from None
-        self._scene_mod = scene
-        self._server = open_live_server(
+        self._server = open_live_server(  # the one clear error when foxglove-sdk is missing
             self.settings,
             STREAMED_TOPICS,
             SCENE_TOPIC,
@@ -202,6 +197,9 @@ class LiveSink(Stoppable):
             self._name,
             self._topic_of,
         )
+        from . import scene  # imports foxglove: only once it is known to be there
+
+        self._scene_mod = scene
         self._scene_channel = self._server.scene
         self._channels = self._server.channels
         self._topics = frozenset(STREAMED_TOPICS)  # producers start taking messages now
@@ -236,11 +234,6 @@ class LiveSink(Stoppable):
         return True
 
     # ------------------------------------------------------------------ producers
-    def log(self, topic: str, payload: Any, log_time_ns: int | None = None) -> bool:
-        """Offer one message (as :meth:`log_many` with one payload). Never blocks. Returns True
-        when it was taken or not wanted, False when the sink is stopped."""
-        return self.log_many(topic, (payload,), log_time_ns) > 0
-
     def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
         """Offer ``payloads`` of ``topic`` (record tuples or dicts, as the session log takes
         them) with one log time (integer ns since the epoch; now if None). Never blocks; the
@@ -355,23 +348,40 @@ class LiveSink(Stoppable):
         return self.stats().counters()
 
     # ------------------------------------------------------------------ updates
-    def tick(self, final: bool = False) -> None:
+    def tick(self, final: bool = False, batches: Iterable[Batch] | None = None) -> None:
         """One update: send what waits (decimated), greet new subscribers, the scene (forced
-        when ``final``), the drop warning. Never raises (a bug is reported)."""
+        when ``final``), the drop warning. Never raises (a bug is reported). What waits is the
+        queue's, or ``batches`` when given: ``(topic, payloads, log_time_ns)`` offered straight
+        to this update, as :meth:`log_many` would (the view's process hands it what it read
+        from shared memory: no second queue)."""
         try:
-            self._drain()
+            self._drain(self._take() if batches is None else self._offer(batches))
             self._replay_latched()
             self._scene_tick(time.monotonic(), force=final)
             self._status_tick(time.monotonic())
         except Exception as exc:  # a bug: reported, the loop goes on
             self._report(exc)
 
-    def _drain(self) -> None:
+    def _take(self) -> Sequence[Batch]:
+        """The queue's batches, the queue emptied."""
         with self._lock:
-            if not self._batches:
-                return
             batches, self._batches = self._batches, collections.deque()
             self._queued = 0
+        return batches
+
+    def _offer(self, batches: Iterable[Batch]) -> list[Batch]:
+        """``batches`` counted as offered, the latched topics' newest kept."""
+        out = [b for b in batches if b[1] and b[0] in self._topics]
+        for topic, payloads, t_ns in out:
+            if topic in LATCHED_TOPICS:
+                self._latest[topic] = (payloads[-1], t_ns)
+        with self._lock:
+            self._offered += sum(len(b[1]) for b in out)
+        return out
+
+    def _drain(self, batches: Sequence[Batch]) -> None:
+        if not batches:
+            return
         keep = self._decimation(batches)
         index: dict[str, int] = dict.fromkeys(keep, 0)  # running index per decimated topic
         for topic, payloads, t_ns in batches:
@@ -399,9 +409,7 @@ class LiveSink(Stoppable):
                             continue
                 self._one(topic, channel, payload, t_ns, send, scene, counted=live)
 
-    def _decimation(
-        self, batches: collections.deque[tuple[str, Sequence[Any], int]]
-    ) -> dict[str, set[int]]:
+    def _decimation(self, batches: Sequence[Batch]) -> dict[str, set[int]]:
         """Per decimated topic with more messages than an update takes: the indices (over
         this update's messages of the topic, oldest first) to send."""
         per_topic: dict[str, list[Any]] = {}
@@ -511,13 +519,3 @@ class LiveSink(Stoppable):
             )
         except Exception as exc:
             self._report(exc)
-
-    def _report(self, exc: BaseException) -> None:
-        if self.error is None:
-            self.error = exc
-        _log.warning("%s", exc)
-        if self._on_error is not None:
-            try:
-                self._on_error(exc)
-            except Exception:  # the handler's own failure is logged, never raised here
-                _log.exception("live view on_error handler raised")

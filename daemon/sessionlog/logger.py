@@ -11,11 +11,12 @@ the files in the calling thread (in that child, or in any program that may wait 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Protocol, Self
+from typing import Any, Protocol, Self, TypedDict, cast
 
 from mcap.writer import CompressionType
 
@@ -148,6 +149,15 @@ class LogSettings:
     fsync: bool = False
     metadata: Mapping[str, str] = field(default_factory=dict)
 
+    @classmethod
+    def of(cls, target: str | os.PathLike[str], options: LogOptions) -> LogSettings:
+        """The checked settings of a log at ``target`` (the writers' keyword arguments)."""
+        return cls(Path(target), **options)
+
+    def options(self) -> LogOptions:
+        """Every field but the first, ``target``: the writers' keyword arguments."""
+        return cast(LogOptions, {f.name: getattr(self, f.name) for f in fields(self)[1:]})
+
     def __post_init__(self) -> None:
         target = Path(self.target)
         object.__setattr__(self, "target", target)
@@ -168,9 +178,41 @@ class LogSettings:
         return self.target.suffix == ".mcap"
 
 
-class Stoppable:
-    """``close()`` and ``with`` for a class with ``stop(timeout_s)``: the loggers, the live
-    view, their fan-out."""
+class LogOptions(TypedDict, total=False):
+    """The keyword arguments of both writers: the fields of :class:`LogSettings` (documented
+    there) but ``target``."""
+
+    roll_bytes: int | None
+    roll_s: float | None
+    flush_period_s: float
+    chunk_size: int
+    queue_size: int
+    compression: CompressionType
+    fsync: bool
+    metadata: Mapping[str, str]
+
+
+class LogConsumer:
+    """What every taker of the session log's messages shares (the writers, the live view, their
+    fan-out): ``log`` as ``log_many`` of one message, ``close()`` and ``with`` from ``stop``."""
+
+    def log_many(
+        self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
+    ) -> int:  # pragma: no cover - the classes override
+        """Take ``payloads`` of ``topic`` with one log time (integer ns since the Unix epoch;
+        now if None); returns how many were taken."""
+        raise NotImplementedError
+
+    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
+        """:meth:`log_many` of one message: False when it was dropped (counted).
+
+        :param topic: one of the logged topics (KeyError for the writers otherwise: a
+            programming error).
+        :param payload: the JSON object, or for the topics of :data:`.schemas.RECORD_FIELDS`
+            a compact record tuple. ``stamp`` is added from ``log_time_ns`` when absent.
+        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
+        """
+        return self.log_many(topic, (payload,), log_time_ns) == 1
 
     def stop(self, timeout_s: float = 5.0) -> bool:  # pragma: no cover - the classes override
         """End the work (drain, finish); True if done within ``timeout_s`` (s)."""
@@ -187,21 +229,61 @@ class Stoppable:
         self.close()
 
 
-class LoggerBase(Stoppable):
-    """The part every writer shares: topic checks, drop counts per topic, error reporting (first
-    error kept, ``on_error`` called, never raised into the producer) and the lifecycle."""
+class ReportingConsumer(LogConsumer):
+    """A taker that reports its problems (the writers, the live view): the first error kept
+    (:attr:`error`), each one logged and passed to ``on_error``, whose own failure is logged,
+    never raised into the producer.
+
+    :param what: names the taker in the Python log lines.
+    """
+
+    _report_level = logging.ERROR
+    """The Python log level of :meth:`_report`."""
+
+    def __init__(self, on_error: Callable[[BaseException], None] | None, what: str) -> None:
+        self._on_error = on_error
+        self._what = what
+        self._error: BaseException | None = None
+
+    @property
+    def error(self) -> BaseException | None:
+        """The first error met, or None."""
+        return self._error
+
+    def _report(self, exc: BaseException) -> None:
+        """Keep the first error, log it, pass it to ``on_error``."""
+        if self._error is None:
+            self._error = exc
+        _log.log(self._report_level, "%s: %s", self._what, exc)
+        self._tell(exc)
+
+    def _report_quietly(self, exc: BaseException) -> None:
+        """Pass a problem that does not stop the work (a message that could not be encoded)
+        to ``on_error`` and the Python log, without keeping it as :attr:`error`."""
+        _log.warning("%s: %s", self._what, exc)
+        self._tell(exc)
+
+    def _tell(self, exc: BaseException) -> None:
+        if self._on_error is not None:
+            try:
+                self._on_error(exc)
+            except Exception:  # the handler's own failure is logged, never raised here
+                _log.exception("%s: its on_error handler raised", self._what)
+
+
+class LoggerBase(ReportingConsumer):
+    """The part every writer shares: topic checks, drop counts per topic, error reporting
+    (:class:`ReportingConsumer`) and the lifecycle."""
 
     def __init__(
         self, settings: LogSettings, on_error: Callable[[BaseException], None] | None, what: str
     ) -> None:
+        super().__init__(on_error, what)
         self._settings = settings
-        self._on_error = on_error
-        self._what = what
         self._drop_lock = threading.Lock()
         self._dropped = 0
         self._dropped_by: dict[str, int] = {}
         self._enqueued = 0
-        self._error: BaseException | None = None
         self._closed = False
 
     @staticmethod
@@ -221,28 +303,3 @@ class LoggerBase(Stoppable):
     def _dropped_snapshot(self) -> dict[str, int]:
         with self._drop_lock:
             return dict(self._dropped_by)
-
-    @property
-    def error(self) -> BaseException | None:
-        """The first error the writer met, or None."""
-        return self._error
-
-    def _report(self, exc: BaseException) -> None:
-        """Keep the first error, log it, pass it to ``on_error`` (whose own failure is logged)."""
-        if self._error is None:
-            self._error = exc
-        _log.error("%s: %r", self._what, exc)
-        self._tell(exc)
-
-    def _report_quietly(self, exc: BaseException) -> None:
-        """Pass a problem that does not stop the log (a message that could not be encoded)
-        to ``on_error`` and the Python log, without making the logger unhealthy."""
-        _log.warning("%s: %s", self._what, exc)
-        self._tell(exc)
-
-    def _tell(self, exc: BaseException) -> None:
-        if self._on_error is not None:
-            try:
-                self._on_error(exc)
-            except Exception:  # the handler's own failure is logged, never raised here
-                _log.exception("MCAP on_error handler raised")

@@ -9,7 +9,7 @@ exists:
   attributes (the session log used to reach into ``mcap``'s name-mangled internals to make
   writing cheap: a patch release could have broken it);
 * a message costs about what it cost before with message indexes switched off (one packed
-  header, two buffer appends, one index entry; ``benchmarks/bench_mcap_writer.py``), while
+  header, two buffer appends, one index entry; docs/mcap.md, "The writer's cost per message"), while
   ``Writer.add_message`` with message indexes costs ~5× more;
 * the Chunk Index records wait on disk (:class:`.summary.ChunkIndexSpool`) and the summary is
   streamed from there (:func:`.summary.write_summary`): memory does not grow with the file.

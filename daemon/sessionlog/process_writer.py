@@ -31,19 +31,24 @@ import pickle
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
-
-from mcap.writer import CompressionType
+from typing import Any, Unpack
 
 from .. import memory
 from ..childproc import ChildEnd, ChildProcess, ChildProcessError, portable
 from ..osthread import expected_priority, lower_priority, name_os_thread
 from ..ring import ring_bytes
 from .encoding import Packer
-from .logger import LOW_PRIORITY_TOPICS, LoggerBase, LoggerStats, LogSettings, Payload
+from .logger import (
+    LOW_PRIORITY_TOPICS,
+    LoggerBase,
+    LoggerStats,
+    LogOptions,
+    LogSettings,
+    Payload,
+)
 from .writer import SessionWriter
 
 _log = logging.getLogger(__name__)
@@ -92,25 +97,15 @@ class McapProcessLogger(LoggerBase):
         self,
         target: str | os.PathLike[str],
         *,
-        roll_bytes: int | None = None,
-        roll_s: float | None = None,
-        flush_period_s: float = 1.0,
-        chunk_size: int = 256 * 1024,
-        queue_size: int = 100_000,
-        compression: CompressionType = CompressionType.ZSTD,
-        fsync: bool = False,
-        metadata: Mapping[str, str] | None = None,
         on_error: Callable[[BaseException], None] | None = None,
+        **options: Unpack[LogOptions],
     ) -> None:
-        meta = {"pid": str(os.getpid()), "writer": WRITER_NAME, **dict(metadata or {})}
-        settings = LogSettings(
-            Path(target), roll_bytes, roll_s, flush_period_s, chunk_size, queue_size,
-            compression, fsync, meta,
-        )  # fmt: skip
+        meta = {"pid": str(os.getpid()), "writer": WRITER_NAME, **options.get("metadata", {})}
+        settings = LogSettings.of(target, {**options, "metadata": meta})
         super().__init__(settings, on_error, "MCAP writer process")
         self._lock = threading.Lock()
         self._pack = Packer()
-        self._capacity = ring_bytes(queue_size, MESSAGE_BYTES)
+        self._capacity = ring_bytes(settings.queue_size, MESSAGE_BYTES)
         self._sent_by: dict[str, int] = {}
         self._drops_sent = 0
         self._child: dict[str, Any] = {"stats": _EMPTY, "healthy": True, "received": 0}
@@ -122,10 +117,6 @@ class McapProcessLogger(LoggerBase):
         self._take(self._proc.info)
 
     # ------------------------------------------------------------------ producers
-    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
-        """Hand one message over; never blocks. False when it was dropped (counted)."""
-        return self.log_many(topic, (payload,), log_time_ns) == 1
-
     def log_many(
         self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
     ) -> int:
@@ -147,7 +138,7 @@ class McapProcessLogger(LoggerBase):
         if self._dropped != self._drops_sent:  # the file's counters include ours
             drops, self._drops_sent = self._dropped_snapshot(), self._dropped
         with self._lock:
-            ok = not self._closed and self._proc.write(
+            ok = not self._closed and self._proc.ring.write(
                 self._pack((topic, payloads, log_time_ns, drops)), n
             )
             if ok:
@@ -181,13 +172,13 @@ class McapProcessLogger(LoggerBase):
         elif kind == "warning":
             self._report_quietly(body)
         elif kind == "lost":
-            self._take(self._proc.status())
+            self._take(self._proc.ring.status())
             self._report(McapWriterProcessError(body))
             self._closed = True
 
     def _refresh(self) -> None:
         if not self._done:
-            self._take(self._proc.status())
+            self._take(self._proc.ring.status())
 
     @property
     def healthy(self) -> bool:
@@ -252,7 +243,7 @@ class McapProcessLogger(LoggerBase):
             lost = sent - c.written_by_topic.get(topic, 0) - c.dropped_by_topic.get(topic, 0)
             if lost > 0:
                 self._count_drop(topic, lost)
-        self._proc.close_ring()
+        self._proc.ring.close()
         return final is not None
 
 
@@ -341,25 +332,22 @@ def _serve(end: ChildEnd) -> None:
             # encoded) is a warning: counted, recorded, the log goes on
             end.send("error" if exc is writer.error else "warning", portable(exc))
 
+    def help_writer() -> float:
+        """The main thread writes too while the ring's backlog is high (for at most
+        :data:`REPORT_S`, then the loop reports and helps again)."""
+        if end.ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
+            until = time.monotonic() + REPORT_S
+            while end.ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
+                with lock:
+                    if not step() or time.monotonic() > until:
+                        break
+        forward_errors()
+        return POLL_S
+
     threading.Thread(target=idle_writer, name="mcap-writer", daemon=True).start()
-    end.send("ready", status())
-    last_report, last = 0.0, None
+    last = None
     try:
-        while True:
-            stop, last = end.stop_requested(POLL_S)
-            if end.ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
-                until = time.monotonic() + REPORT_S  # then report, and help again
-                while end.ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
-                    with lock:
-                        if not step() or time.monotonic() > until:
-                            break
-            forward_errors()
-            now = time.monotonic()
-            if now - last_report >= REPORT_S:
-                end.publish(status())
-                last_report = now
-            if stop:
-                break
+        last = end.serve(status(), help_writer, status, REPORT_S)
     finally:
         # what the daemon handed over before it stopped (or died), written and the file
         # finished here, at this thread's normal priority: the writer thread at SCHED_IDLE

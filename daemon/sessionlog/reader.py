@@ -16,11 +16,11 @@ import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.records import Channel, Footer, Message, Metadata, Schema
+from mcap.records import Channel, Footer, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from .schemas import ns_from_stamp
@@ -40,6 +40,21 @@ except ImportError:  # pragma: no cover - mcap depends on it for zstd
     pass
 
 _NUMBERED = re.compile(r"^(.*?)(\d+)\.mcap$")
+
+
+def intact_records(f: IO[bytes], cut: list[str], **options: Any) -> Iterator[McapRecord]:
+    """The records of ``f`` front to back (``StreamReader`` with CRCs checked, ``options``
+    passed on) up to the first that cannot be read: its error text is appended to ``cut``."""
+    records = StreamReader(f, validate_crcs=True, **options).records
+    while True:
+        try:
+            record = next(records)
+        except StopIteration:
+            return
+        except TRUNCATION_ERRORS as exc:
+            cut.append(f"{type(exc).__name__}: {exc}")
+            return
+        yield record
 
 
 @dataclass(frozen=True)
@@ -82,17 +97,9 @@ class MessageStream:
         channels: dict[int, Channel] = {}
         schemas: dict[int, Schema] = {}
         complete = False
+        cut: list[str] = []
         with open(path, "rb") as f:
-            records = StreamReader(f, validate_crcs=True).records
-            while True:
-                try:
-                    record = next(records)
-                except StopIteration:
-                    break
-                except TRUNCATION_ERRORS as exc:
-                    self.errors.append(f"{path}: {type(exc).__name__}: {exc}")
-                    complete = False  # even a footer without its closing magic is a cut file
-                    break
+            for record in intact_records(f, cut):
                 if isinstance(record, Message):
                     channel = channels.get(record.channel_id)
                     if channel is None:
@@ -111,6 +118,9 @@ class MessageStream:
                     self.metadata.append((record.name, dict(record.metadata)))
                 elif isinstance(record, Footer):
                     complete = True
+        if cut:  # even a footer without its closing magic is a cut file
+            self.errors.append(f"{path}: {cut[0]}")
+            complete = False
         if not complete:
             self.truncated = True
 

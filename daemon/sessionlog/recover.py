@@ -17,12 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType
 
 from .mcapfile import McapFileWriter
 from .mcapwire import MAGIC
-from .reader import TRUNCATION_ERRORS
+from .reader import intact_records
 
 RECOVER_LIBRARY = "cmm-comp mcap recover"
 RECOVER_CHUNK_SIZE = 1024 * 1024
@@ -115,15 +114,8 @@ def _copy_records(
     schema_ids: dict[int, int] = {0: 0}
     channels: dict[int, tuple[int, str]] = {}
     good_end = 0
-    records = StreamReader(f, validate_crcs=True, record_size_limit=size).records
-    while True:
-        try:
-            record = next(records)
-        except StopIteration:
-            break
-        except TRUNCATION_ERRORS as exc:
-            report.cut_at, report.error = good_end, f"{type(exc).__name__}: {exc}"
-            break
+    cut: list[str] = []
+    for record in intact_records(f, cut, record_size_limit=size):
         if not started:
             header = record if isinstance(record, Header) else Header("", "")
             writer.start(profile=header.profile, library=header.library or RECOVER_LIBRARY)
@@ -162,6 +154,8 @@ def _copy_records(
         elif isinstance(record, Footer):
             report.complete = True
         good_end = f.tell()
+    if cut:
+        report.cut_at, report.error = good_end, cut[0]
     if not started:  # cut inside the header: an empty but valid file
         writer.start(profile="", library=RECOVER_LIBRARY)
     report.complete = report.complete and report.error is None

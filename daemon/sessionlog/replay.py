@@ -35,11 +35,13 @@ from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.grid import CorrectionGrid
 from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
 from cmm_comp.protocol.can_ids import sent_by_daemon
+from cmm_comp.protocol.codes import Status
 
+from ..engine import GRID_STATUS
 from .reader import read_messages
 from .schemas import ns_from_stamp
 
-_GEOMETRY_APPLIED = ("ok", "not_thermally_corrected", "missing_direction")
+_GEOMETRY_APPLIED = tuple(s.label for s in Status if s.geometric_correction_applied)
 
 
 class ReplayError(CmmCompError, ValueError):
@@ -247,13 +249,9 @@ def _u_value(value: Any) -> float:
 
 
 def _as_sent_label(grid_status: str) -> str:
-    """The daemon's status label for a grid status (same mapping as the engine)."""
-    return {
-        "no_temperature": "not_thermally_corrected",
-        "missing_input": "missing_direction",
-        "clamped_outside_volume": "outside_volume",
-        "invalid_input": "invalid_reading",
-    }.get(str(grid_status), str(grid_status))
+    """The daemon's status label for a grid status (the engine's mapping; any other as it is)."""
+    status = GRID_STATUS.get(str(grid_status))
+    return str(grid_status) if status is None else status.label
 
 
 def _counts(values: np.ndarray) -> dict[str, int]:

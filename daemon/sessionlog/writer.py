@@ -22,12 +22,13 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, Unpack
 
 from mcap.writer import CompressionType
 
+from ..events import Throttle
 from .encoding import ERROR_TOPIC, encode_error, encode_message, error_payload, safe_str
-from .logger import LoggerBase, LoggerStats, LogSettings, Payload
+from .logger import LoggerBase, LoggerStats, LogOptions, LogSettings, Payload
 from .mcapfile import McapFileWriter
 from .schemas import (
     MESSAGE_ENCODING,
@@ -163,21 +164,11 @@ class SessionWriter(LoggerBase):
         self,
         target: str | os.PathLike[str],
         *,
-        roll_bytes: int | None = None,
-        roll_s: float | None = None,
-        flush_period_s: float = 1.0,
-        chunk_size: int = 256 * 1024,
-        queue_size: int = 100_000,
-        compression: CompressionType = CompressionType.ZSTD,
-        fsync: bool = False,
-        metadata: Mapping[str, str] | None = None,
         on_error: Callable[[BaseException], None] | None = None,
         opener: Callable[[Path], IO[bytes]] = open_exclusive,
+        **options: Unpack[LogOptions],
     ) -> None:
-        settings = LogSettings(
-            Path(target), roll_bytes, roll_s, flush_period_s, chunk_size, queue_size,
-            compression, fsync, metadata or {},
-        )  # fmt: skip
+        settings = LogSettings.of(target, options)
         super().__init__(settings, on_error, "MCAP writer")
         self._single = settings.single
         self._opener = opener
@@ -190,7 +181,7 @@ class SessionWriter(LoggerBase):
         self._encode_errors = 0
         self._encode_errors_by: dict[str, int] = {}
         self._upstream_dropped: dict[str, int] = {}
-        self._error_reports: list[float] = []
+        self._error_reports = Throttle(1.0 / _ERROR_REPORTS_PER_S)
         self._files: list[Path] = []
         started = datetime.now(UTC)
         self._session_tag = started.strftime("%Y%m%dT%H%M%S")
@@ -215,31 +206,15 @@ class SessionWriter(LoggerBase):
         cls, settings: LogSettings, on_error: Callable[[BaseException], None] | None = None
     ) -> SessionWriter:
         """A writer for ``settings`` (what the writer child runs)."""
-        return cls(
-            settings.target, roll_bytes=settings.roll_bytes, roll_s=settings.roll_s,
-            flush_period_s=settings.flush_period_s, chunk_size=settings.chunk_size,
-            queue_size=settings.queue_size, compression=settings.compression,
-            fsync=settings.fsync, metadata=settings.metadata, on_error=on_error,
-        )  # fmt: skip
+        return cls(settings.target, on_error=on_error, **settings.options())
 
     # ------------------------------------------------------------------ messages
-    def log(self, topic: str, payload: Payload, log_time_ns: int | None = None) -> bool:
-        """Write one message now. Returns False when it was dropped (counted: stopped or
-        failed); a message that cannot be encoded is taken: its error record is written.
-
-        :param topic: one of the logged topics (KeyError otherwise: a programming error).
-        :param payload: the JSON object, or for the topics of :data:`.schemas.RECORD_FIELDS`
-            a compact record tuple. ``stamp`` is added from ``log_time_ns`` when absent.
-        :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
-        """
-        self._check(topic, (payload,))
-        return self.write(topic, payload, time.time_ns() if log_time_ns is None else log_time_ns)
-
     def log_many(
         self, topic: str, payloads: Sequence[Payload], log_time_ns: int | None = None
     ) -> int:
-        """Write ``payloads`` of ``topic`` with one log time (integer ns; now if None), as
-        :meth:`log` each; returns how many were taken."""
+        """Write ``payloads`` of ``topic`` now, with one log time (integer ns; now if None).
+        Returns how many were taken: a message is dropped (counted) once the writer stopped
+        or failed; one that cannot be encoded is taken: its error record is written."""
         self._check(topic, payloads)
         t_ns = time.time_ns() if log_time_ns is None else log_time_ns
         return sum(self.write(topic, p, t_ns) for p in payloads)
@@ -426,14 +401,10 @@ class SessionWriter(LoggerBase):
             record = {**error_payload(topic, payload, t_ns, exc), "stamp": stamp_from_ns(now_ns)}
             self._writer.add_message(channel, now_ns, encode_error(record), now_ns)
             self._written_by[ERROR_TOPIC] = self._written_by.get(ERROR_TOPIC, 0) + 1
-        now = time.monotonic()
-        recent = [t for t in self._error_reports if now - t < 1.0]
-        if len(recent) < _ERROR_REPORTS_PER_S:
-            recent.append(now)
+        if self._error_reports.passes() is not None:
             self._report_quietly(
                 ValueError(f"{topic}: payload not JSON-encodable: {safe_str(exc)}")
             )
-        self._error_reports = recent
 
     def _flush(self) -> None:
         assert self._writer is not None and self._stream is not None
