@@ -5,29 +5,19 @@ latency_us)``, ``fault(kind)``; each is a dict update under one uncontended lock
 a microsecond). Every statistic is finite by construction: a latency that is not a finite
 number ≥ 0 (or ``None``: an answer without a reply latency, e.g. a reading that never
 completed) is counted apart and never enters the histogram; a quantile in the overflow bin is
-the largest latency seen, not infinity; an empty histogram has no quantile (``None``).
-
-:class:`MetricsServer` serves ``GET /metrics`` (Prometheus text format 0.0.4, from
-:meth:`Metrics.families`) with prometheus_client's request handler in one thread, bound to
-127.0.0.1 by default; it is a context manager with ``stop(timeout_s)``. prometheus_client's
-own ``Counter`` / ``Histogram`` are not used on the hot path: measured 4–5× the cost of
-``count`` and 3× that of ``answer`` here, and without the largest latency, the quantiles and
-the per-period histogram the ``/cmm/counters`` record needs.
+the largest latency seen, not infinity; an empty histogram has no quantile (``None``). :class:`MetricsServer` serves ``GET /metrics`` (Prometheus text format 0.0.4)
+from a tiny ``http.server`` thread bound to 127.0.0.1 by default; it is a context manager
+with ``stop(timeout_s)``.
 """
 
 from __future__ import annotations
 
 import bisect
 import http.server
-import itertools
 import math
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from typing import Any
-
-from prometheus_client import CollectorRegistry, MetricsHandler, generate_latest
-from prometheus_client.core import CounterMetricFamily, HistogramMetricFamily, Metric
-from prometheus_client.registry import Collector
 
 #: Histogram bin upper edges, µs: 5 µs steps to 200 µs, then roughly 10 % steps to 100 ms.
 LATENCY_EDGES_US: tuple[float, ...] = tuple(
@@ -168,66 +158,67 @@ class Metrics:
             out["latency_max_us"] = period.max_us
         return out
 
-    def families(self, extra: Iterable[Metric] = ()) -> list[Metric]:
-        """Everything as Prometheus metric families (what ``/metrics`` serves), then
-        ``extra``. Read under the lock once: the hot path's cost is unchanged."""
+    def prometheus(self, extra: dict[str, float] | None = None) -> str:
+        """Prometheus text exposition of everything, plus ``extra`` gauges."""
         with self._lock:
             counters = dict(self.counters)
             answers = dict(self.answers)
             faults = dict(self.faults)
             hist = self.latency.copy()
-        out: list[Metric] = []
-        for name, doc, label, values in (
-            ("cmm_comp_events_total", "Daemon events since start, by kind.", "kind", counters),
-            ("cmm_comp_answers_total", "Answers sent, by status.", "status", answers),
-            ("cmm_comp_faults_total", "Input and transport faults, by kind.", "kind", faults),
-        ):
-            family = CounterMetricFamily(name, doc, labels=[label])
-            for k, v in sorted(values.items()):
-                family.add_metric([k], v)
-            out.append(family)
-        edges = [f"{edge:g}" for edge in hist.edges_us]
-        cumulative = list(itertools.accumulate(hist.counts[:-1]))
-        buckets = [*zip(edges, cumulative, strict=True), ("+Inf", hist.total)]
-        doc = "Last input frame to answer sent, microseconds."
-        out.append(HistogramMetricFamily("cmm_comp_reply_latency_us", doc, buckets, hist.sum_us))
-        return [*out, *extra]
-
-    def prometheus(self) -> str:
-        """The text exposition (format 0.0.4) of :meth:`families`."""
-        return generate_latest(registry_of(self.families)).decode()
-
-
-class _Families(Collector):
-    """The collector of what ``families()`` returns (called at each scrape)."""
-
-    def __init__(self, families: Callable[[], Iterable[Metric]]) -> None:
-        self._families = families
-
-    def collect(self) -> Iterable[Metric]:
-        return self._families()
-
-
-def registry_of(collect: Callable[[], Iterable[Metric]]) -> CollectorRegistry:
-    """A registry of its own whose one collector returns ``collect()``."""
-    registry = CollectorRegistry(auto_describe=False)
-    registry.register(_Families(collect))
-    return registry
+        lines = [
+            "# HELP cmm_comp_events_total Daemon events since start, by kind.",
+            "# TYPE cmm_comp_events_total counter",
+        ]
+        lines += [f'cmm_comp_events_total{{kind="{k}"}} {v}' for k, v in sorted(counters.items())]
+        lines += [
+            "# HELP cmm_comp_answers_total Answers sent, by status.",
+            "# TYPE cmm_comp_answers_total counter",
+        ]
+        lines += [f'cmm_comp_answers_total{{status="{k}"}} {v}' for k, v in sorted(answers.items())]
+        lines += [
+            "# HELP cmm_comp_faults_total Input and transport faults, by kind.",
+            "# TYPE cmm_comp_faults_total counter",
+        ]
+        lines += [f'cmm_comp_faults_total{{kind="{k}"}} {v}' for k, v in sorted(faults.items())]
+        lines += [
+            "# HELP cmm_comp_reply_latency_us Last input frame to answer sent, microseconds.",
+            "# TYPE cmm_comp_reply_latency_us histogram",
+        ]
+        acc = 0
+        for edge, c in zip(hist.edges_us, hist.counts, strict=False):
+            acc += c
+            lines.append(f'cmm_comp_reply_latency_us_bucket{{le="{edge:g}"}} {acc}')
+        lines.append(f'cmm_comp_reply_latency_us_bucket{{le="+Inf"}} {hist.total}')
+        lines.append(f"cmm_comp_reply_latency_us_sum {hist.sum_us:.1f}")
+        lines.append(f"cmm_comp_reply_latency_us_count {hist.total}")
+        for name, value in sorted((extra or {}).items()):
+            lines += [f"# TYPE {name} gauge", f"{name} {value:g}"]  # Prometheus takes NaN/Inf
+        return "\n".join(lines) + "\n"
 
 
 class MetricsServer:
-    """``GET /metrics`` on ``host:port`` (port 0 = any free port): prometheus_client's request
-    handler (text format 0.0.4, or OpenMetrics when the scraper asks for it) in one thread.
+    """``GET /metrics`` on ``host:port`` (port 0 = any free port), served by one thread.
 
-    :param collect: returns the metric families (called per request, from the server's
-        thread), e.g. :meth:`Metrics.families`.
+    :param render: returns the exposition text (called per request, from the server thread).
     """
 
-    def __init__(
-        self, collect: Callable[[], Iterable[Metric]], host: str = "127.0.0.1", port: int = 0
-    ) -> None:
-        handler = MetricsHandler.factory(registry_of(collect))
-        self._httpd = http.server.HTTPServer((host, port), handler)
+    def __init__(self, render: Callable[[], str], host: str = "127.0.0.1", port: int = 0) -> None:
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_GET(self) -> None:
+                if self.path.split("?")[0] not in ("/metrics", "/"):
+                    self.send_error(404, "only /metrics")
+                    return
+                body = render().encode()
+                self.send_response(200)
+                self.send_header("Content-Type", "text/plain; version=0.0.4; charset=utf-8")
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+            def log_message(self, format: str, *args: Any) -> None:
+                pass  # the daemon's own event log covers operations
+
+        self._httpd = http.server.HTTPServer((host, port), Handler)
         bound = self._httpd.server_address
         self.host = bound[0].decode() if isinstance(bound[0], bytes) else str(bound[0])
         self.port = int(bound[1])

@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from mcap.writer import CompressionType
-from prometheus_client.core import GaugeMetricFamily, Metric
 
 from cmm_comp.protocol import DaemonBlock, Heartbeat
 from cmm_comp.protocol.codes import DaemonState, grid_id_from_sha256
@@ -377,19 +376,19 @@ class DaemonService:
         self.metrics.fault("mcap_error")
         self.events.emit("mcap_error", "error", error=repr(exc))
 
-    def _prometheus(self) -> list[Metric]:
-        state = GaugeMetricFamily("cmm_comp_state", "1 for the daemon's state.", labels=["state"])
-        for s in DaemonState:
-            state.add_metric([s.label], float(self.state.state == s))
-        gauges: dict[str, int] = {}
+    def _prometheus(self) -> str:
+        extra = {
+            f'cmm_comp_state{{state="{s.label}"}}': float(self.state.state == s)
+            for s in DaemonState
+        }
         if self.logger is not None:
             # exact per-topic drops and encode errors of the session log (docs/mcap.md)
-            gauges.update(self.logger.stats().counters())
+            for k, v in self.logger.stats().counters().items():
+                extra[f"cmm_comp_{k}"] = float(v)
         if self.live is not None:  # live_sent, live_dropped (exact), live_clients …
-            gauges.update(self.live.counters())
-        doc = "A counter of the session log or the live view (docs/mcap.md, docs/live.md)."
-        extra = [GaugeMetricFamily(f"cmm_comp_{k}", doc, value=v) for k, v in gauges.items()]
-        return self.metrics.families([state, *extra])
+            for k, v in self.live.counters().items():
+                extra[f"cmm_comp_{k}"] = float(v)
+        return self.metrics.prometheus(extra)
 
     def _publish_counters(self) -> None:
         if self.logger is None:
