@@ -164,6 +164,9 @@ class MultilaterationBlock(Block):
             return []
         return [(4 * self.s + np.arange(3 * self.np), "point_um", self.data.spec.u_um)]
 
+    def local_nuisance(self) -> NDArray[np.intp]:
+        return 4 * self.s + np.arange(3 * self.np, dtype=np.intp)  # each row: one point
+
     def initial_state(self, model: MachineModel, theta: FloatArray) -> StationState:
         d = self.data
         pos = np.asarray(d.spec.station_guess_mm, dtype=float).copy()
