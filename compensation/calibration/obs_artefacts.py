@@ -38,6 +38,9 @@ from .plate import PlateData
 __all__ = ["MultilaterationBlock", "PlateBlock", "PlateState", "StationState"]
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+LENGTH_BANDS = 3  # variance groups of a multilateration's lengths, by range (_length_bands)
+LENGTH_BAND_MIN_ROWS = 40  # lengths per band at least (each band's σ is estimated)
 MIN_BALL_U_UM = 1e-4  # a ball "known exactly" still gets a (tiny) prior, so the maths stays finite
 
 
@@ -147,8 +150,7 @@ class MultilaterationBlock(Block):
     def __init__(self, data: MultilaterationData, dataset: int, model: MachineModel) -> None:
         super().__init__(kind="multilateration", dataset=dataset, source=data.source)
         self.data = data
-        self.variance_groups = [VarianceGroup(dataset, "length_um", "um", data.spec.u_um)]
-        self.groups = np.zeros(data.n, dtype=np.intp)
+        self.groups, self.variance_groups = _length_bands(data, dataset)
         self.lines = data.lines
         self.pts = model.points(data.q_mm, data.spec.stylus_mm, None, data.temps_C or None)
         self.s = len(data.stations)
@@ -224,6 +226,25 @@ class MultilaterationBlock(Block):
                 entry["u_dead_path_um"] = float(sd[4 * k + 3])
             out.append(entry)
         return {"stations": out, "point_offsets_rms_um": _rms3(st.point_um)}
+
+
+def _length_bands(data: MultilaterationData, dataset: int) -> tuple[IntArray, list[VarianceGroup]]:
+    """The lengths' variance groups: bands of the range (indicated point to the station's
+    guess), each with its own σ estimated. A tracking interferometer's noise grows with the
+    length (``a + b·L``: its wavelength, the air's index along the beam), so one σ for all would
+    over-weight the long lengths and make the U of what they determine too small; up to
+    :data:`LENGTH_BANDS` bands of at least :data:`LENGTH_BAND_MIN_ROWS` rows (a piecewise-
+    constant σ(L) estimated from the data, no model of it assumed)."""
+    guess = np.asarray(data.spec.station_guess_mm, dtype=float)
+    reach = np.linalg.norm(data.q_mm - guess[data.station], axis=1)
+    bands = int(np.clip(data.n // LENGTH_BAND_MIN_ROWS, 1, LENGTH_BANDS))
+    edges = np.quantile(reach, np.linspace(0.0, 1.0, bands + 1))
+    groups = np.clip(np.searchsorted(edges, reach, side="right") - 1, 0, bands - 1)
+    out = []
+    for k in range(bands):
+        name = "length_um" if bands == 1 else f"length_um ({edges[k]:.0f}-{edges[k + 1]:.0f} mm)"
+        out.append(VarianceGroup(dataset, name, "um", data.spec.u_um))
+    return groups.astype(np.intp), out
 
 
 def _rms3(values: FloatArray) -> float | None:
