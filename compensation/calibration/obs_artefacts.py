@@ -38,9 +38,6 @@ from .plate import PlateData
 __all__ = ["MultilaterationBlock", "PlateBlock", "PlateState", "StationState"]
 
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.intp]
-LENGTH_BANDS = 3  # variance groups of a multilateration's lengths, by range (_length_bands)
-LENGTH_BAND_MIN_ROWS = 40  # lengths per band at least (each band's σ is estimated)
 MIN_BALL_U_UM = 1e-4  # a ball "known exactly" still gets a (tiny) prior, so the maths stays finite
 
 
@@ -150,7 +147,8 @@ class MultilaterationBlock(Block):
     def __init__(self, data: MultilaterationData, dataset: int, model: MachineModel) -> None:
         super().__init__(kind="multilateration", dataset=dataset, source=data.source)
         self.data = data
-        self.groups, self.variance_groups = _length_bands(data, dataset)
+        self.variance_groups = [VarianceGroup(dataset, "length_um", "um", data.spec.u_um)]
+        self.groups = np.zeros(data.n, dtype=np.intp)
         self.lines = data.lines
         self.pts = model.points(data.q_mm, data.spec.stylus_mm, None, data.temps_C or None)
         self.s = len(data.stations)
@@ -162,9 +160,12 @@ class MultilaterationBlock(Block):
         return 4 * self.s + 3 * self.np
 
     def random_effects(self) -> list[tuple[NDArray[np.intp], str, float]]:
+        # one σ per machine axis: the offsets are mostly each axis' reversal at that stop,
+        # which differs from axis to axis (a pooled σ would shrink the largest too far)
         if not self.np:
             return []
-        return [(4 * self.s + np.arange(3 * self.np), "point_um", self.data.spec.u_um)]
+        first = 4 * self.s + 3 * np.arange(self.np)
+        return [(first + c, f"point_{a}_um", self.data.spec.u_um) for c, a in enumerate("xyz")]
 
     def local_nuisance(self) -> NDArray[np.intp]:
         return 4 * self.s + np.arange(3 * self.np, dtype=np.intp)  # each row: one point
@@ -226,25 +227,6 @@ class MultilaterationBlock(Block):
                 entry["u_dead_path_um"] = float(sd[4 * k + 3])
             out.append(entry)
         return {"stations": out, "point_offsets_rms_um": _rms3(st.point_um)}
-
-
-def _length_bands(data: MultilaterationData, dataset: int) -> tuple[IntArray, list[VarianceGroup]]:
-    """The lengths' variance groups: bands of the range (indicated point to the station's
-    guess), each with its own σ estimated. A tracking interferometer's noise grows with the
-    length (``a + b·L``: its wavelength, the air's index along the beam), so one σ for all would
-    over-weight the long lengths and make the U of what they determine too small; up to
-    :data:`LENGTH_BANDS` bands of at least :data:`LENGTH_BAND_MIN_ROWS` rows (a piecewise-
-    constant σ(L) estimated from the data, no model of it assumed)."""
-    guess = np.asarray(data.spec.station_guess_mm, dtype=float)
-    reach = np.linalg.norm(data.q_mm - guess[data.station], axis=1)
-    bands = int(np.clip(data.n // LENGTH_BAND_MIN_ROWS, 1, LENGTH_BANDS))
-    edges = np.quantile(reach, np.linspace(0.0, 1.0, bands + 1))
-    groups = np.clip(np.searchsorted(edges, reach, side="right") - 1, 0, bands - 1)
-    out = []
-    for k in range(bands):
-        name = "length_um" if bands == 1 else f"length_um ({edges[k]:.0f}-{edges[k + 1]:.0f} mm)"
-        out.append(VarianceGroup(dataset, name, "um", data.spec.u_um))
-    return groups.astype(np.intp), out
 
 
 def _rms3(values: FloatArray) -> float | None:
