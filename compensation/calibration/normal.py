@@ -10,10 +10,9 @@ kept parameters) instead of a factor of the whole ``H``:
     x_K = S⁻¹ (g_K − B D⁻¹ g_E),   x_E = D⁻¹ (g_E − Bᵀ x_K)
     C_KK = S⁻¹,  C_KE = −S⁻¹ B D⁻¹,  C_EE = D⁻¹ + D⁻¹ Bᵀ S⁻¹ B D⁻¹
 
-The fixed-point updates need only ``tr(H⁻¹·JᵀJ)`` per variance group and the diagonal of
-``H⁻¹``: since no reading sees two points' offsets, ``JᵀJ`` over them is block diagonal too, so
-only ``C_EE``'s 3 × 3 diagonal blocks are formed (:meth:`Normal.trace`, :meth:`Normal.diagonal`).
-The same algebra as factorising ``H`` (exact, not an approximation); ``H`` is scaled to a unit
+The fixed-point updates need ``tr(H⁻¹·JᵀJ)`` per variance group and the diagonal of ``H⁻¹``:
+the inverse is assembled from these blocks once per factor (:meth:`Normal.inverse`). The same
+algebra as factorising ``H`` (exact, not an approximation); ``H`` is scaled to a unit
 diagonal (Jacobi) before either factor, so solves stay accurate across the parameters' scales.
 """
 
@@ -23,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import cho_factor, cho_solve, lapack
+from scipy.linalg import blas, cho_factor, cho_solve, lapack
 
 from ..errors import CalibrationError
 
@@ -72,9 +71,9 @@ class Normal:
         h = GAUGE_PRECISION * pins.T @ pins
         h[np.diag_indices_from(h)] += prec
         grad = prec * x_abs + GAUGE_PRECISION * pins.T @ (pins @ x_abs)
-        for g, sup, (a, b, _) in zip(problem.groups, problem.support, stats, strict=True):
-            cell = np.ix_(sup, sup)  # JᵀJ is zero outside its group's support
-            h[cell] += a[cell] * (1.0 / g.sigma**2)
+        flat = h.reshape(-1)
+        for g, (a, b, _) in zip(problem.groups, stats, strict=True):
+            blas.daxpy(a.reshape(-1), flat, a=1.0 / g.sigma**2)  # in place: h += a/σ²
             grad += b / g.sigma**2
         if damping:
             h[np.diag_indices_from(h)] *= 1.0 + damping
@@ -100,8 +99,7 @@ class Normal:
         except np.linalg.LinAlgError:
             raise _singular() from None
         self._ckk: FloatArray | None = None
-        self._q: FloatArray | None = None
-        self._cee: FloatArray | None = None
+        self._full: FloatArray | None = None
 
     def _solve_kept(self, rhs: FloatArray) -> FloatArray:
         return self.scale * np.asarray(cho_solve(self.chol, self.scale * rhs))
@@ -127,49 +125,29 @@ class Normal:
             self._ckk = _potri(self.chol) * np.outer(self.scale, self.scale)
         return self._ckk
 
-    def _cross(self) -> tuple[FloatArray, FloatArray]:
-        """(S⁻¹·B·D⁻¹ (K, E) — minus C_KE —, C_EE's diagonal blocks (m, 3, 3))."""
-        if self._q is None or self._cee is None:
-            q = self.kept_inverse() @ self.bd
-            bd3 = self.bd.reshape(-1, self.m, LOCAL)
-            q3 = q.reshape(-1, self.m, LOCAL)
-            self._cee = self.d_inv + np.einsum("kia,kib->iab", bd3, q3)
-            self._q = q
-        return self._q, self._cee
-
     def diagonal(self) -> FloatArray:
         """The diagonal of H⁻¹ (all parameters)."""
-        out = np.empty(self.n)
-        out[self.kept] = np.diag(self.kept_inverse())
-        if self.m:
-            out[self.local] = np.einsum("iaa->ia", self._cross()[1]).reshape(-1)
-        return out
+        return np.diag(self.inverse()).copy()
 
     def trace(self, a: FloatArray) -> float:
-        """tr(H⁻¹·a) for a symmetric (n, n) ``a`` that, like every group's JᵀJ, couples no two
-        local groups (its local part block diagonal)."""
-        out = float(np.sum(self.kept_inverse() * a[np.ix_(self.kept, self.kept)]))
-        if self.m:
-            q, cee = self._cross()
-            out -= 2.0 * float(np.sum(q * a[np.ix_(self.kept, self.local)]))
-            aee = a[np.ix_(self.local, self.local)].reshape(self.m, LOCAL, self.m, LOCAL)
-            idx = np.arange(self.m)
-            out += float(np.sum(cee * aee[idx, :, idx, :]))
-        return out
+        """tr(H⁻¹·a) for a symmetric (n, n) ``a`` (a group's JᵀJ): one dense dot product."""
+        return float(np.vdot(self.inverse(), a))
 
     def inverse(self) -> FloatArray:
-        """H⁻¹, every parameter (assembled from the blocks)."""
+        """H⁻¹, every parameter (assembled from the blocks once, then kept)."""
+        if self._full is not None:
+            return self._full
         out = np.empty((self.n, self.n))
         out[np.ix_(self.kept, self.kept)] = self.kept_inverse()
         if self.m:
-            q, _ = self._cross()
-            c_ke = -q
-            out[np.ix_(self.kept, self.local)] = c_ke
-            out[np.ix_(self.local, self.kept)] = c_ke.T
+            q = self.kept_inverse() @ self.bd  # S⁻¹·B·D⁻¹ = −C_KE
+            out[np.ix_(self.kept, self.local)] = -q
+            out[np.ix_(self.local, self.kept)] = -q.T
             d = np.zeros((self.m, LOCAL, self.m, LOCAL))
             idx = np.arange(self.m)
             d[idx, :, idx, :] = self.d_inv
             out[np.ix_(self.local, self.local)] = d.reshape(self.local.size, -1) + self.bd.T @ q
+        self._full = out
         return out
 
 
