@@ -214,3 +214,30 @@ def test_schur_eliminated_normal_matrix_equals_the_dense_inverse(mixed) -> None:
     np.testing.assert_allclose(
         kept, dense[np.ix_(problem.kept, problem.kept)], atol=1e-9 * np.abs(dense).max()
     )
+
+
+def test_plate_gaps_are_the_stretches_no_placement_along_the_axis_reaches() -> None:
+    """Hand-made placements (the answer known by construction): two flat plates at x 0–400 and
+    900–1300 mm leave x 400–900 unseen; a plate standing across x at x ≈ 650 does not close the
+    gap (it sees none of the rise along x); a laser linear run along x, or a multilateration,
+    does."""
+    from types import SimpleNamespace as NS
+
+    from cmm_comp.compensation.calibration.gaps import gap_warning, plate_gaps
+
+    g = np.linspace(0.0, 400.0, 5)
+    flat = np.array([[u, v, 50.0] for u in g for v in g])  # an XY plate, 25 balls
+    across = np.array([[650.0 + 0.01 * v, u, v] for u in g for v in g])  # a YZ plate
+    q = np.vstack([flat, flat + np.array([900.0, 0.0, 0.0]), across])
+    placement = np.repeat([0, 1, 2], 25)
+    plate = NS(kind="plate", data=NS(placements=("a", "b", "c"), placement=placement, q_mm=q))
+    lower, upper = np.zeros(3), np.array([1300.0, 400.0, 400.0])
+    gaps = plate_gaps([plate], lower, upper)
+    assert [(x["error"], x["from_mm"], x["to_mm"]) for x in gaps] == [("dx_x", 400.0, 900.0)]
+    assert "dx_x between x = 400 and 900 mm" in (gap_warning(gaps) or "")
+    linear_x = NS(kind="laser", data=NS(runs=(NS(kind="linear", axis=0),)))
+    linear_y = NS(kind="laser", data=NS(runs=(NS(kind="linear", axis=1),)))
+    assert plate_gaps([plate, linear_x], lower, upper) == []
+    assert len(plate_gaps([plate, linear_y], lower, upper)) == 1
+    assert plate_gaps([plate, NS(kind="multilateration", data=None)], lower, upper) == []
+    assert gap_warning([]) is None
