@@ -14,11 +14,13 @@ import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 REALDATA = ROOT.parent / "shared" / "realdata"
 CLI = [sys.executable, "-m", "cmm_comp.cli"]
+Runner = Callable[[list[str], Path], None]  # runs one ``cmm-comp`` command in a folder
 CALIBRATE_CYCLES = (1, 2, 3)
 CHECK_CYCLES = (4, 5)
 #: (file, axis, a-priori σ of one reading µm: the runs' repeatability order of magnitude)
@@ -57,55 +59,40 @@ def plan_text(dat: Path, axis: str, u_um: float) -> str:
     return "\n".join(lines)
 
 
-def iso(dat: Path, cwd: Path) -> dict[str, float]:
+def run_subprocess(args: list[str], cwd: Path) -> None:
+    """``cmm-comp ARGS`` in ``cwd`` as a user runs it (a subprocess); fails on a non-zero exit."""
+    subprocess.run([*CLI, *args], cwd=cwd, check=True, capture_output=True)
+
+
+def iso(dat: Path, cwd: Path, run: Runner = run_subprocess) -> dict[str, float]:
     out = cwd / "iso.json"
-    subprocess.run(
-        [*CLI, "iso230", str(dat), "--json", str(out)], cwd=cwd, check=True, capture_output=True
-    )
+    run(["iso230", str(dat), "--json", str(out)], cwd)
     data = json.loads(out.read_text())
     return {k: float(data[k]) for k in PARAMETERS}
 
 
-def evaluate(rel: str, axis: str, u_um: float, tmp: Path) -> dict[str, object]:
+def evaluate(
+    rel: str, axis: str, u_um: float, tmp: Path, run: Runner = run_subprocess
+) -> dict[str, object]:
+    """Calibrate on the first cycles, evaluate the held-out ones; ``run`` runs one ``cmm-comp``
+    command (a subprocess here; the test passes the CLI's ``main()`` in its own process)."""
     dat = REALDATA / rel
     folder = tmp / rel.replace("/", "_")
     folder.mkdir()
     (folder / "plan.toml").write_text(plan_text(dat, axis, u_um))
-    subprocess.run(
-        [*CLI, "calibrate", "plan.toml", "-o", "machine.toml", "--report", "report", "--quiet"],
-        cwd=folder,
-        check=True,
-        capture_output=True,
-    )
+    run(["calibrate", "plan.toml", "-o", "machine.toml", "--report", "report", "--quiet"], folder)
     cycles = [str(c) for c in CHECK_CYCLES]
     for name, extra in (("before.dat", ["--uncorrected"]), ("after.dat", [])):
-        subprocess.run(
-            [
-                *CLI,
-                "calibrate",
-                "apply",
-                "machine.toml",
-                str(dat),
-                "--axis",
-                axis,
-                "--cycles",
-                *cycles,
-                *extra,
-                "-o",
-                name,
-            ],
-            cwd=folder,
-            check=True,
-            capture_output=True,
-        )
+        apply = ["calibrate", "apply", "machine.toml", str(dat), "--axis", axis, "--cycles"]
+        run([*apply, *cycles, *extra, "-o", name], folder)
     report = json.loads((folder / "report" / "calibration.json").read_text())
     return {
         "file": rel,
         "axis": axis,
         "calibrated_on_cycles": list(CALIBRATE_CYCLES),
         "evaluated_on_cycles": list(CHECK_CYCLES),
-        "before": iso(folder / "before.dat", folder),
-        "after": iso(folder / "after.dat", folder),
+        "before": iso(folder / "before.dat", folder, run),
+        "after": iso(folder / "after.dat", folder, run),
         "fit_rms_um": report["datasets"][0]["rms_after_um"],
         "reversal_written": bool(report["reversal_half_um"]),
     }

@@ -1,6 +1,7 @@
 """The worked example of docs/calibration.md, run exactly as the page prints it (each line of its
-first ``bash`` block, in a fresh folder holding a copy of ``examples/``), and the example's data
-regenerated bit for bit by ``examples/calibration/generate.py``.
+first ``bash`` block, in a fresh folder holding a copy of ``examples/``, through the CLI's own
+``main()`` in this process: what the installed script calls), and the example's data regenerated
+bit for bit by ``examples/calibration/generate.py``.
 
 Oracles independent of the calibration code: the truth the example was simulated from
 (``truth.toml``, through the public machine API), the grid file read back by the daemon's own
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doc_commands import cli
 
 from cmm_comp.compensation import Machine
 
@@ -51,13 +53,7 @@ def test_worked_example_runs_as_printed(tmp_path: Path) -> None:
     for line in commands:
         argv = shlex.split(line)
         assert argv[0] == "cmm-comp"
-        proc = subprocess.run(
-            [sys.executable, "-m", "cmm_comp.cli", *argv[1:]],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
+        proc = cli(*argv[1:], cwd=tmp_path)
         assert proc.returncode == 0, f"{line}\n{proc.stdout}\n{proc.stderr}"
     # the daemon accepted the signed grid of the calibrated machine
     assert "ok; grid machine.grid" in proc.stdout

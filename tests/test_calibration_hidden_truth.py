@@ -13,7 +13,15 @@ the harness scores what it wrote (``calibration_generator/scoring.py``):
 * pooled over the cases: the fraction of (node, component) with |difference| ≤ U is 90–98 %.
 
 The bad inputs the issue names get one clear error naming file, line and field, and nothing is
-written. ``benchmarks/bench_calibration_truth.py`` measures the same on ≥ 50 fresh machines.
+written. ``benchmarks/bench_calibration_truth.py`` measures the same on ≥ 50 fresh machines
+(through the installed script, a subprocess; ``tests/test_calibration_harness.py`` runs that
+path once).
+
+Power of the CI sample: ten machines (one per model, the four kinds in turn) and 6 × 6 × 6 × 3 =
+648 (node, component) values each. Each case fails on its own when its RMS difference passes
+20 % (a per-case claim, no sampling); the pooled coverage over 6,480 values — correlated within
+a machine, so worth ≈ 10 machines — fails a U that is ≈ 1.5× too small (coverage ≈ 80 %) or
+≈ 1.5× too large (≈ 99.5 %); the 90–98 % bar to a percent is the benchmark's (50 machines).
 """
 
 from __future__ import annotations
@@ -30,11 +38,18 @@ from calibration_generator.scoring import (
     bar_failures,
     calibrate_and_score,
     pooled,
-    run_cli,
 )
 from calibration_generator.seeds import CI_CASES
+from doc_commands import cli
 
 Scored = Callable[[int, str, str], CaseScore]
+
+
+def run_cli(plan: Path, out_toml: Path, report_dir: Path) -> tuple[int, str, str]:
+    """``cmm-comp calibrate PLAN -o OUT --report DIR`` in this process (the harness' contract:
+    exit code, stdout, stderr)."""
+    proc = cli("calibrate", plan, "-o", out_toml, "--report", report_dir)
+    return proc.returncode, proc.stdout, proc.stderr
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +63,7 @@ def scored(tmp_path_factory: pytest.TempPathFactory) -> Scored:
         if key not in cache:
             name = f"{kind}-{model}-{seed}"
             case = build_case(root / name, seed, kind, model)
-            cache[key] = calibrate_and_score(case, root / f"run-{name}")
+            cache[key] = calibrate_and_score(case, root / f"run-{name}", run_cli)
         return cache[key]
 
     return get

@@ -1,11 +1,18 @@
 """Identification with hidden truth: random machines of several of the ten models, each data kind
 alone and all mixed, simulated by tests/calibration_sim.py (public machine API only, the
 contract's definitions, noise, unknown plate poses, stations known to ±30 mm, dead paths) and
-calibrated through the real command line. The identified volumetric error at the calibration
-stylus, compared with the truth after removing the best rigid motion, must be within 20 % of the
-truth's RMS and its U (k = 2) must cover about 95 % of (node, component) — over the runs pooled
-90–99 %, each run ≥ 80 %. benchmarks/bench_calibrate_accuracy.py runs the same over more
-machines.
+calibrated through the command line (the CLI's ``main()``, in this process). The identified
+volumetric error at the calibration stylus, compared with the truth after removing the best
+rigid motion, must be within 20 % of the truth's RMS and its U (k = 2) must cover about 95 % of
+(node, component) — over the runs pooled 90–99 %, each run ≥ 80 %.
+benchmarks/bench_calibrate_accuracy.py runs the same over more machines.
+
+Power of this sample (four machines, each data kind once, 9³ × 3 = 2,187 values each; it was
+eight, two per kind, before the statistical claims moved to the benchmarks): every case still
+fails on its own when its RMS difference passes 20 % or its coverage falls below 80 % (a U about
+1.6× too small); the pooled mean of four fails a U ≈ 1.4× too small (≈ 84 %) or ≈ 1.5× too large
+(≈ 99.7 %), not a U a few per cent off — that is bench_calibrate_accuracy.py's and
+bench_calibration_truth.py's (50 machines).
 """
 
 from __future__ import annotations
@@ -18,20 +25,17 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from calibration_sim import Setup, compare, run_cli, simulate
+from calibration_sim import Setup, compare, simulate
+from doc_commands import cli
 
 SETUP = Setup(
     lower=np.zeros(3), upper=np.array([700.0, 600.0, 500.0]), stylus=np.array([0.0, 0.0, -120.0])
 )
 CASES = [
     (("laser",), "MB2", 1),
-    (("laser",), "CY1", 2),
     (("plate",), "FB1", 3),
-    (("plate",), "MH2", 4),
-    (("multilateration",), "FH1", 5),
     (("multilateration",), "CX1", 6),
     (("laser", "plate", "multilateration"), "MB1", 7),
-    (("laser", "plate", "multilateration"), "FB2", 8),
 ]
 RESULTS: list[dict[str, float]] = []
 
@@ -45,10 +49,8 @@ def test_identified_error_within_its_uncertainty(
     machine, plan = simulate(
         tmp_path, model, SETUP, kinds, np.random.default_rng(seed), nodes=9, wave=False
     )
-    proc = run_cli(
-        ["calibrate", str(plan), "-o", "machine.toml", "--report", "report", "--quiet"],
-        tmp_path,
-        500,
+    proc = cli(
+        "calibrate", plan, "-o", "machine.toml", "--report", "report", "--quiet", cwd=tmp_path
     )
     assert proc.returncode == 0, proc.stderr
     result = compare(machine, tmp_path / "report" / "volumetric_u.csv")

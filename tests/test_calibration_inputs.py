@@ -2,17 +2,18 @@
 code 2, nothing written — a previous machine file is left as it was (docs/formats.md §10).
 
 Each case corrupts one file of the worked example (examples/calibration) in a copy and runs the
-real command line in a subprocess, as a user would.
+command line as a user types it, through the CLI's own ``main()`` in this process (what the
+installed script calls: exit code, stdout and stderr as a subprocess would give them).
 """
 
 from __future__ import annotations
 
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from doc_commands import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "calibration"
@@ -28,23 +29,15 @@ def plan_dir(tmp_path: Path) -> Path:
 
 
 def _run(folder: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "cmm_comp.cli",
-            "calibrate",
-            "calibration.toml",
-            "-o",
-            "machine.toml",
-            "--report",
-            "report",
-            "--quiet",
-        ],
+    return cli(
+        "calibrate",
+        "calibration.toml",
+        "-o",
+        "machine.toml",
+        "--report",
+        "report",
+        "--quiet",
         cwd=folder,
-        capture_output=True,
-        text=True,
-        timeout=120,
     )
 
 

@@ -170,3 +170,74 @@ def test_written_machine_predicts_the_data_to_the_noise(tmp_path: Path) -> None:
     runs = data[linear, 5]
     resid = np.concatenate([d[runs == r] - np.mean(d[runs == r]) for r in np.unique(runs)])
     assert 0.12 < np.sqrt(np.mean(resid**2)) < 0.3  # the simulated σ is 0.2 µm
+
+
+def test_schur_eliminated_normal_matrix_equals_the_dense_inverse(mixed) -> None:  # type: ignore[no-untyped-def]
+    """The solver's factor with the multilateration points' offsets eliminated (Schur complement,
+    :mod:`.normal`) against brute force: the whole normal matrix assembled here from the
+    prior, the pins and every group's JᵀJ, inverted densely by numpy. The flat priors (poses,
+    stations) and the rigid-rotation pins make the real matrix too ill-conditioned (≈ 1e13) for
+    any inverse to serve as an oracle, so here every prior precision is at least 1e-2 and the
+    pins are off (condition ≈ 2e5): the algebra under test is the same."""
+    from cmm_comp.compensation.calibration.normal import GAUGE_PRECISION, Normal
+
+    _, plan_path = mixed
+    problem = _problem(plan_path)
+    assert problem.local.size > 0 and problem.local.size % 3 == 0
+    theta = np.zeros(problem.p)
+    states = [b.initial_state(problem.model, theta) for b in problem.blocks]
+    res, jac = problem.linearize(theta, states)
+    stats = problem.group_stats(res, jac)
+    problem.base_precision = np.maximum(problem.base_precision, 1e-2)
+    problem.pins = problem.pins[:0]
+    rng = np.random.default_rng(5)
+    lam = {c: 10.0 ** rng.uniform(-4, 0) for c in problem.classes}
+    for g in problem.groups:
+        g.sigma = g.sigma0 * rng.uniform(0.5, 2.0)
+    x = problem.absolute(theta, states) + rng.normal(0.0, 0.1, problem.n)
+    h = np.diag(problem.precision(lam)) + GAUGE_PRECISION * problem.pins.T @ problem.pins
+    grad = problem.precision(lam) * x + GAUGE_PRECISION * problem.pins.T @ (problem.pins @ x)
+    for g, (a, b, _) in zip(problem.groups, stats, strict=True):
+        h += a / g.sigma**2
+        grad += b / g.sigma**2
+    scale = 1.0 / np.sqrt(np.diag(h))
+    dense = np.linalg.inv(h * np.outer(scale, scale)) * np.outer(scale, scale)
+    normal = Normal(problem, stats, x, lam)
+    inv = normal.inverse()
+    np.testing.assert_allclose(inv, dense, rtol=0, atol=1e-9 * np.abs(dense).max())
+    step = -dense @ grad
+    np.testing.assert_allclose(normal.step(), step, rtol=0, atol=1e-7 * np.abs(step).max())
+    np.testing.assert_allclose(normal.diagonal(), np.diag(dense), rtol=1e-9)
+    for a, _, _ in stats:
+        assert normal.trace(a) == pytest.approx(float(np.sum(dense * a)), rel=1e-8)
+    kept = normal.kept_inverse()
+    np.testing.assert_allclose(
+        kept, dense[np.ix_(problem.kept, problem.kept)], atol=1e-9 * np.abs(dense).max()
+    )
+
+
+def test_plate_gaps_are_the_stretches_no_placement_along_the_axis_reaches() -> None:
+    """Hand-made placements (the answer known by construction): two flat plates at x 0–400 and
+    900–1300 mm leave x 400–900 unseen; a plate standing across x at x ≈ 650 does not close the
+    gap (it sees none of the rise along x); a laser linear run along x, or a multilateration,
+    does."""
+    from types import SimpleNamespace as NS
+
+    from cmm_comp.compensation.calibration.gaps import gap_warning, plate_gaps
+
+    g = np.linspace(0.0, 400.0, 5)
+    flat = np.array([[u, v, 50.0] for u in g for v in g])  # an XY plate, 25 balls
+    across = np.array([[650.0 + 0.01 * v, u, v] for u in g for v in g])  # a YZ plate
+    q = np.vstack([flat, flat + np.array([900.0, 0.0, 0.0]), across])
+    placement = np.repeat([0, 1, 2], 25)
+    plate = NS(kind="plate", data=NS(placements=("a", "b", "c"), placement=placement, q_mm=q))
+    lower, upper = np.zeros(3), np.array([1300.0, 400.0, 400.0])
+    gaps = plate_gaps([plate], lower, upper)
+    assert [(x["error"], x["from_mm"], x["to_mm"]) for x in gaps] == [("dx_x", 400.0, 900.0)]
+    assert "dx_x between x = 400 and 900 mm" in (gap_warning(gaps) or "")
+    linear_x = NS(kind="laser", data=NS(runs=(NS(kind="linear", axis=0),)))
+    linear_y = NS(kind="laser", data=NS(runs=(NS(kind="linear", axis=1),)))
+    assert plate_gaps([plate, linear_x], lower, upper) == []
+    assert len(plate_gaps([plate, linear_y], lower, upper)) == 1
+    assert plate_gaps([plate, NS(kind="multilateration", data=None)], lower, upper) == []
+    assert gap_warning([]) is None

@@ -2,22 +2,30 @@
 ``cmm-comp iso230`` — the project's independent ISO 230-2 evaluation — shows the gain on cycles
 the calibration did not use (cross-validated). Skipped when ../shared/realdata is absent.
 The corrected re-evaluation is also checked against a hand computation of reference − (target
-+ the written machine's error) from the file itself.
++ the written machine's error) from the file itself. The commands run through the CLI's own
+``main()`` in this process (``benchmarks/bench_calibrate_realdata.py`` runs them as
+subprocesses).
 """
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import REALDATA
+from doc_commands import cli
 
 pytestmark = pytest.mark.realdata
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
+
+
+def _in_process(args: list[str], cwd: Path) -> None:
+    """``cmm-comp ARGS`` in ``cwd`` through the CLI's ``main()``; fails on a non-zero exit."""
+    proc = cli(*args, cwd=cwd)
+    assert proc.returncode == 0, f"cmm-comp {' '.join(args)}: {proc.stderr}"
 
 
 def _need_data() -> None:
@@ -39,7 +47,7 @@ def test_held_out_cycles_improve(tmp_path: Path, rel: str, axis: str, u_um: floa
     _need_data()
     from bench_calibrate_realdata import evaluate
 
-    r = evaluate(rel, axis, u_um, tmp_path)
+    r = evaluate(rel, axis, u_um, tmp_path, _in_process)
     before, after = r["before"], r["after"]
     # the systematic deviations fall on cycles the fit never saw; repeatability cannot rise
     assert after["E_um"] < 0.6 * before["E_um"], r
@@ -58,32 +66,9 @@ def test_corrected_run_is_reference_minus_corrected_position(tmp_path: Path) -> 
     from bench_calibrate_realdata import plan_text
 
     (tmp_path / "plan.toml").write_text(plan_text(dat, "z", 0.5))
-    cli = [sys.executable, "-m", "cmm_comp.cli"]
-    subprocess.run(
-        [*cli, "calibrate", "plan.toml", "-o", "m.toml", "--quiet"],
-        cwd=tmp_path,
-        check=True,
-        capture_output=True,
-    )
-    subprocess.run(
-        [
-            *cli,
-            "calibrate",
-            "apply",
-            "m.toml",
-            str(dat),
-            "--axis",
-            "z",
-            "--cycles",
-            "4",
-            "5",
-            "-o",
-            "c.dat",
-        ],
-        cwd=tmp_path,
-        check=True,
-        capture_output=True,
-    )
+    _in_process(["calibrate", "plan.toml", "-o", "m.toml", "--quiet"], tmp_path)
+    apply = ["calibrate", "apply", "m.toml", str(dat), "--axis", "z", "--cycles", "4", "5"]
+    _in_process([*apply, "-o", "c.dat"], tmp_path)
     run, corrected = read_iso230_dat(dat), read_iso230_dat(tmp_path / "c.dat")
     machine = Machine.from_toml(tmp_path / "m.toml")
     q = np.zeros((run.target_mm.size, 3))

@@ -28,6 +28,7 @@ from .covariance import (
     volumetric_u,
 )
 from .datasets import Dataset, build_problem, load_datasets
+from .gaps import gap_warning, plate_gaps
 from .gauge import analyse_gauge
 from .plan import Plan
 from .posterior import residuals_without_errors, with_smoothness_spread
@@ -247,6 +248,10 @@ def _warnings(r: CalibrationResult) -> list[str]:
                     f"{q['sigma_prior']:g}: the data hold something the model does not "
                     "describe (or the a-priori σ is too small); U is scaled to the scatter"
                 )
+    lay = r.problem.model.layout
+    gaps = gap_warning(plate_gaps(r.datasets, lay.lower_mm, lay.upper_mm))
+    if gaps:
+        out.append(gaps)
     unseen = [
         f"{'+'.join(f['errors'])} ({f['what']})"
         for f in r.gauge["all_data"]["freedoms"]

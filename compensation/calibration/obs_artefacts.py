@@ -160,9 +160,15 @@ class MultilaterationBlock(Block):
         return 4 * self.s + 3 * self.np
 
     def random_effects(self) -> list[tuple[NDArray[np.intp], str, float]]:
+        # one σ per machine axis: the offsets are mostly each axis' reversal at that stop,
+        # which differs from axis to axis (a pooled σ would shrink the largest too far)
         if not self.np:
             return []
-        return [(4 * self.s + np.arange(3 * self.np), "point_um", self.data.spec.u_um)]
+        first = 4 * self.s + 3 * np.arange(self.np)
+        return [(first + c, f"point_{a}_um", self.data.spec.u_um) for c, a in enumerate("xyz")]
+
+    def local_nuisance(self) -> NDArray[np.intp]:
+        return 4 * self.s + np.arange(3 * self.np, dtype=np.intp)  # each row: one point
 
     def initial_state(self, model: MachineModel, theta: FloatArray) -> StationState:
         d = self.data

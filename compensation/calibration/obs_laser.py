@@ -50,13 +50,17 @@ class LaserBlock(Block):
         super().__init__(kind="laser", dataset=dataset, source=data.source)
         self.data = data
         runs = data.runs
-        kinds = [k for k in _QUANTITY_GROUPS if any(r.kind == k for r in runs)]
+        # one variance group per kind of reading, the angles one per quantity: a roll is read
+        # by other means (a level, a straightness pair) than pitch and yaw (angular optics) and
+        # is less precise; one σ for all three would make the U of the pitches too large and
+        # of the rolls too small
+        kinds = sorted({_group_key(r) for r in runs}, key=_group_order)
         self.variance_groups = [
             VarianceGroup(
                 dataset,
-                _QUANTITY_GROUPS[k][0],
-                _QUANTITY_GROUPS[k][1],
-                float(data.spec.u[_QUANTITY_GROUPS[k][2]]),
+                k if _kind(k) == "angle" else _QUANTITY_GROUPS[k][0],
+                _QUANTITY_GROUPS[_kind(k)][1],
+                float(data.spec.u[_QUANTITY_GROUPS[_kind(k)][2]]),
             )
             for k in kinds
         ]
@@ -70,7 +74,7 @@ class LaserBlock(Block):
         projections: list[Projection] = []
         start = 0
         for r in self.row_runs:
-            groups.append(np.full(r.n, kinds.index(r.kind), dtype=np.intp))
+            groups.append(np.full(r.n, kinds.index(_group_key(r)), dtype=np.intp))
             lines.extend(r.lines)
             if r.kind == "straightness":
                 for p in r.passes:
@@ -248,6 +252,19 @@ class LaserBlock(Block):
         for p in self.projections:
             out[self.groups[p.rows[0]]] += p.design.shape[1]
         return out
+
+
+def _group_key(run: LaserRun) -> str:
+    """The variance group of a run: its kind, an angle's quantity (``roll_urad`` …)."""
+    return run.quantity if run.kind == "angle" else run.kind
+
+
+def _kind(key: str) -> str:
+    return key if key in _QUANTITY_GROUPS else "angle"
+
+
+def _group_order(key: str) -> tuple[int, str]:
+    return list(_QUANTITY_GROUPS).index(_kind(key)), key
 
 
 def _temps(runs: list[LaserRun]) -> dict[str, FloatArray] | None:

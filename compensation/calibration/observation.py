@@ -82,6 +82,12 @@ class Block:
         nuisance, a name, the a-priori σ); their prior N(0, σ²) has its σ estimated by the fit."""
         return []
 
+    def local_nuisance(self) -> IntArray:
+        """Nuisance parameters (indices within the block's, in groups of 3) that each only its
+        own rows see, no two groups sharing a row — a point's offsets: the solver eliminates
+        them from its normal matrix by a Schur complement (:mod:`.normal`)."""
+        return np.zeros(0, dtype=np.intp)
+
     def initial_state(self, model: MachineModel, theta: FloatArray) -> Any:
         return None
 

@@ -11,7 +11,8 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from .solver import CLASS_WEIGHT, LAMBDA_RANGE, Problem, Solution, _lm, _Normal
+from .normal import Normal
+from .solver import CLASS_WEIGHT, LAMBDA_RANGE, Problem, Solution, _lm
 
 __all__ = ["residuals_without_errors", "smoothness_spread", "with_smoothness_spread"]
 
@@ -24,8 +25,8 @@ def with_smoothness_spread(problem: Problem, sol: Solution) -> Solution:
     if problem.fixed_smoothness is not None or not problem.classes:
         return sol
     x_abs = problem.absolute(sol.theta_internal, sol.states)
-    normal = _Normal(problem, sol.stats, x_abs, sol.lam, pinned=False)
-    cov = normal.inverse()
+    normal = Normal(problem, sol.stats, x_abs, sol.lam, pinned=False)
+    cov = normal.kept_inverse()
     cov = cov + smoothness_spread(problem, sol.stats, x_abs, sol.lam, cov, normal.step())
     return replace(sol, covariance_theta=problem.theta_covariance(cov[: problem.p, : problem.p]))
 
@@ -38,7 +39,8 @@ def smoothness_spread(
     cov: FloatArray,
     step: FloatArray,
 ) -> FloatArray:
-    """(n, n) what the smoothness' own uncertainty adds to the posterior covariance ``cov``.
+    """(K, K) what the smoothness' own uncertainty adds to the posterior covariance ``cov`` of
+    the kept parameters (:attr:`.solver.Problem.kept`: θ first, the local nuisance eliminated).
 
     Each class' λ_f is an estimate: its evidence gives log λ_f a posterior of standard deviation
     ``√(2/ν_f)`` (MacKay), ν_f the degrees of freedom behind it (γ_f of the data plus the
@@ -54,9 +56,9 @@ def smoothness_spread(
         for sign in (-1.0, 1.0):
             moved = dict(lam)
             moved[f] = float(np.clip(lam[f] * np.exp(sign * np.sqrt(3.0) * s), *LAMBDA_RANGE))
-            normal = _Normal(problem, stats, x_abs, moved, pinned=False)
-            shift = normal.step() - step  # θ̂(λ') − θ̂(λ) of the linearised problem
-            out += (normal.inverse() - cov + np.outer(shift, shift)) / 6.0
+            normal = Normal(problem, stats, x_abs, moved, pinned=False)
+            shift = (normal.step() - step)[problem.kept]  # θ̂(λ') − θ̂(λ), linearised
+            out += (normal.kept_inverse() - cov + np.outer(shift, shift)) / 6.0
     return out
 
 

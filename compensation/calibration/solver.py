@@ -31,10 +31,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import cho_factor, cho_solve, lapack
 
-from ..errors import CalibrationError
 from .model import MachineModel
+from .normal import GAUGE_PRECISION, Normal, local_structure
 from .observation import Block
 
 __all__ = [
@@ -50,7 +49,6 @@ LAMBDA_RANGE = (1e-8, 1e6)  # τ = 1e4 … 1e-3 µm (µrad): beyond, the data ha
 INITIAL_TAU = 1e4  # µm or µrad: start rough, the data first (the smoothness then grows to fit)
 STEP_TOL = 1e-6  # µm, µrad (scaled): a step this small ends the iteration
 FLAT_PRECISION = 1e-12  # a "flat" nuisance prior (poses, stations): keeps H positive definite
-GAUGE_PRECISION = 1e8  # 1/µrad²: the rigid rotations no data see are pinned at zero in θ
 NULL_RATIO = 1e-3  # a direction whose data information is below 1e-3 of the weak prior's: unseen
 PENALTY_ORDER = 3  # the third derivative is penalised: a parabola is free (docs §3)
 HYPER_ITERATIONS = 30  # fixed-point updates of σ and λ per linearisation
@@ -145,6 +143,9 @@ class Problem:
                 n = int(np.sum(b.groups == li))
                 self.groups.append(GroupFit(bi, li, n, float(removed[li]), vg.sigma0, vg.sigma0))
             self.group_index.append(base + b.groups)
+        self.support = [np.zeros(0, dtype=np.intp) for _ in self.groups]  # JᵀJ's columns
+        # the local nuisance (a point's offsets) is eliminated from the normal matrix (.normal)
+        self.kept, self.local = local_structure(self)
         self.effects = [
             EffectGroup(bi, name, self.offsets[bi] + idx, sigma0, sigma0)
             for bi, b in enumerate(blocks)
@@ -320,12 +321,18 @@ class Problem:
     def group_stats(
         self, res: list[FloatArray], jac: list[FloatArray]
     ) -> list[tuple[FloatArray, FloatArray, float]]:
-        """Per group (JᵀJ, Jᵀr, rᵀr)."""
+        """Per group (JᵀJ, Jᵀr, rᵀr). JᵀJ is formed over the columns the group's rows touch
+        (:attr:`support`, the union over every call: a laser run sees no pose or station)."""
         out = []
         for gi, g in enumerate(self.groups):
             rows = self.group_index[g.block] == gi
             j, r = jac[g.block][rows], res[g.block][rows]
-            out.append((j.T @ j, j.T @ r, float(r @ r)))
+            sup = np.union1d(self.support[gi], np.flatnonzero(np.any(j != 0.0, axis=0)))
+            self.support[gi] = sup
+            a = np.zeros((self.n, self.n))
+            js = j[:, sup]
+            a[np.ix_(sup, sup)] = js.T @ js
+            out.append((a, j.T @ r, float(r @ r)))
         return out
 
     def cost(self, res: list[FloatArray], x_abs: FloatArray, lam: dict[str, float]) -> float:
@@ -376,52 +383,6 @@ def _class_scale(problem: Problem, theta_int: FloatArray) -> dict[str, float]:
     }
 
 
-class _Normal:
-    """H and the gradient at a linearisation point, factorised after scaling H to a unit
-    diagonal (Jacobi): solves and the inverse stay accurate across the parameters' scales."""
-
-    def __init__(
-        self,
-        problem: Problem,
-        stats: list[tuple[FloatArray, FloatArray, float]],
-        x_abs: FloatArray,
-        lam: dict[str, float],
-        damping: float = 0.0,
-        *,
-        pinned: bool = True,
-    ) -> None:
-        prec = problem.precision(lam)
-        pins = problem.pins if pinned else problem.gauge
-        h = np.diag(prec) + GAUGE_PRECISION * pins.T @ pins
-        grad = prec * x_abs + GAUGE_PRECISION * pins.T @ (pins @ x_abs)
-        for g, (a, b, _) in zip(problem.groups, stats, strict=True):
-            h += a / g.sigma**2
-            grad += b / g.sigma**2
-        if damping:
-            h[np.diag_indices_from(h)] *= 1.0 + damping
-        self.grad = grad
-        self.scale = 1.0 / np.sqrt(np.diag(h))
-        try:
-            self.chol = cho_factor(h * np.outer(self.scale, self.scale), lower=False)
-        except np.linalg.LinAlgError:
-            raise CalibrationError(
-                "the calibration problem is singular even with its prior: a data set's "
-                "nuisance (a plate pose, a station) is not determined by its readings"
-            ) from None
-
-    def step(self) -> FloatArray:
-        return -self.scale * np.asarray(cho_solve(self.chol, self.scale * self.grad))
-
-    def inverse(self) -> FloatArray:
-        """H⁻¹ from the factor (LAPACK potri: a third of a general solve's work)."""
-        factor, lower = self.chol
-        inv, info = lapack.dpotri(factor, lower=lower)
-        if info != 0:  # pragma: no cover - the factor exists, so its inverse does
-            raise CalibrationError(f"inverting the normal matrix failed (LAPACK info {info})")
-        inv = np.tril(inv) + np.tril(inv, -1).T if lower else np.triu(inv) + np.triu(inv, 1).T
-        return inv * np.outer(self.scale, self.scale)
-
-
 def _lm(
     problem: Problem,
     theta: FloatArray,
@@ -440,7 +401,7 @@ def _lm(
             jac = [j * ~frozen for j in jac]
         stats = problem.group_stats(res, jac)
         while True:
-            normal = _Normal(problem, stats, x_abs * (1 if frozen is None else ~frozen), lam, mu)
+            normal = Normal(problem, stats, x_abs * (1 if frozen is None else ~frozen), lam, mu)
             delta = normal.step()
             t_new, s_new = problem.advance(theta, states, delta)
             res_new, jac_new = problem.linearize(t_new, s_new)
@@ -470,13 +431,13 @@ def _hyper_step(
     the largest relative change and the step δ."""
     # one linear problem: its solution has no cause to wander along unseen directions (that is
     # the re-linearisation's doing), so the real posterior gives both the step and the traces
-    normal = _Normal(problem, stats, x_abs, lam, pinned=False)
+    normal = Normal(problem, stats, x_abs, lam, pinned=False)
     delta = normal.step()
-    cov = normal.inverse()
+    diag = normal.diagonal()
     change = 0.0
     for g, (a, b, c) in zip(problem.groups, stats, strict=True):
         rss = c + 2.0 * float(b @ delta) + float(delta @ a @ delta)
-        used = float(np.sum(cov * a)) / g.sigma**2
+        used = normal.trace(a) / g.sigma**2
         g.redundancy = g.n - g.removed - used
         if g.redundancy >= 2.0 and rss > 0:
             new = float(np.sqrt(rss / g.redundancy))
@@ -487,7 +448,7 @@ def _hyper_step(
         # σ of a random effect: the MacKay update, like a variance group's (γ = the effects
         # the data determine); floored, so a vanishing effect stays a (tight) prior
         effect = x_abs[e.index] + delta[e.index]
-        e.used = e.index.size - float(np.sum(np.diag(cov)[e.index])) / e.sigma**2
+        e.used = e.index.size - float(np.sum(diag[e.index])) / e.sigma**2
         if e.used >= 1.0:
             new = max(float(np.sqrt(float(effect @ effect) / e.used)), EFFECT_SIGMA_MIN)
             change = max(change, abs(new / e.sigma - 1.0))
@@ -496,7 +457,6 @@ def _hyper_step(
     new_lam = dict(lam)
     if estimate_lambda:
         theta = x_abs[: problem.p] + delta[: problem.p]
-        diag = np.diag(cov)
         gamma, rough = {}, {}
         for f in problem.classes:
             idx = problem.shape_index[f]
@@ -570,8 +530,8 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
     res, jac = problem.linearize(theta, states)
     stats = problem.group_stats(res, jac)
     x_abs = problem.absolute(theta, states)
-    cov = _Normal(problem, stats, x_abs, lam, pinned=False).inverse()
-    pinned = _Normal(problem, stats, x_abs, lam).inverse()[: problem.p, : problem.p]
+    cov = Normal(problem, stats, x_abs, lam, pinned=False).inverse()
+    pinned = Normal(problem, stats, x_abs, lam).kept_inverse()[: problem.p, : problem.p]
     return Solution(
         theta=problem.theta(theta),
         theta_internal=theta,
