@@ -27,7 +27,7 @@ from .families import DRAFTS, VARIANTS, Redraw, mode_of
 from .machine_effects import MACHINE_EFFECTS, Reversal
 from .noise import Noise, draw_noise
 from .reference_effects import REFERENCE_EFFECTS, Latency
-from .truth import Hidden, SessionFacts, truth_labels
+from .truth import Hidden, SamplePoints, SessionFacts, truth_labels
 
 FloatArray = NDArray[np.float64]
 REDRAWS = 40
@@ -210,7 +210,12 @@ def draw_case(family: str, variant: str, seed: int) -> Case:
         facts = session_facts(design, effects, rows, offset)
         if mode_of(variant) == "bidirectional" and not facts.bidirectional:
             continue
-        hidden, nothing = truth_labels(effects, facts)
+        points = SamplePoints(
+            np.asarray(rows["indicated_mm"], dtype=float),
+            np.asarray(rows["direction"], dtype=float),
+            noise.total_sigma_um,
+        )
+        hidden, nothing = truth_labels(effects, facts, points)
         return Case(
             family=family,
             variant=variant,
