@@ -326,7 +326,8 @@ def test_truth_rules_follow_the_contract() -> None:
     d = np.repeat([1.0, -1.0], 200)
 
     def labels(effects, facts, sigma_um=0.5):
-        hidden, nothing = truth_labels(effects, facts, SamplePoints(q, d, sigma_um))
+        points = SamplePoints(q, q + d * facts.reversal_um / 2000, d, sigma_um)
+        hidden, nothing = truth_labels(effects, facts, points)
         return [h.label for h in hidden], len(nothing)
 
     sep = _facts(rest=10, rev=30.0)
@@ -470,8 +471,8 @@ def test_separability_lambda_matches_the_closed_form(r_over_p: float) -> None:
     ripple = ReferenceRipple("constant", p, 0.0, 0.0, 20.0, amp, 0.0, 0.7, 0.0, 0.0)
     lam = lock_lambda(
         q,
+        q + d * r_over_p * p / 2,
         d,
-        r_over_p * p * 1000.0,
         sigma,
         lambda c: ripple.error_um(c, np.zeros_like(c)),
         ripple.phase_at,
@@ -534,7 +535,7 @@ def test_separability_lambda_predicts_the_monte_carlo_delta_chi2(
     signal = f(own_c)
     own = _law_columns(own_c, d, phase, 0.0, 20.0)
     other = _law_columns(other_c, d, phase, 0.0, 20.0)
-    lam = lock_lambda(q, d, rev_um, sigma_um, f, phase, locked)
+    lam = lock_lambda(q, x, d, sigma_um, f, phase, locked)
     dchi = _mc_delta_chi2(signal, own, other, sigma_um, rng, 300)
     assert 10.0 < lam < 400.0  # a configuration where the check has power
     assert abs(dchi.mean() - lam) < 4 * dchi.std() / np.sqrt(dchi.size)
@@ -553,9 +554,10 @@ def test_the_ess_case_is_separable() -> None:
     assert ripple.period_at_ends_mm() == pytest.approx((0.22, 0.47))
     q, d = _interleaved(17_000, -20.0, 20.0, rng)
     f = lambda c: ripple.error_um(c, np.zeros_like(c))  # noqa: E731
-    lam = lock_lambda(q, d, 27.0, 4.2, f, ripple.phase_at, "reference")
+    lam = lock_lambda(q, q + d * 0.0135, d, 4.2, f, ripple.phase_at, "reference")
     assert lam > 10 * LAMBDA_MIN
     # the same ripple with no reversal, or 1 500 rows at 15 µm of noise: not separable
-    assert lock_lambda(q, d, 0.0, 4.2, f, ripple.phase_at, "reference") < 1e-6
+    assert lock_lambda(q, q, d, 4.2, f, ripple.phase_at, "reference") < 1e-6
     q2, d2 = q[:1500], d[:1500]
-    assert lock_lambda(q2, d2, 27.0, 15.0, f, ripple.phase_at, "reference") < LAMBDA_MIN
+    x2 = q2 + d2 * 0.0135
+    assert lock_lambda(q2, x2, d2, 15.0, f, ripple.phase_at, "reference") < LAMBDA_MIN

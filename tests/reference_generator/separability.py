@@ -9,7 +9,8 @@ expected Δχ² between the true model and the best fit of the other one — the
 
     λ = Σ_i (s_i − ŝ_i)² / σ²,
 
-s the noise-free true signal at the session's own sample points (both directions), ŝ its
+s the noise-free true signal at the session's own sample points (both directions; the carriage
+position x = q + d·r/2 with the drawn reversal r, signed), ŝ its
 least-squares imitation by the other lock, σ the observation noise (µm). With Gaussian noise,
 Δχ² = χ²(imitation) − χ²(truth) has mean λ and standard deviation ≈ 2√λ; λ ≥ 25 puts the mean
 5 standard deviations of a single-noise-term (√λ = 5) away from zero, i.e. a twin that never fits
@@ -77,21 +78,22 @@ def noncentrality(
 
 def lock_lambda(
     q_mm: FloatArray,
+    carriage_mm: FloatArray,
     direction: FloatArray,
-    reversal_um: float,
     sigma_um: float,
     signal_of: Callable[[FloatArray], FloatArray],
     phase_of: Callable[[FloatArray], FloatArray],
     locked: str,
 ) -> float:
     """λ for a ripple ``signal_of`` (µm, of a position in mm) locked to ``locked``
-    (``reference``: the carriage position x = q + d·r/2; ``machine``: q), imitated by the other
-    lock, at the session's sample points (q, d) with noise σ (µm)."""
+    (``reference``: the carriage position x, where the reference's target is; ``machine``: the
+    axis' own position q), imitated by the other lock, at the session's sample points (q, x, d)
+    with noise σ (µm).For a pure reversal r, x = q + d·r/2000."""
     q = np.asarray(q_mm, dtype=float)
+    x = np.asarray(carriage_mm, dtype=float)
     d = np.asarray(direction, dtype=float)
     if q.size == 0:
         return 0.0
-    x = q + d * reversal_um / 2000.0
     own, other = (x, q) if locked == "reference" else (q, x)
     centre = 0.5 * (float(np.min(other)) + float(np.max(other)))
     half = 0.5 * (float(np.max(other)) - float(np.min(other)))

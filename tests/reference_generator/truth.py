@@ -101,10 +101,15 @@ def _short(v: object) -> str:
 
 @dataclass(frozen=True)
 class SamplePoints:
-    """The session's rows as the separability rule needs them: the axis' indicated position q
-    (mm), the direction of its last motion (±1) and the total noise σ of the observed error (µm)."""
+    """The session's rows as the separability rule needs them: the axis' position q at each
+    sample instant (mm; the latency's own shift left out), the carriage position x there moved by
+    the reversal alone (mm; q + d·r/2, r signed — the direction-dependent part of the machine's
+    errors; what does not depend on the direction is a function of q, which a position-locked
+    imitation may follow, and the drift's shift between passes in time is left out: conservative),
+    the direction of the last motion there (±1) and the total noise σ of the observed error (µm)."""
 
     q_mm: FloatArray
+    carriage_mm: FloatArray
     direction: FloatArray
     sigma_um: float
 
@@ -123,8 +128,8 @@ def _periodic_source(
         raise ValueError("a bidirectional ripple's truth needs the session's sample points")
     lam = lock_lambda(
         points.q_mm,
+        points.carriage_mm,
         points.direction,
-        facts.reversal_um,
         points.sigma_um,
         signal_of,
         phase_of,
