@@ -28,12 +28,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from reference_generator import (
+    LAMBDA_MIN,
     VARIANTS,
     Hidden,
+    SamplePoints,
     SessionFacts,
     draw_case,
+    lock_lambda,
     score_diagnosis,
-    separation,
     simulate,
     truth_labels,
     write_case,
@@ -171,7 +173,6 @@ def test_reversal_shifts_the_ripple_in_the_other_instruments_coordinate(referenc
     locked, other = ("r", "q") if reference else ("q", "r")
     assert abs(shift[locked]) < 0.02
     assert abs(abs(shift[other]) - abs(expected)) < 0.02
-    assert separation(rev, p) == (True, pytest.approx(0.3))
 
 
 # ------------------------------------------------------------------ latency, reversal, drifts
@@ -316,21 +317,17 @@ def _facts(bidir: bool = True, rest: int = 0, speeds: int = 1, rev: float = 0.0)
     return SessionFacts("x", bidir, rest, speeds, rev)
 
 
-def test_separation_rule_hand_values() -> None:
-    assert separation(30.0, 0.1) == (True, pytest.approx(0.3))
-    assert separation(27.0, 0.3)[0] is False  # the ESS record: 27 µm against 0.3 mm
-    assert separation(50.0, 0.048)[0] is False  # a reversal of about one period
-    assert separation(4.0, 0.01)[0] is False  # too small a reversal, whatever the period
-    assert separation(-30.0, 0.1)[0] is True  # the sign of the reversal does not matter
-
-
 def test_truth_rules_follow_the_contract() -> None:
     ripple = ReferenceRipple("triangulation", 0.1, 0.0, 30.0, 5.0, 2.0, 0.0, 0.0, 0.0, 0.0)
     screw = PeriodicError(0.1, 2.0, 0.0, 0.0, 0.0)
     lat, rev = Latency(0.03), Reversal(-30.0)
 
-    def labels(effects, facts):
-        hidden, nothing = truth_labels(effects, facts)
+    q = np.tile(np.linspace(-5.0, 5.0, 200), 2)
+    d = np.repeat([1.0, -1.0], 200)
+
+    def labels(effects, facts, sigma_um=0.5):
+        points = SamplePoints(q, q + d * facts.reversal_um / 2000, d, sigma_um)
+        hidden, nothing = truth_labels(effects, facts, points)
         return [h.label for h in hidden], len(nothing)
 
     sep = _facts(rest=10, rev=30.0)
@@ -340,7 +337,14 @@ def test_truth_rules_follow_the_contract() -> None:
     ]
     assert labels([screw], sep)[0] == ["periodic(axis=x,period_mm=0.1)/machine"]
     assert labels([ripple], _facts(bidir=False, rest=10, rev=30.0))[0][0].endswith("/either")
-    assert labels([ripple], _facts(rest=10, rev=5.0))[0][0].endswith("/either")  # 0.05 period
+    # 5 µm against 0.1 mm (0.05 of a period; the first version's fixed rule said `either`):
+    # λ = n·A²·sin²(π·r/p)/(2σ²) ≈ 400·4·0.0245/(2σ²): 78 at σ = 0.5 µm, 2.2 at σ = 3 µm
+    assert labels([ripple], _facts(rest=10, rev=5.0))[0][0].endswith("/reference")
+    assert labels([ripple], _facts(rest=10, rev=5.0), sigma_um=3.0)[0][0].endswith("/either")
+    assert labels([ripple], _facts(rest=10, rev=0.0))[0][0].endswith("/either")  # no reversal
+    assert labels([screw], _facts(rest=10, rev=100.0))[0][0].endswith("/either")  # one period
+    with pytest.raises(ValueError, match="sample points"):
+        truth_labels([ripple], sep)
     assert labels([lat], _facts(rest=10)) == (["latency(axis=x)/reference"], 0)
     assert labels([lat], _facts(speeds=2)) == (["latency(axis=x)/reference"], 0)
     assert labels([lat], _facts()) == (["latency(axis=x)/either"], 0)
@@ -446,3 +450,114 @@ print(score_diagnosis(case.hidden, {{"verdict": "none", "effects": []}}).all_exa
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
     assert (tmp_path / "measurements.csv").exists()
+
+
+# ------------------------------------------------------------------ separability (the ripple rule)
+def _interleaved(n: int, lo: float, hi: float, rng: np.random.Generator):
+    """n sample points over [lo, hi] mm, half forward, half backward, not on a common grid."""
+    q = rng.uniform(lo, hi, n)
+    d = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    return q, d
+
+
+@pytest.mark.parametrize("r_over_p", [0.06, 0.12, 0.3, 0.5])
+def test_separability_lambda_matches_the_closed_form(r_over_p: float) -> None:
+    """A constant-period reference ripple A·sin(2π·x/p), x = q + d·r/2: the best position-locked
+    imitation is the mean of the two directions, A·cos(π·r/p)·sin(2π·q/p); what is left is
+    ±A·sin(π·r/p)·cos(2π·q/p), so λ = n·A²·sin²(π·r/p)/(2σ²) (over many periods)."""
+    rng = np.random.default_rng(3)
+    p, amp, sigma, n = 0.3, 4.0, 1.5, 6000
+    q, d = _interleaved(n, -20.0, 20.0, rng)
+    ripple = ReferenceRipple("constant", p, 0.0, 0.0, 20.0, amp, 0.0, 0.7, 0.0, 0.0)
+    lam = lock_lambda(
+        q,
+        q + d * r_over_p * p / 2,
+        d,
+        sigma,
+        lambda c: ripple.error_um(c, np.zeros_like(c)),
+        ripple.phase_at,
+        "reference",
+    )
+    expected = n * amp**2 * np.sin(np.pi * r_over_p) ** 2 / (2 * sigma**2)
+    assert lam == pytest.approx(expected, rel=0.05)
+
+
+def _mc_delta_chi2(signal, own, other, sigma, rng, runs):
+    """Monte Carlo oracle: noisy realisations y = signal + N(0, σ²), each fitted by the two
+    models (least squares on the given columns); Δχ² = (RSS(other) − RSS(own))/σ²."""
+    out = np.empty(runs)
+    for k in range(runs):
+        y = signal + rng.normal(0.0, sigma, signal.size)
+        rss = [np.sum((y - a @ np.linalg.lstsq(a, y, rcond=None)[0]) ** 2) for a in (own, other)]
+        out[k] = (rss[1] - rss[0]) / sigma**2
+    return out
+
+
+def _law_columns(c, d, phase, centre, half):
+    """The test's own columns of a ripple law locked to coordinate c (written apart from
+    reference_generator.separability): offset, reversal step, cubic, 2 harmonics × (1, u)."""
+    u = (c - centre) / half
+    cols = [np.ones_like(c), d, u, u * u, u**3]
+    for k in (1, 2):
+        cols += [f(k * phase(c)) * m for m in (1.0, u) for f in (np.sin, np.cos)]
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize(
+    ("law", "locked", "rev_um", "amp_um", "sigma_um"),
+    [
+        ("triangulation", "reference", 27.0, 0.5, 1.0),  # the ESS case, r/p ≈ 0.06–0.12
+        ("constant", "reference", 20.0, 0.6, 1.0),  # r/p = 0.08
+        ("periodic", "machine", 30.0, 0.3, 1.0),  # a screw error, r/p = 0.15
+    ],
+)
+def test_separability_lambda_predicts_the_monte_carlo_delta_chi2(
+    law: str, locked: str, rev_um: float, amp_um: float, sigma_um: float
+) -> None:
+    """λ is the mean of the actual two-model Δχ² on noisy realisations (white Gaussian noise of
+    the σ λ was computed with; the generator's correlated part is not simulated here). 300 runs:
+    the mean is checked within 4 standard errors (sd ≈ 2√λ), which detects a λ off by ≳ 25 %
+    at these λ (≈ 20–150) — e.g. a rule that forgot the amplitude slope or a direction."""
+    rng = np.random.default_rng(11)
+    n, p_c = 1500, 0.25
+    q, d = _interleaved(n, -20.0, 20.0, rng)
+    x = q + d * rev_um / 2000.0
+    if law == "periodic":
+        screw = PeriodicError(p_c, amp_um, 0.4, 0.2, 1.1)
+        f = lambda c: screw.error_um(c, np.ones_like(c), np.zeros_like(c))  # noqa: E731
+        phase = lambda c: 2 * np.pi * c / p_c  # noqa: E731
+    else:
+        r0 = -20.0 - 86.6 if law == "triangulation" else 0.0
+        ripple = ReferenceRipple(law, p_c, 0.0, r0, 20.0, amp_um, 0.4, 0.9, 0.2, 0.3)
+        f = lambda c: ripple.error_um(c, np.zeros_like(c))  # noqa: E731
+        phase = ripple.phase_at
+    own_c, other_c = (x, q) if locked == "reference" else (q, x)
+    signal = f(own_c)
+    own = _law_columns(own_c, d, phase, 0.0, 20.0)
+    other = _law_columns(other_c, d, phase, 0.0, 20.0)
+    lam = lock_lambda(q, x, d, sigma_um, f, phase, locked)
+    dchi = _mc_delta_chi2(signal, own, other, sigma_um, rng, 300)
+    assert 10.0 < lam < 400.0  # a configuration where the check has power
+    assert abs(dchi.mean() - lam) < 4 * dchi.std() / np.sqrt(dchi.size)
+    assert dchi.std() == pytest.approx(2 * np.sqrt(lam), rel=0.3)
+
+
+def test_the_ess_case_is_separable() -> None:
+    """The issue's ESS record (sanity of the rule against the issue's own analysis): triangulation
+    ripple, local period 0.22 → 0.47 mm over ±20 mm (optical centre 86.6 mm beyond the near
+    end), reversal 27 µm (0.06–0.12 of a period), ≈ 17 000 rows; at its smallest amplitude (4 µm
+    all along) and treating the whole 4.2 µm RMS left after ripple and curve as noise, λ ≫ 25."""
+    rng = np.random.default_rng(5)
+    d0 = 40.0 / (np.sqrt(0.47 / 0.22) - 1.0)
+    p_c = 0.22 * ((d0 + 20.0) / d0) ** 2
+    ripple = ReferenceRipple("triangulation", p_c, 0.0, -20.0 - d0, 20.0, 4.0, 0.0, 0.3, 0.0, 0.0)
+    assert ripple.period_at_ends_mm() == pytest.approx((0.22, 0.47))
+    q, d = _interleaved(17_000, -20.0, 20.0, rng)
+    f = lambda c: ripple.error_um(c, np.zeros_like(c))  # noqa: E731
+    lam = lock_lambda(q, q + d * 0.0135, d, 4.2, f, ripple.phase_at, "reference")
+    assert lam > 10 * LAMBDA_MIN
+    # the same ripple with no reversal, or 1 500 rows at 15 µm of noise: not separable
+    assert lock_lambda(q, q, d, 4.2, f, ripple.phase_at, "reference") < 1e-6
+    q2, d2 = q[:1500], d[:1500]
+    x2 = q2 + d2 * 0.0135
+    assert lock_lambda(q2, x2, d2, 15.0, f, ripple.phase_at, "reference") < LAMBDA_MIN

@@ -14,27 +14,30 @@ from .families import FAMILIES, VARIANTS, mode_of
 from .files import machine_toml, measurement_rows, write_case
 from .runner import Run, find_cli, run_case
 from .scoring import PERIOD_TOLERANCE, Score, identity_mismatch, score_diagnosis
-from .truth import Hidden, SessionFacts, separation, truth_labels
+from .separability import LAMBDA_MIN, lock_lambda
+from .truth import Hidden, SamplePoints, SessionFacts, truth_labels
 
 __all__ = [
     "FAMILIES",
+    "LAMBDA_MIN",
     "PERIOD_TOLERANCE",
     "VARIANTS",
     "Case",
     "Hidden",
     "Run",
+    "SamplePoints",
     "Score",
     "SessionFacts",
     "UnreachableCase",
     "draw_case",
     "find_cli",
     "identity_mismatch",
+    "lock_lambda",
     "machine_toml",
     "measurement_rows",
     "mode_of",
     "run_case",
     "score_diagnosis",
-    "separation",
     "simulate",
     "truth_labels",
     "write_case",

@@ -27,7 +27,7 @@ from .families import DRAFTS, VARIANTS, Redraw, mode_of
 from .machine_effects import MACHINE_EFFECTS, Reversal
 from .noise import Noise, draw_noise
 from .reference_effects import REFERENCE_EFFECTS, Latency
-from .truth import Hidden, SessionFacts, truth_labels
+from .truth import Hidden, SamplePoints, SessionFacts, truth_labels
 
 FloatArray = NDArray[np.float64]
 REDRAWS = 40
@@ -128,7 +128,9 @@ def simulate(
     offset_um: float,
     calibrated_um: tuple[float, float],
 ) -> dict[str, object]:
-    """The rows of the session (see the module's docstring) and each effect's part (µm)."""
+    """The rows of the session (see the module's docstring), each effect's part (µm), and for the
+    truth's separability rule the axis' position and last direction at each sample instant
+    (``sample_q_mm``, ``sample_direction``: the latency's own shift left out)."""
     t_all = _sample_times(d, rng)
     keep, state = _kept(d, t_all)
     t = t_all[keep]
@@ -165,6 +167,8 @@ def simulate(
         "state": state[keep],
         "group": group,
         "parts_um": parts,
+        "sample_q_mm": qs,
+        "sample_direction": ds,
     }
 
 
@@ -210,7 +214,17 @@ def draw_case(family: str, variant: str, seed: int) -> Case:
         facts = session_facts(design, effects, rows, offset)
         if mode_of(variant) == "bidirectional" and not facts.bidirectional:
             continue
-        hidden, nothing = truth_labels(effects, facts)
+        q_s = np.asarray(rows.pop("sample_q_mm"), dtype=float)
+        parts = rows["parts_um"]
+        assert isinstance(parts, dict)
+        step_um = parts.get("reversal", np.zeros_like(q_s))  # the reversal's ±r/2, signed
+        points = SamplePoints(
+            q_s,
+            q_s + np.asarray(step_um, dtype=float) / 1000.0,
+            np.asarray(rows.pop("sample_direction"), dtype=float),
+            noise.total_sigma_um,
+        )
+        hidden, nothing = truth_labels(effects, facts, points)
         return Case(
             family=family,
             variant=variant,

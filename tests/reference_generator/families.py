@@ -91,7 +91,11 @@ def _span(d: SessionDesign) -> tuple[float, float]:
 
 
 def _ripple_period_and_reversal(rng: np.random.Generator, variant: str, machine: bool):
-    """(period at the centre mm, reversal µm) steering the separability of the variant."""
+    """(period at the centre mm, reversal µm) steering the separability of the variant.
+
+    The variant names the intent of the draw; the truth is decided by :mod:`.separability` (λ on
+    the session's rows), so an ESS-like shift (r/p 0.02–0.12) drawn as ``unseparable`` is
+    labelled the instrument's own when its many points and low noise separate it."""
     if variant == "bidirectional-separable":
         rev = rng.uniform(10.0, 80.0)
         return rev / rng.uniform(0.25, 0.75) / 1000.0, rev
