@@ -83,6 +83,12 @@ def cluster(tmp_path: Path) -> Iterator[str]:
                 tmp_path / "worker.log",
             )
         )
+        # a user starts the run once the workers show up: wait for both here, or the run
+        # may start (and count its workers) while the second is still registering
+        import distributed
+
+        with distributed.Client(address, timeout="30s") as probe:
+            probe.wait_for_workers(2, timeout=120)
         yield address
     finally:
         for proc in reversed(procs):

@@ -145,6 +145,7 @@ class FleetRun:
     compute_s: list[float] = field(default_factory=list)
     cpu_s: list[float] = field(default_factory=list)
     workers: int = 0
+    """Worker threads serving the run: the most seen at its start or its end."""
     wait_s: float = 0.0
     """Time the client spent waiting for a result (the rest of ``wall_s`` is its own work:
     hashing inputs, storing results)."""
@@ -261,6 +262,8 @@ def run_jobs(
         if progress is not None:
             progress.update(done, run.cached, len(run.failed))
     run.wall_s = time.perf_counter() - t0
+    if dask is not None:  # workers that joined a remote scheduler during the run count too
+        run.workers = max(run.workers, sum(dask.nthreads().values()))
     if progress is not None:
         progress.update(done, run.cached, len(run.failed), final=True)
     return run
