@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from doc_commands import cli
+from ess_record import LOG, ess_x
 
 from cmm_comp.cli.main import main
 from cmm_comp.compensation.errors import CmmCompError, RealDataError
@@ -400,6 +400,7 @@ def test_cli_synthetic(synthetic, tmp_path, capsys) -> None:
 
 
 # ---------------------------------------------------------------- the real ESS X run
+LOG_NAME = LOG.name
 ESS_ARGS = ["--position", "TARGET_DU:X-PosAct", "--reference", "IOC_TEST:ILD_DownSample"]
 
 
@@ -428,22 +429,32 @@ def test_real_ess_import(realdata_dir: Path) -> None:
     assert moving - raw == pytest.approx(rev["latency_part_um"], rel=0.2)
 
 
-@pytest.fixture(scope="module")
-def ess_imported(realdata_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Path]:
-    """The ESS X record imported once per module with ``cmm-comp import camonitor`` (in this
-    process, tests/doc_commands.py): (its result, the output folder); the diagnosis test reads
-    the same files instead of importing the record again."""
-    log = realdata_dir / "ess-target-b02" / "x_230_2.log"
-    out = tmp_path_factory.mktemp("ess-import") / "ess"
-    proc = cli("import", "camonitor", log, "--axis", "x", *ESS_ARGS, "--out-dir", out)
-    return proc, out
+def _ess_lines(realdata: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """The ESS X record imported and diagnosed by the README's real-data lines (``import
+    camonitor`` with :data:`ESS_ARGS`, then ``diagnose`` with its report): the same two
+    commands these tests would run, run once per test run (tests/ess_record.py; ~30 s of CPU)
+    and shared with tests/test_readme.py and tests/test_reading_outputs.py. Per command its
+    record (exit code, stdout, stderr), and ``out``: the folder they wrote."""
+    work, runs = ess_x(tmp_path_factory, realdata)
+    lines = runs["lines"]
+    (imp,) = [line for line in lines if line.startswith("cmm-comp import camonitor")]
+    (diagnose,) = [line for line in lines if line.startswith("cmm-comp diagnose")]
+    # the README's lines are the commands these tests are about (same flags, same record)
+    assert f"--axis x {' '.join(ESS_ARGS)} --out-dir ess-x" in imp, imp
+    assert imp.split()[3].endswith(LOG_NAME), imp
+    assert diagnose == (
+        "cmm-comp diagnose ess-x/machine.toml ess-x/measurements.csv "
+        "--json ess-x/diagnosis.json --report ess-x/report"
+    ), diagnose
+    return {"import": lines[imp], "diagnose": lines[diagnose], "out": work / "ess-x"}
 
 
 @pytest.mark.realdata
-def test_real_ess_cli(ess_imported: tuple[Any, Path]) -> None:
-    proc, out = ess_imported
-    assert proc.returncode == 0, proc.stderr
-    assert "reading" in proc.stderr  # progress
+def test_real_ess_cli(realdata_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> None:
+    ran = _ess_lines(realdata_dir, tmp_path_factory)
+    imp, out = ran["import"], ran["out"]
+    assert imp["code"] == 0, imp["err"]
+    assert "reading" in imp["err"]  # progress
     for name in ("machine.toml", "measurements.csv", "summary.json", "import.png"):
         assert (out / name).is_file()
     data = read_measurements(out / "measurements.csv")
@@ -454,9 +465,9 @@ def test_real_ess_cli(ess_imported: tuple[Any, Path]) -> None:
 
 
 @pytest.mark.realdata
-@pytest.mark.timeout(400)
+@pytest.mark.timeout(900)
 def test_real_ess_dense_diagnosis_names_what_is_in_it(
-    ess_imported: tuple[Any, Path], tmp_path: Path
+    realdata_dir: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
     """Issue 24, as a user runs it: the dense ESS X record (import camonitor + diagnose). Its
     truths, from the signal analysis in docs/discovery.md (done by hand, apart from the
@@ -465,24 +476,13 @@ def test_real_ess_dense_diagnosis_names_what_is_in_it(
     moving by the reversal in axis coordinates and by ~0 in the sensor's between directions:
     the reference's; a reversal of 23–27 µm at the stops; a drift that depends on the position
     (thermal, temperature not logged); a smooth curve no session of one sensor can assign; and
-    no cyclic error of the machine. Held-out RMS ≤ 8 µm (was 15.7). The import is the
-    module fixture's (shared with test_real_ess_cli)."""
-    imp, imported = ess_imported
-    assert imp.returncode == 0, imp.stderr
-    out = tmp_path / "ess"
-    out.mkdir()
-    result = out / "diagnosis.json"
-    proc = cli(
-        "diagnose",
-        imported / "machine.toml",
-        imported / "measurements.csv",
-        "--json",
-        result,
-        "--report",
-        out / "report",
-    )
-    assert proc.returncode == 0, proc.stderr
-    d = json.loads(result.read_text())
+    no cyclic error of the machine. Held-out RMS ≤ 8 µm (was 15.7). The two commands are the
+    README's real-data lines, run once per test run (:func:`_ess_lines`)."""
+    ran = _ess_lines(realdata_dir, tmp_path_factory)
+    imp, run, out = ran["import"], ran["diagnose"], ran["out"]
+    assert imp["code"] == 0, imp["err"]
+    assert run["code"] == 0, run["err"]
+    d = json.loads((out / "diagnosis.json").read_text())
     by_cause = {e["cause"]: e for e in d["effects"]}
     ripple = by_cause["reference_ripple"]
     assert ripple["source"] == "reference" and ripple["law"] == "triangulation"
@@ -503,6 +503,6 @@ def test_real_ess_dense_diagnosis_names_what_is_in_it(
     smooth = [e for e in d["effects"] if e.get("component") == "dx_x"]
     assert smooth and smooth[0]["source"] == "either"
     assert d["heldout_rms_um"]["after"] <= 8.0 < d["heldout_rms_um"]["before"]
-    assert "reference ripple" in proc.stdout and "[reference]" in proc.stdout  # the verdict line
+    assert "reference ripple" in run["out"] and "[reference]" in run["out"]  # the verdict line
     words = (out / "report" / "report.md").read_text()
     assert "triangulation" in words and "E_XX" in words
