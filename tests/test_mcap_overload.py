@@ -88,10 +88,27 @@ def test_process_writer_flood_counts_parent_and_child_drops_in_the_file(tmp_path
     assert st.dropped > 0 and sum(dropped.values()) == st.dropped
 
 
+def _wait_stopped(pid: int, timeout_s: float = 30.0) -> None:
+    """Until process ``pid`` is stopped (state ``T`` in /proc/PID/stat)."""
+    import time
+
+    stat = Path(f"/proc/{pid}/stat")
+    deadline = time.monotonic() + timeout_s
+    while stat.read_text().rsplit(")", 1)[1].split()[0] != "T":
+        assert time.monotonic() < deadline, f"process {pid} did not stop on SIGSTOP"
+        time.sleep(0.001)
+
+
 @contextlib.contextmanager
 def _held(lg: McapProcessLogger) -> Iterator[None]:
-    """The writer child stopped (SIGSTOP, as a starved writer would be) while inside."""
+    """The writer child stopped (SIGSTOP, as a starved writer would be) while inside.
+
+    ``kill`` returns once the signal is sent, not once the child has stopped: a child running
+    on the other core keeps draining the ring until it takes the signal (seen on a loaded
+    2-core machine: a frame refused, a later one taken). So the block starts only when the
+    child's state is ``T`` (stopped) in /proc."""
     os.kill(lg.child_pid, signal.SIGSTOP)
+    _wait_stopped(lg.child_pid)
     try:
         yield
     finally:
