@@ -55,37 +55,21 @@ def _child_pids() -> set[int]:
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
-    """Under pytest-xdist: the grid's numba kernels compiled once for the whole run.
+    """Under pytest-xdist: the project's numba kernels compiled once for the whole run.
 
     The kernels' on-disk cache (numba's, in the sources' ``__pycache__`` of an editable
     install) is written by the first process that compiles them; on a fresh checkout (CI) every
     worker would otherwise compile the same kernels side by side (~30 s of CPU each) before
-    either has written them. The first worker compiles (serial, thread-pool and uncertainty
-    kernels, through the public API on a shipped grid) under an exclusive lock (one per checkout:
-    concurrent runs of the same checkout share its cache); the others then load them from the
-    cache. Outside xdist nothing is done (one file's run compiles only what it uses)."""
-    if not os.environ.get("PYTEST_XDIST_WORKER"):
+    either has written them. The workers share the compiling instead (tests/kernel_warmup.py:
+    the grid's kernels in one worker while another compiles the virtual CMM's, each group under
+    its own lock) and load from the cache what another compiled. Outside xdist nothing is done
+    (one file's run compiles only what it uses)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if not worker:
         return
-    import fcntl
-    import hashlib
-    import tempfile
+    from kernel_warmup import warm_up
 
-    import numpy as np
-
-    from cmm_comp.compensation import CorrectionGrid
-
-    tag = hashlib.sha256(str(ROOT).encode()).hexdigest()[:16]
-    with open(Path(tempfile.gettempdir()) / f"cmm-comp-kernels-{tag}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        grid = CorrectionGrid.load(ROOT / "tests" / "data" / "grid_golden_npl.grid")  # serial
-        rng = np.random.default_rng(0)
-        n = 2 * 256  # from PARALLEL_MIN points on, the batch runs the thread-pool kernel
-        pts = grid.lower_mm + rng.random((n, 3)) * (grid.upper_mm - grid.lower_mm)
-        temps = {s.name: 20.0 for s in grid.signals}
-        for m in (n, 4):
-            _, status, _ = grid.correct_with_uncertainty(pts[:m], (0.0, 0.0, 0.0), temps)
-            assert (status == "ok").all(), "the kernels' warm-up must reach every kernel"
-        grid.uncertainty_point(pts[0], (0.0, 0.0, 0.0), temps)
+    warm_up(worker)
 
 
 @pytest.fixture(autouse=True)
