@@ -7,6 +7,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -22,6 +23,19 @@ from hypothesis import settings
 # No per-example deadline anywhere: how long one example takes depends on the machine's load
 # (a 2-core runner beside a benchmark), not on the code under test; the suite must be
 # deterministic under load (pytest-timeout still stops a hung test).
+# One BLAS thread per process. pytest-xdist runs a worker per core; numpy's OpenBLAS would add
+# a thread per core inside each, and on a loaded 2-core machine its threads spin waiting for
+# each other: measured on tests/test_calibration_model.py + tests/test_reference_generator.py
+# (one process, load ~5), 20.6 s of CPU and 31 s wall with the default, 7.5 s and 11 s with
+# one thread. Set before numpy is first imported (numpy reads it when it loads its BLAS) and
+# inherited by every subprocess a test starts (daemons, Dask workers: the same numbers as the
+# test process computes); a value set by the caller wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+if "numpy" in sys.modules:  # loaded before this file (a plugin): limit the loaded library
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]), user_api="blas")
+
 settings.register_profile("ci", derandomize=True, print_blob=True, deadline=None)
 settings.register_profile("dev", deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
