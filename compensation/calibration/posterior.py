@@ -17,15 +17,6 @@ from .solver import CLASS_WEIGHT, LAMBDA_RANGE, Problem, Solution, _lm
 __all__ = ["residuals_without_errors", "smoothness_spread", "with_smoothness_spread"]
 
 FloatArray = NDArray[np.float64]
-#: the standard deviation of log λ_f used in the marginalisation, in units of MacKay's
-#: Laplace value √(2/ν_f). The Laplace value is what the evidence's curvature gives when the
-#: truth is a draw from the smoothness prior; a real error function (a low-order curve whose
-#: roughness sits in two or three shapes) is not, and λ_f is then less certain than ν_f
-#: independent shapes would make it. Measured (docs/calibration.md §8.1, development seeds):
-#: U of the volumetric error at 1× was short by ≈ 1.25× uniformly over the volume for
-#: multilateration and mixed data (noise model and class shrinkage ruled out, a rougher λ
-#: covered it: the shortfall is the smoothing's bias); 2× recovers most of it.
-SPREAD_FACTOR = 2.0
 
 
 def with_smoothness_spread(problem: Problem, sol: Solution) -> Solution:
@@ -52,8 +43,8 @@ def smoothness_spread(
     the kept parameters (:attr:`.solver.Problem.kept`: θ first, the local nuisance eliminated).
 
     Each class' λ_f is an estimate: its evidence gives log λ_f a posterior of standard deviation
-    ``√(2/ν_f)`` (MacKay) × :data:`SPREAD_FACTOR`, ν_f the degrees of freedom behind it (γ_f
-    of the data plus the :data:`CLASS_WEIGHT` the class lends). The covariance marginalised over λ is
+    ``√(2/ν_f)`` (MacKay), ν_f the degrees of freedom behind it (γ_f of the data plus the
+    :data:`CLASS_WEIGHT` the class lends). The covariance marginalised over λ is
     ``E[H(λ)⁻¹] + Var[θ̂(λ)]``; both are integrated by 3-point Gauss–Hermite in log λ_f, one class
     at a time (nodes ±√3·s, weight 1/6 each): a rougher λ widens what the data leave to the
     prior (where the data end: the volume's corners), and a solution that moves with λ adds its
@@ -61,7 +52,7 @@ def smoothness_spread(
     out = np.zeros_like(cov)
     for f in problem.classes:
         dof = max(problem.gamma.get(f, 0.0), 0.0) + CLASS_WEIGHT
-        s = SPREAD_FACTOR * float(np.sqrt(2.0 / dof))
+        s = float(np.sqrt(2.0 / dof))
         for sign in (-1.0, 1.0):
             moved = dict(lam)
             moved[f] = float(np.clip(lam[f] * np.exp(sign * np.sqrt(3.0) * s), *LAMBDA_RANGE))
