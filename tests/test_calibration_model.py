@@ -241,3 +241,42 @@ def test_plate_gaps_are_the_stretches_no_placement_along_the_axis_reaches() -> N
     assert len(plate_gaps([plate, linear_y], lower, upper)) == 1
     assert plate_gaps([plate, NS(kind="multilateration", data=None)], lower, upper) == []
     assert gap_warning([]) is None
+
+
+def test_end_weighted_roughness_against_the_closed_form() -> None:
+    """The smoothness penalty's end weight (docs/calibration.md §3) against closed forms: per
+    node interval the mean of 1.5·(1 − s²) is 1.5·[s − s³/3]/Δs (its mean over the travel is 1),
+    and for a spline holding a function ``f`` its penalty ``L⁵∫w f‴²`` equals the analytic
+    integral — a cubic (f‴ = 6a constant) costs what it costs unweighted, ``36a²L⁶``, a quartic
+    (f‴ = 24b·q) ``L⁵·∫w(q)·(24bq)²dq`` by Gauss–Legendre on the polynomial integrand. A wrong
+    weight, a wrong normalisation or a penalty built on the wrong intervals fails."""
+    from cmm_comp.compensation.calibration.basis import END_WEIGHT_POWER, Layout, end_weight
+
+    assert END_WEIGHT_POWER == 1.0  # the closed forms below are for (1 − s²)¹
+    nodes = np.linspace(-100.0, 500.0, 13)
+    s = 2.0 * (nodes - nodes[0]) / 600.0 - 1.0
+    antiderivative = s - s**3 / 3.0
+    expected = 1.5 * np.diff(antiderivative) / np.diff(s)
+    np.testing.assert_allclose(end_weight(nodes), expected, rtol=1e-12)
+
+    layout = Layout(
+        np.array([-100.0, 0.0, 0.0]),
+        np.array([500.0, 400.0, 300.0]),
+        basis="spline",
+        nodes=(13, 9, 9),
+        order=(3, 3, 3),
+        components=("ex_x",),  # angular: no fixed reference, every node free
+    )
+    fn = layout.functions[0]
+    k = fn.curvature(3)
+    span = 600.0
+    a = 2e-7  # µrad/mm³: a cubic
+    cubic = a * (nodes - 37.0) ** 3
+    assert float(cubic @ k @ cubic) == pytest.approx(36.0 * a**2 * span**6, rel=1e-9)
+    b = 3e-10  # a quartic: f‴ = 24·b·q, not constant; the spline (not-a-knot) is not exact for
+    quartic = b * nodes**4  # it, so compare within the spline's own third-derivative error
+    g, gw = np.polynomial.legendre.leggauss(8)
+    q = nodes[0] + (g + 1.0) / 2.0 * span
+    weight = 1.5 * (1.0 - g**2)
+    exact = span**5 * float(np.sum(gw / 2.0 * span * weight * (24.0 * b * q) ** 2))
+    assert float(quartic @ k @ quartic) == pytest.approx(exact, rel=0.05)

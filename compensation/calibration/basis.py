@@ -33,6 +33,30 @@ __all__ = ["FunctionBasis", "Layout"]
 FloatArray = NDArray[np.float64]
 
 
+#: power p of the end weight (1 − s²)^p of the roughness penalty (:func:`end_weight`)
+END_WEIGHT_POWER = 1.0
+
+
+def end_weight(nodes_mm: FloatArray) -> FloatArray:
+    """(M − 1,) the weight of each node interval in the third-derivative penalty: the mean of
+    ``(1 − s²)^p`` over the interval (s the position normalised to −1…1 over the travel,
+    p = :data:`END_WEIGHT_POWER`), scaled so that its mean over the travel is 1 (a cubic keeps
+    the roughness it has unweighted).
+
+    The weight of the Legendre series' own Sturm–Liouville form: it lets a function change
+    faster towards the ends of the travel than in the middle, as low-order curves do (a
+    polynomial's derivatives are largest at the ends) — and as the fit must allow where its
+    data stop short of the ends (a laser run from 3 %, a plate's edge): with a uniform weight,
+    the smoothness prior extrapolated the middle's smoothness to the ends and U there was too
+    small (docs/calibration.md §3, §8.1)."""
+    span = float(nodes_mm[-1] - nodes_mm[0])
+    g, gw = np.polynomial.legendre.leggauss(6)  # exact for (1 − s²)^p, p ≤ 5 integer
+    lo, h = nodes_mm[:-1, None], np.diff(nodes_mm)[:, None]
+    s = 2.0 * (lo + (g + 1.0) / 2.0 * h - nodes_mm[0]) / span - 1.0
+    w = np.sum(gw / 2.0 * np.clip(1.0 - s**2, 0.0, None) ** END_WEIGHT_POWER, axis=1)
+    return np.asarray(w / (np.sum(w * h[:, 0]) / span), dtype=float)
+
+
 @dataclass(frozen=True)
 class FunctionBasis:
     """One identified function: component ``name`` (or ``reversal:<name>``) of ``axis`` in
@@ -115,7 +139,8 @@ class FunctionBasis:
     def curvature(self, order: int = 2) -> FloatArray:
         """(size, size) roughness penalty ``L^(2·order−1)·∫ (d^order f / dq^order)² dq`` of the
         free parameters: order 2 the curvature (straight lines are free), order 3 the change of
-        curvature (parabolas are free); zero for polynomials (their order is the smoothness)."""
+        curvature (parabolas are free), for a spline weighted towards the travel's ends by
+        :func:`end_weight`; zero for polynomials (their order is the smoothness)."""
         if self.basis in ("polynomial", "linear") or self.nodes_mm is None:
             return np.zeros((self.size, self.size))
         nodes = self.nodes_mm
@@ -126,7 +151,7 @@ class FunctionBasis:
             d2 = np.asarray(CubicSpline(nodes, np.eye(m), bc_type="not-a-knot")(nodes, 2))
             if order == 3:  # the third derivative is constant on each interval
                 d3 = (d2[1:] - d2[:-1]) / h[:, None]
-                k = d3.T @ np.diag(h) @ d3
+                k = d3.T @ np.diag(h * end_weight(nodes)) @ d3
             else:
                 q = np.zeros((m, m))  # the integral of a piecewise linear f'' squared (exact)
                 for i, hi in enumerate(h):
