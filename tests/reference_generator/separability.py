@@ -76,6 +76,33 @@ def noncentrality(
     return float(resid @ resid / sigma_um**2)
 
 
+#: Legendre order of the positional table a drift's imitation may use (the generator's own
+#: positioning curves reach order 5).
+DRIFT_TABLE_ORDER = 5
+
+
+def drift_lambda(
+    q_mm: FloatArray, direction: FloatArray, signal_um: FloatArray, sigma_um: float
+) -> float:
+    """λ of a drift's noise-free signal (µm at the session's rows) against its best imitation
+    by errors that have no time: a positional table of the axis (Legendre, order
+    :data:`DRIFT_TABLE_ORDER`, offset included) and a reversal constant or growing linearly along
+    the travel (d, d·u; ISO 230-2's reversal, which wear or preload makes position-dependent).
+
+    A session that visits each (position, direction) once in time — one back-and-forth cycle —
+    cannot tell a drift from those: time is a function of position and direction there (a drift
+    linear in time is exactly a linear table plus a growing reversal, λ = 0). Only a session
+    that returns to the same places at other times shows the drift as a drift."""
+    q = np.asarray(q_mm, dtype=float)
+    d = np.asarray(direction, dtype=float)
+    if q.size == 0:
+        return 0.0
+    lo, hi = float(np.min(q)), float(np.max(q))
+    u = 2.0 * (q - lo) / (hi - lo) - 1.0 if hi > lo else np.zeros_like(q)
+    basis = np.column_stack([np.polynomial.legendre.legvander(u, DRIFT_TABLE_ORDER), d, d * u])
+    return noncentrality(np.asarray(signal_um, dtype=float), basis, sigma_um)
+
+
 def lock_lambda(
     q_mm: FloatArray,
     carriage_mm: FloatArray,
