@@ -32,7 +32,7 @@ readings' range, the constant offset between the instruments removed).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,7 +45,7 @@ from .reference_effects import (
     ReferenceRipple,
     ReferenceScale,
 )
-from .separability import LAMBDA_MIN, drift_lambda, lock_lambda
+from .separability import LAMBDA_MIN, drift_lambda, lock_lambda, uniform_drift_lambda
 
 MIN_REST_ROWS = 3
 FloatArray = NDArray[np.float64]
@@ -61,6 +61,7 @@ class SessionFacts:
     n_speeds: int
     reversal_um: float  # |reversal| of the machine, 0 without one
     ref_centre_mm: float = 0.0  # centre of the travel the reference saw (its reading − offset)
+    has_table: bool = False  # a smooth curve (the axis' table or the sensor's linearity) is hidden
 
     @property
     def has_rest(self) -> bool:
@@ -252,11 +253,29 @@ def _truth_of(effect: object, facts: SessionFacts, points: SamplePoints | None) 
     if isinstance(effect, ThermalExpansion):
         why = f"expansion about {effect.fixed_point_mm:.2f} mm: a drift that depends on position"
         th = effect
+        source = "machine"
+        if points is not None and points.t_s is not None:
+            s = th.error_um(points.q_mm, np.zeros_like(points.q_mm), points.t_s)
+            lam = uniform_drift_lambda(
+                points.q_mm,
+                points.direction,
+                points.t_s,
+                s,
+                points.sigma_um,
+                facts.has_table,
+                facts.bidirectional and facts.reversal_um > 0,
+            )
+            if lam < LAMBDA_MIN:
+                source = "either"
+                why = (
+                    f"{why}, but a drift the same everywhere and what the session holds imitate "
+                    f"it: λ = {lam:.4g} (< {LAMBDA_MIN:g}); the machine's or the reference's"
+                )
         return _drift_hidden(
             "thermal_drift",
             "drift",
             {"axis": axis},
-            "machine",
+            source,
             why,
             points,
             lambda q, t: th.error_um(q, np.zeros_like(q), t),
@@ -271,6 +290,8 @@ def truth_labels(
     ``points`` (the session's rows) are needed for a ripple in a bidirectional session."""
     hidden: list[Hidden] = []
     nothing: list[str] = []
+    if any(isinstance(e, PositioningCurve | ReferenceNonlinearity) for e in effects):
+        facts = replace(facts, has_table=True)
     for effect in effects:
         t = _truth_of(effect, facts, points)
         if isinstance(t, str):
