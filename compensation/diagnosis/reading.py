@@ -11,12 +11,18 @@ between the directions it is to be told by). The position-locked hypothesis, who
 the axis' own encoder — is clean, then wins whatever the truth. The two are compared on equal
 terms only with the reading taken as the position plus the *smooth* part of the error.
 
-The smooth part: per *pass* (consecutive samples of one direction of travel, rows at rest
-included — the direction is that of the last motion), the observed error fitted by a
-Legendre series of the position of order ≤ :data:`PASS_ORDER` (at most a quarter of the
-pass' distinct positions), plus a term proportional to the velocity where the pass has more
-than one (a latency's −v·τ: zero at rest, the sensor looked behind the axis while it moved).
-Within a pass the position is monotonic in time, so a drift is a smooth function of it too.
+The smooth part: per *segment* (consecutive samples of one direction of travel — the direction
+is that of the last motion — cut also where the time stamps jump by more than
+:data:`GAP_FACTOR` median intervals), the observed error fitted by a Legendre series of the
+position of order ≤ :data:`PASS_ORDER` (at most a quarter of the segment's distinct
+positions), plus a term proportional to the velocity where the segment has more than one (a
+latency's −v·τ: zero at rest, the sensor looked behind the axis while it moved). Within a
+segment the position is monotonic in time, so a drift is a smooth function of it too.
+
+Known limit: where the rows taken while accelerating are dropped (the importer's default),
+the time gap cuts every stop of an ISO test into a segment of its own, whose coordinate is the
+stop's mean error — the sensor's own ripple value there included, which the moving rows' fit
+leaves out (docs/discovery.md, item 7).
 Where a position has one reading (one direction of travel) the map between the two
 coordinates stays exact (:func:`.reference_candidates.through_map`), as physics says.
 """
