@@ -19,11 +19,15 @@ mode × source, the quiet sessions, times, every miss; writes
 ``benchmarks/results/discovery_reference.json``.
 
 Seeds: the test (tests/test_discovery_reference.py) and development use seeds 0–999; this
-benchmark's seeds start at 1000 (``--first-seed``) and are the held-out figures.
+benchmark's seeds start at 1000 (``--first-seed``) and are the held-out figures. Seeds already
+run (no longer held out): 1000–1003 (their misses guided the changes of 2026-12-05) and
+3000–3002 (run once, 2026-12-05, for that round's figure); the next fresh range starts at 4000.
 
     .venv/bin/python benchmarks/bench_discovery_reference.py --jobs 2          # 144 sessions
     .venv/bin/python benchmarks/bench_discovery_reference.py --quick           # 1 seed, 33
     .venv/bin/python benchmarks/bench_discovery_reference.py --from-json FILE  # reprint a run
+    .venv/bin/python benchmarks/bench_discovery_reference.py --from-json FILE --rescore DIR
+        # re-score a run kept with --keep DIR under the generator's current truth rules
 """
 
 from __future__ import annotations
@@ -43,7 +47,13 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from reference_generator import VARIANTS, find_cli, run_case  # noqa: E402
+from reference_generator import (  # noqa: E402
+    VARIANTS,
+    draw_case,
+    find_cli,
+    run_case,
+    score_diagnosis,
+)
 from reference_generator.report import misses_text, rate_table, summary  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results" / "discovery_reference.json"
@@ -64,6 +74,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--keep", type=Path, help="keep every session's files under this folder")
     p.add_argument("--out", type=Path, default=RESULTS)
     p.add_argument("--from-json", type=Path, help="reprint the tables of a saved run")
+    p.add_argument(
+        "--rescore", type=Path, help="with --from-json: re-score its diagnoses kept in this folder"
+    )
     args = p.parse_args(argv)
     if args.quick:
         args.seeds, args.clean = 1, 1
@@ -161,10 +174,26 @@ def print_report(records: list[dict[str, Any]], meta: dict[str, Any]) -> dict[st
     return s
 
 
+def rescore(records: list[dict[str, Any]], kept: Path) -> None:
+    """Each record's truth and score again, from the session redrawn by its seed (the generator's
+    current truth rules) and its ``diagnosis.json`` kept under ``kept`` (``--keep``)."""
+    for rec in records:
+        family, variant, seed = str(rec["case"]).split("/")
+        case = draw_case(family, variant, int(seed.lstrip("s")))
+        out = kept / f"{family}-{variant}-{seed}" / "diagnosis.json"
+        rec["hidden"] = [h.as_dict() for h in case.hidden]
+        if rec.get("score") is not None and out.is_file():
+            rec["score"] = score_diagnosis(
+                case.hidden, json.loads(out.read_text(encoding="utf-8"))
+            ).as_dict()
+
+
 def main(argv: list[str]) -> int:
     args = parse_args(argv)
     if args.from_json:
         saved = json.loads(args.from_json.read_text(encoding="utf-8"))
+        if args.rescore:
+            rescore(saved["sessions"], args.rescore)
         print_report(saved["sessions"], saved["meta"])
         return 0
     meta: dict[str, Any] = {

@@ -34,10 +34,12 @@ from reference_generator import (
     SamplePoints,
     SessionFacts,
     draw_case,
+    drift_lambda,
     lock_lambda,
     score_diagnosis,
     simulate,
     truth_labels,
+    uniform_drift_lambda,
     write_case,
 )
 from reference_generator.design import Constraints, draw_design
@@ -561,3 +563,132 @@ def test_the_ess_case_is_separable() -> None:
     q2, d2 = q[:1500], d[:1500]
     x2 = q2 + d2 * 0.0135
     assert lock_lambda(q2, x2, d2, 15.0, f, ripple.phase_at, "reference") < LAMBDA_MIN
+
+
+def _back_and_forth(cycles: float, n_per_pass: int, lo: float, hi: float):
+    """Constant-speed passes lo → hi → lo … (``cycles`` back-and-forth cycles, a half cycle
+    allowed), one sample every 1/n_per_pass of a pass: (q mm, direction ±1, t in passes)."""
+    passes = round(2 * cycles)
+    s = (np.arange(n_per_pass) + 0.5) / n_per_pass
+    q = np.concatenate([lo + (hi - lo) * (s if k % 2 == 0 else 1 - s) for k in range(passes)])
+    d = np.concatenate([np.full(n_per_pass, 1.0 if k % 2 == 0 else -1.0) for k in range(passes)])
+    t = np.concatenate([k + s for k in range(passes)])
+    return q, d, t
+
+
+def test_a_drift_over_one_cycle_is_a_table_and_a_growing_reversal() -> None:
+    """Analytic oracle: over one back-and-forth cycle at constant speed, time is a linear
+    function of position in each direction (t = s forward, 2 − s backward), so a drift linear in
+    time is exactly a linear table plus a reversal growing along the travel: λ = 0, whatever its
+    size. Over three cycles the same drift comes back to each place at other times: the residual
+    after the best table-and-reversal imitation is the drift minus its per-(position, direction)
+    mean over the cycles, computed here by brute force on the samples — λ equals it."""
+    q, d, t = _back_and_forth(1, 400, -10.0, 10.0)
+    assert drift_lambda(q, d, 12.0 * t / t.max(), 0.3) < 1e-9
+    q3, d3, t3 = _back_and_forth(3, 400, -10.0, 10.0)
+    s3 = 12.0 * t3 / t3.max()
+    # each (position, direction) is visited at the same q in every cycle: the imitation's best
+    # is the mean over cycles there (a table and a reversal reach any function of (q, d) that is
+    # linear in q per direction, and the per-place mean of a linear drift is one)
+    per_place = s3.reshape(3, 2, 400).mean(axis=0)
+    resid = s3 - np.tile(per_place.reshape(-1), 3)
+    lam3 = drift_lambda(q3, d3, s3, 0.3)
+    assert lam3 == pytest.approx(float(resid @ resid) / 0.3**2, rel=1e-6)
+    assert lam3 > 1000.0
+
+
+@pytest.mark.parametrize("cycles", [1.5, 2.0])
+def test_drift_lambda_predicts_the_monte_carlo_delta_chi2(cycles: float) -> None:
+    """λ is the mean of the actual Δχ² between the imitation (a table of order 5 and a reversal
+    constant or growing, the test's own columns) and the truth (the same plus the drift's own
+    shape) on noisy realisations, less the truth's one extra parameter. A warm-up drift
+    (1 − e^{−t/τ}) of a size that puts λ at ~20–200; 300 runs: the mean is checked within 4
+    standard errors (sd ≈ 2√λ), which detects a λ off by ≳ 30 % (a rule that forgot the
+    growing reversal, or a table of another order)."""
+    rng = np.random.default_rng(7)
+    q, d, t = _back_and_forth(cycles, 150, -10.0, 10.0)
+    drift = 1.2 * (1.0 - np.exp(-t / 0.8))
+    sigma = 1.0
+    u = q / 10.0
+    other = np.column_stack([np.polynomial.legendre.legvander(u, 5), d, d * u])
+    own = np.column_stack([other, drift])
+    lam = drift_lambda(q, d, drift, sigma)
+    dchi = _mc_delta_chi2(drift, own, other, sigma, rng, 300)
+    assert 10.0 < lam < 400.0  # a configuration where the check has power
+    assert abs(dchi.mean() - (lam + 1.0)) < 4 * dchi.std() / np.sqrt(dchi.size)
+
+
+def test_a_drift_the_session_cannot_show_is_not_required() -> None:
+    """The truth rule on the generator's own sessions: a drift is required where λ ≥ 25 and
+    not required (naming it or not is right; never spurious) where λ < 25; the scoring leaves
+    a not-required effect out of the rates and pairs an entry naming it."""
+    for family, variant, seed in [
+        ("mixed", "bidirectional", 1001),
+        ("reference_drift", "bidirectional", 1),
+    ]:
+        case = draw_case(family, variant, seed)
+        for h in case.hidden:
+            if h.cause in ("drift", "reference_drift"):
+                assert h.required == (h.extra["lambda"] >= 25.0), h
+    optional = Hidden(
+        "reference_drift", "reference_drift", {"axis": "x"}, "either", "", required=False
+    )
+    entry = {"cause": "reference_drift", "axis": "x", "source": "either"}
+    named = score_diagnosis([optional], {"verdict": "found", "effects": [entry]})
+    assert named.per_hidden == [] and named.spurious == [] and named.optional
+    quiet = score_diagnosis([optional], {"verdict": "none", "effects": []})
+    assert quiet.per_hidden == [] and quiet.spurious == []
+
+
+def _one_directional_scans(passes: int, n_per_pass: int, lo: float, hi: float, gap: float):
+    """One-directional scans lo → hi at one speed (a pass per unit of time, ``gap`` of a return
+    between them): (q mm, direction +1, t)."""
+    s = (np.arange(n_per_pass) + 0.5) / n_per_pass
+    q = np.tile(lo + (hi - lo) * s, passes)
+    t = np.concatenate([k * (1.0 + gap) + s for k in range(passes)])
+    return q, np.ones_like(q), t
+
+
+def test_an_expansion_in_one_directional_scans_is_a_uniform_drift_and_a_table() -> None:
+    """Analytic oracle: within a one-directional pass at one speed t = t_k + s, q = lo + L·s, so
+    c·t·(q − q_f) (an expansion with ΔT ∝ t) is per pass c·t_k·(q − q_f) + c·s·(q − q_f). Over
+    two passes (t_1 = 0, t_2 = T) the first part is zero on pass 1 and c·T·(q − q_f) on pass 2,
+    which a uniform drift P(t) = α·t² + β·t reaches — P(T + s) − P(s) = 2αT·s + αT² + βT is
+    linear in s, i.e. in q — with the table absorbing P on pass 1: λ = 0 with a table. Without
+    a table the uniform drift alone cannot (λ ≫ 25); a third pass asks for a per-pass constant
+    c·t_k² no polynomial in time holds (λ ≫ 25 even with a table); both directions likewise."""
+    q, d, t = _one_directional_scans(2, 300, -10.0, 10.0, 0.2)
+    expansion = 0.8 * t * (q - 4.0)  # µm: α·ΔT(t)·(q − q_f) with ΔT ∝ t
+    assert uniform_drift_lambda(q, d, t, expansion, 0.3, table=True, reversal=False) < 1e-6
+    assert uniform_drift_lambda(q, d, t, expansion, 0.3, table=False, reversal=False) > 1000
+    q3, d3, t3 = _one_directional_scans(3, 300, -10.0, 10.0, 0.2)
+    three = 0.8 * t3 * (q3 - 4.0)
+    assert uniform_drift_lambda(q3, d3, t3, three, 0.3, table=True, reversal=False) > 1000
+    q2, d2, t2 = _back_and_forth(3, 300, -10.0, 10.0)
+    bidir = 0.8 * t2 * (q2 - 4.0)
+    assert uniform_drift_lambda(q2, d2, t2, bidir, 0.3, table=True, reversal=True) > 1000
+
+
+def test_uniform_drift_lambda_predicts_the_monte_carlo_delta_chi2() -> None:
+    """λ is the mean Δχ² between the imitation (a uniform cubic drift in time, a table of order
+    5, a reversal constant or growing: the test's own columns) and the truth (the same plus the
+    expansion's own shape), less the truth's one extra parameter, on 300 noisy realisations;
+    checked within 4 standard errors (detects a λ off by ≳ 30 % at λ ≈ 20–200)."""
+    rng = np.random.default_rng(9)
+    q, d, t = _back_and_forth(1.5, 150, -10.0, 10.0)
+    signal = 0.9 * (1.0 - np.exp(-t / 1.5)) * (q - 3.0)
+    tau = 2.0 * (t - t.min()) / np.ptp(t) - 1.0
+    u = q / 10.0
+    other = np.column_stack(
+        [
+            np.polynomial.legendre.legvander(tau, 3),
+            np.polynomial.legendre.legvander(u, 5)[:, 1:],
+            d,
+            d * u,
+        ]
+    )
+    own = np.column_stack([other, signal])
+    lam = uniform_drift_lambda(q, d, t, signal, 1.0, table=True, reversal=True)
+    dchi = _mc_delta_chi2(signal, own, other, 1.0, rng, 300)
+    assert 10.0 < lam < 400.0
+    assert abs(dchi.mean() - (lam + 1.0)) < 4 * dchi.std() / np.sqrt(dchi.size)

@@ -53,6 +53,8 @@ __all__ = [
 #: (harmonics, envelope order) of a chirped cyclic error: default and rich. A triangulation
 #: sensor's ripple is rarely a pure sine, and its amplitude changes with the distance.
 CHIRP_SHAPES = ((2, 3), (3, 5))
+#: (harmonics, envelope order) of the rich constant-period cyclic error of the reading.
+RIPPLE_RICH = (3, 2)
 #: A record with at least this many points (a one-axis stream: ``CHIRP_ONE_AXIS``) is searched
 #: for a chirped cyclic error.
 CHIRP_POINTS = 2000
@@ -193,7 +195,9 @@ def _nyquist_mm(q: FloatArray, length: float) -> float:
 
 def _chirp_candidates(res: Residuals, axis: str) -> list[Candidate]:
     k = AXIS_INDEX[axis]
-    q, r = res.q_mm[:, k], res.ref_mm[:, k]
+    # the law is sought on the raw reading (its own sampling, the harmonics its ripple puts in
+    # it); the candidates are evaluated at the distance the sensor looked at (:mod:`.reading`)
+    q, r = res.q_mm[:, k], res.data.reference_mm[:, k]
     span = (float(np.min(q)), float(np.max(q)))
     length = span[1] - span[0]
     moved = sum(float(np.ptp(res.q_mm[:, j])) > 1e-6 for j in range(3))
@@ -300,34 +304,38 @@ def forward_candidates(
 
 # ----------------------------------------------------------------------------- twins
 def _ripple_twin(res: Residuals, axis: str, periods: Sequence[float], n_eff: float) -> Candidate:
+    """A constant-period cyclic error of the reading; rich: 3 harmonics and an amplitude that
+    changes along the reading (:data:`RIPPLE_RICH`: a sensor's nonlinearity is rarely as large
+    at both ends of its range)."""
     k = AXIS_INDEX[axis]
+    h1, e1 = RIPPLE_RICH
     span = (float(np.min(res.q_mm[:, k])), float(np.max(res.q_mm[:, k])))
 
-    def design_for(h: int) -> Callable[[Residuals, Any], FloatArray]:
+    def design_for(h: int, e: int) -> Callable[[Residuals, Any], FloatArray]:
         def design(r: Residuals, period: Any) -> FloatArray:
             law = PeriodLaw("constant", float(period))
-            return _on_axis(r, axis, ripple_columns(r.ref_mm[:, k], law, h))
+            return _on_axis(r, axis, ripple_columns(r.ref_mm[:, k], law, h, e, span))
 
         return design
 
-    def builder(h: int) -> EffectBuilder:
+    def builder(h: int, e: int) -> EffectBuilder:
         return lambda a, period: ReferenceRippleEffect(
-            axis, PeriodLaw("constant", float(period)), ripple_terms(a, h, 0), span
+            axis, PeriodLaw("constant", float(period)), ripple_terms(a, h, e), span
         )
 
     return Candidate(
         "reference_ripple",
         {"axis": axis},
         2,
-        builder(1),
+        builder(1, 0),
         thetas=tuple(periods),
         look_elsewhere=n_eff,
-        design_fn=design_for(1),
+        design_fn=design_for(1, 0),
         design_many=_reading_scan(k),
         design_component=k,
         source="reference",
         locked_to="reference",
-    ).with_rich(n_params=6, build=builder(3), design_fn=design_for(3))
+    ).with_rich(n_params=2 * h1 * (e1 + 1), build=builder(h1, e1), design_fn=design_for(h1, e1))
 
 
 def _reading_scan(k: int) -> Callable[[Residuals, Sequence[Any]], FloatArray]:
@@ -524,15 +532,15 @@ def through_map(cand: Candidate, res: Residuals) -> Candidate:
     sign = 1.0 if locked == "position" else -1.0
 
     def mapped(r: Residuals) -> Residuals:
-        data = r.data.subset(slice(None))
-        col = (data.indicated_mm if locked == "position" else data.reference_mm).copy()
-        own_err = (data.reference_mm[:, k] - data.indicated_mm[:, k]) * 1000.0
+        # the reading as the coordinate (its noise out, :mod:`.reading`), as ``err`` above
+        col = (r.q_mm if locked == "position" else r.ref_mm).copy()
+        own_err = (r.ref_mm[:, k] - r.q_mm[:, k]) * 1000.0
         own_dir = r.signals.get(f"dir_{'xyz'[k]}", np.zeros(r.n))
-        col[:, k] = col[:, k] + sign * ebar(col[:, k], data.t_s, own_err, own_dir) / 1000.0
-        if locked == "position":
-            data.indicated_mm = col
-        else:
-            data.reference_mm = col
+        col[:, k] = col[:, k] + sign * ebar(col[:, k], r.data.t_s, own_err, own_dir) / 1000.0
+        if locked == "reference":
+            return replace(r, reading_mm=col)
+        data = r.data.subset(slice(None))
+        data.indicated_mm = col
         return replace(r, data=data)
 
     def wrap(c: Candidate) -> Candidate:

@@ -19,6 +19,7 @@ from ..formats.measurements import Measurements
 from ..kinematics import first_order_jacobian
 from ..machine import Machine
 from ..thermal.roles import TEMPERATURE_ROLES
+from .reading import denoised_reading
 
 FloatArray = NDArray[np.float64]
 #: a larger |residual| is no machine error (a wrong value or unit): refused, not averaged
@@ -43,6 +44,9 @@ class Residuals:
     residual_um: FloatArray  # (N, 3)
     jacobian: FloatArray  # (N, 3 out, 3 axes, 6)
     squareness_jacobian: FloatArray  # (N, 3 out, 3)
+    #: (N, 3) the reading as the coordinate of reading-locked terms: the distance the sensor
+    #: looked at (:mod:`.reading`); None: the raw reading
+    reading_mm: FloatArray | None = None
 
     @property
     def n(self) -> int:
@@ -63,8 +67,10 @@ class Residuals:
 
     @property
     def ref_mm(self) -> FloatArray:
-        """(N, 3) the reference instrument's reading in the machine frame (mm)."""
-        return self.data.reference_mm
+        """(N, 3) the reference instrument's reading in the machine frame (mm), as the
+        coordinate of terms locked to it: ``reading_mm`` where it is set (a stream: the distance
+        the sensor looked at, :mod:`.reading`); the observed error always uses the raw reading."""
+        return self.data.reference_mm if self.reading_mm is None else self.reading_mm
 
     def subset(self, index: Any) -> Residuals:
         return Residuals(
@@ -76,6 +82,7 @@ class Residuals:
             residual_um=self.residual_um[index],
             jacobian=self.jacobian[index],
             squareness_jacobian=self.squareness_jacobian[index],
+            reading_mm=None if self.reading_mm is None else self.reading_mm[index],
         )
 
 
@@ -112,6 +119,7 @@ def compute_residuals(machine: Machine, data: Measurements) -> Residuals:
         residual_um=residual,
         jacobian=jac,
         squareness_jacobian=sq,
+        reading_mm=denoised_reading(data),
     )
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +40,7 @@ from .fitting import (
 from .merge import one_for_several
 from .outcome import Diagnosis, Finding, describe_terms, session_summary
 from .periods import CYCLIC, check_period
+from .reading import denoised_reading
 from .residuals import compute_residuals
 from .sources import decide_sources
 from .steps import (
@@ -361,6 +362,26 @@ def _final_periods(problem: Problem, search: _Search, say: Callable[[str], None]
     return removed
 
 
+def _carried_reading(problem: Problem, terms: Sequence[Term]) -> Problem:
+    """The problem with the reading's coordinate (:func:`.reading.denoised_reading`) carrying
+    the machine's named cyclic errors (a screw's, a scale's: the carriage, and the sensor's
+    target with it, is where they put it; a smooth curve per pass cannot follow them). The
+    problem itself when no cyclic error of the position is named or the reading is raw."""
+    res = problem.res
+    if res.reading_mm is None or not any(t.candidate.cause == "periodic" for t in terms):
+        return problem
+    beta, _, _ = fit(problem, terms)
+    carried = np.zeros((res.n, 3))
+    col = problem.n_nuisance
+    for t in terms:
+        p = t.candidate.n_params
+        if t.candidate.cause == "periodic":
+            carried += t.candidate.design(res, t.theta) @ beta[col : col + p]
+        col += p
+    reading = denoised_reading(res.data, carried)
+    return replace(problem, res=replace(res, reading_mm=reading), _q_cache={})
+
+
 def _resume_after_replacement(
     problem: Problem,
     pool: list[Candidate],
@@ -453,6 +474,8 @@ def diagnose(
     slots, rounds, cv_history = search.slots, search.rounds, search.cv_history
     local_hits, refused = search.local_hits, search.refused
 
+    # the distance the sensor looked at includes the machine's named cyclic errors
+    problem = _carried_reading(problem, terms_of(slots))
     # which instrument carries each term, and which coordinate it is locked to
     accepted = terms_of(slots)
     roots = [s.root for s in slots]

@@ -14,7 +14,7 @@ from .families import FAMILIES, VARIANTS, mode_of
 from .files import machine_toml, measurement_rows, write_case
 from .runner import Run, find_cli, run_case
 from .scoring import PERIOD_TOLERANCE, Score, identity_mismatch, score_diagnosis
-from .separability import LAMBDA_MIN, lock_lambda
+from .separability import LAMBDA_MIN, drift_lambda, lock_lambda, uniform_drift_lambda
 from .truth import Hidden, SamplePoints, SessionFacts, truth_labels
 
 __all__ = [
@@ -30,6 +30,7 @@ __all__ = [
     "SessionFacts",
     "UnreachableCase",
     "draw_case",
+    "drift_lambda",
     "find_cli",
     "identity_mismatch",
     "lock_lambda",
@@ -40,5 +41,6 @@ __all__ = [
     "score_diagnosis",
     "simulate",
     "truth_labels",
+    "uniform_drift_lambda",
     "write_case",
 ]

@@ -223,6 +223,7 @@ def draw_case(family: str, variant: str, seed: int) -> Case:
             q_s + np.asarray(step_um, dtype=float) / 1000.0,
             np.asarray(rows.pop("sample_direction"), dtype=float),
             noise.total_sigma_um,
+            np.asarray(rows["t_s"], dtype=float),
         )
         hidden, nothing = truth_labels(effects, facts, points)
         return Case(

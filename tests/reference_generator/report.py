@@ -33,6 +33,8 @@ def hidden_outcomes(records: Iterable[Record]) -> list[dict[str, Any]]:
         score = r.get("score")
         per = {h["hidden"]: h for h in (score or {}).get("per_hidden", [])}
         for h in r["hidden"]:
+            if not h.get("required", True):  # the session cannot show it as itself
+                continue
             label = h["label"]
             got = per.get(label, {})
             out.append(

@@ -23,7 +23,9 @@ truth needs that the entry lacks is a mismatch. Entries and hidden effects are p
 (an optimal assignment: exact pairs first, then named ones); an entry left unpaired is
 **spurious** (also a second entry for one hidden effect: one physical cause must be one entry).
 A session whose truth names nothing (clean, or only effects for which naming nothing is right)
-is a **false alarm** when the verdict is not ``none`` or any effect is listed.
+is a **false alarm** when the verdict is not ``none`` or any effect is listed. A hidden effect
+that is not ``required`` (a drift the session cannot show as one, truth.py) takes part in the
+pairing — an entry naming it is not spurious — but is neither named nor missed in the rates.
 """
 
 from __future__ import annotations
@@ -116,6 +118,7 @@ class Score:
     verdict: str
     expects_nothing: bool
     bad_sources: list[str] = field(default_factory=list)
+    optional: list[str] = field(default_factory=list)  # hidden, not required (truth.Hidden)
 
     @property
     def false_alarm(self) -> bool:
@@ -133,6 +136,7 @@ class Score:
             "false_alarm": self.false_alarm,
             "all_exact": self.all_exact,
             "bad_sources": self.bad_sources,
+            "optional": self.optional,
         }
 
 
@@ -168,7 +172,11 @@ def score_diagnosis(
     rows, cols = linear_sum_assignment(-quality) if n_h and n_e else ([], [])
     paired = {int(i): int(j) for i, j in zip(rows, cols, strict=True) if quality[i, j] > 0}
     scores: list[HiddenScore] = []
+    optional: list[str] = []
     for i, h in enumerate(hidden):
+        if not h.required:  # an entry naming it is not spurious; naming nothing is no miss
+            optional.append(h.label + (" (named)" if i in paired else ""))
+            continue
         s = HiddenScore(h)
         if i in paired:
             e = entries[paired[i]]
@@ -187,4 +195,4 @@ def score_diagnosis(
     spurious = [entry_label(e) for j, e in enumerate(entries) if j not in used]
     bad = [entry_label(e) for e in entries if e.get("source") not in SOURCES]
     nothing = (n_h == 0) if expects_nothing is None else expects_nothing
-    return Score(scores, spurious, str(output.get("verdict")), nothing, bad)
+    return Score(scores, spurious, str(output.get("verdict")), nothing, bad, optional)

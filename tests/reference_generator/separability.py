@@ -76,6 +76,77 @@ def noncentrality(
     return float(resid @ resid / sigma_um**2)
 
 
+#: Legendre order of the positional table a drift's imitation may use (the generator's own
+#: positioning curves reach order 5).
+DRIFT_TABLE_ORDER = 5
+
+
+def drift_lambda(
+    q_mm: FloatArray, direction: FloatArray, signal_um: FloatArray, sigma_um: float
+) -> float:
+    """λ of a drift's noise-free signal (µm at the session's rows) against its best imitation
+    by errors that have no time: a positional table of the axis (Legendre, order
+    :data:`DRIFT_TABLE_ORDER`, offset included) and a reversal constant or growing linearly along
+    the travel (d, d·u; ISO 230-2's reversal, which wear or preload makes position-dependent).
+
+    A session that visits each (position, direction) once in time — one back-and-forth cycle —
+    cannot tell a drift from those: time is a function of position and direction there (a drift
+    linear in time is exactly a linear table plus a growing reversal, λ = 0). Only a session
+    that returns to the same places at other times shows the drift as a drift."""
+    q = np.asarray(q_mm, dtype=float)
+    d = np.asarray(direction, dtype=float)
+    if q.size == 0:
+        return 0.0
+    lo, hi = float(np.min(q)), float(np.max(q))
+    u = 2.0 * (q - lo) / (hi - lo) - 1.0 if hi > lo else np.zeros_like(q)
+    basis = np.column_stack([np.polynomial.legendre.legvander(u, DRIFT_TABLE_ORDER), d, d * u])
+    return noncentrality(np.asarray(signal_um, dtype=float), basis, sigma_um)
+
+
+#: Legendre order in time of a uniform drift imitating a position-dependent one (a slow warm-up,
+#: a wander: the reference drifts the generator draws are of this order).
+DRIFT_TIME_ORDER = 3
+
+
+def uniform_drift_lambda(
+    q_mm: FloatArray,
+    direction: FloatArray,
+    t_s: FloatArray,
+    signal_um: FloatArray,
+    sigma_um: float,
+    table: bool,
+    reversal: bool,
+) -> float:
+    """λ of a position-dependent drift's noise-free signal (a thermal expansion about a point)
+    against its best imitation by a drift the same at every position (Legendre in time, order
+    :data:`DRIFT_TIME_ORDER`, offset included) — the reference's drift — together with what
+    the session holds anyway: a positional table (``table``: a smooth curve of the axis or of the
+    sensor is among its effects) and a reversal constant or growing (``reversal``). One cause is
+    not imitated by two the session does not hold (the parsimony every diagnosis applies).
+
+    In a one-directional scan at one speed, time is a linear function of position within each
+    pass, so ΔT(t)·(q − q_f) with ΔT linear in t is exactly a uniform drift quadratic in t plus
+    a quadratic table: with a table in the session, nothing tells the machine's expansion from
+    the sensor's drift."""
+    q = np.asarray(q_mm, dtype=float)
+    t = np.asarray(t_s, dtype=float)
+    d = np.asarray(direction, dtype=float)
+    if q.size == 0:
+        return 0.0
+
+    def unit(v: FloatArray) -> FloatArray:
+        lo, hi = float(np.min(v)), float(np.max(v))
+        return 2.0 * (v - lo) / (hi - lo) - 1.0 if hi > lo else np.zeros_like(v)
+
+    u = unit(q)
+    cols = [np.polynomial.legendre.legvander(unit(t), DRIFT_TIME_ORDER)]
+    if table:
+        cols.append(np.polynomial.legendre.legvander(u, DRIFT_TABLE_ORDER)[:, 1:])
+    if reversal:
+        cols.append(np.column_stack([d, d * u]))
+    return noncentrality(np.asarray(signal_um, dtype=float), np.column_stack(cols), sigma_um)
+
+
 def lock_lambda(
     q_mm: FloatArray,
     carriage_mm: FloatArray,

@@ -32,7 +32,7 @@ readings' range, the constant offset between the instruments removed).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,7 +45,7 @@ from .reference_effects import (
     ReferenceRipple,
     ReferenceScale,
 )
-from .separability import LAMBDA_MIN, lock_lambda
+from .separability import LAMBDA_MIN, drift_lambda, lock_lambda, uniform_drift_lambda
 
 MIN_REST_ROWS = 3
 FloatArray = NDArray[np.float64]
@@ -61,6 +61,7 @@ class SessionFacts:
     n_speeds: int
     reversal_um: float  # |reversal| of the machine, 0 without one
     ref_centre_mm: float = 0.0  # centre of the travel the reference saw (its reading − offset)
+    has_table: bool = False  # a smooth curve (the axis' table or the sensor's linearity) is hidden
 
     @property
     def has_rest(self) -> bool:
@@ -77,6 +78,9 @@ class Hidden:
     source: str
     rule: str
     extra: dict[str, object] = field(default_factory=dict)
+    #: False: the session cannot show it as itself (a drift a table and a reversal imitate):
+    #: naming it is right, naming nothing for it too (scored neither as named nor as missed)
+    required: bool = True
 
     @property
     def label(self) -> str:
@@ -91,6 +95,7 @@ class Hidden:
             "keys": self.keys,
             "source": self.source,
             "rule": self.rule,
+            "required": self.required,
             **({"extra": self.extra} if self.extra else {}),
         }
 
@@ -112,6 +117,29 @@ class SamplePoints:
     carriage_mm: FloatArray
     direction: FloatArray
     sigma_um: float
+    t_s: FloatArray | None = None  # the sample instants (s): a drift's truth needs them
+
+
+def _drift_hidden(
+    family: str,
+    cause: str,
+    keys: dict[str, object],
+    source: str,
+    why: str,
+    points: SamplePoints | None,
+    signal_of: Callable[[FloatArray, FloatArray], FloatArray],
+) -> Hidden:
+    """A drift's truth: required only when the session can show it as a drift (λ ≥ 25 against
+    a table and a reversal, :func:`.separability.drift_lambda`)."""
+    if points is None or points.t_s is None:
+        return Hidden(family, cause, keys, source, why)
+    s = signal_of(points.q_mm, points.t_s)
+    lam = drift_lambda(points.q_mm, points.direction, s, points.sigma_um)
+    if lam >= LAMBDA_MIN:
+        why = f"{why}; λ = {lam:.4g} against a table and a reversal"
+        return Hidden(family, cause, keys, source, why, {"lambda": round(lam, 3)})
+    why = f"{why}; λ = {lam:.4g} (< {LAMBDA_MIN:g}): a table and a reversal imitate it"
+    return Hidden(family, cause, keys, source, why, {"lambda": round(lam, 3)}, required=False)
 
 
 def _periodic_source(
@@ -217,10 +245,41 @@ def _truth_of(effect: object, facts: SessionFacts, points: SamplePoints | None) 
         )
     if isinstance(effect, ReferenceDrift):
         why = "the same at every position: the reference's or a uniform drift of the machine"
-        return Hidden("reference_drift", "reference_drift", {"axis": axis}, "either", why)
+        keys = {"axis": axis}
+        ref = effect
+        return _drift_hidden(
+            "reference_drift", "reference_drift", keys, "either", why, points, ref.error_um
+        )
     if isinstance(effect, ThermalExpansion):
         why = f"expansion about {effect.fixed_point_mm:.2f} mm: a drift that depends on position"
-        return Hidden("thermal_drift", "drift", {"axis": axis}, "machine", why)
+        th = effect
+        source = "machine"
+        if points is not None and points.t_s is not None:
+            s = th.error_um(points.q_mm, np.zeros_like(points.q_mm), points.t_s)
+            lam = uniform_drift_lambda(
+                points.q_mm,
+                points.direction,
+                points.t_s,
+                s,
+                points.sigma_um,
+                facts.has_table,
+                facts.bidirectional and facts.reversal_um > 0,
+            )
+            if lam < LAMBDA_MIN:
+                source = "either"
+                why = (
+                    f"{why}, but a drift the same everywhere and what the session holds imitate "
+                    f"it: λ = {lam:.4g} (< {LAMBDA_MIN:g}); the machine's or the reference's"
+                )
+        return _drift_hidden(
+            "thermal_drift",
+            "drift",
+            {"axis": axis},
+            source,
+            why,
+            points,
+            lambda q, t: th.error_um(q, np.zeros_like(q), t),
+        )
     raise TypeError(f"no truth rule for {type(effect).__name__}")
 
 
@@ -231,6 +290,8 @@ def truth_labels(
     ``points`` (the session's rows) are needed for a ripple in a bidirectional session."""
     hidden: list[Hidden] = []
     nothing: list[str] = []
+    if any(isinstance(e, PositioningCurve | ReferenceNonlinearity) for e in effects):
+        facts = replace(facts, has_table=True)
     for effect in effects:
         t = _truth_of(effect, facts, points)
         if isinstance(t, str):
