@@ -12,6 +12,8 @@ offer both.
 from __future__ import annotations
 
 import contextlib
+import socket
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -45,6 +47,7 @@ class LiveServer:
     scene: Any
     topic_of: dict[int, str]
     context: Any
+    host: str = ""
 
     @property
     def port(self) -> int:
@@ -63,12 +66,36 @@ class LiveServer:
             with contextlib.suppress(Exception):  # a channel of a stopped server
                 ch.close()
 
-    def stop(self) -> None:
-        """Stop the server (connections closed, port released), then close the channels."""
+    def stop(self, release_wait_s: float = 2.0) -> None:
+        """Stop the server (connections closed, port released), then close the channels.
+
+        The SDK's ``stop()`` may return before its runtime has closed the listening socket;
+        this waits (at most ``release_wait_s``, s) until the port can be bound again, so a
+        restart on the same port right after finds it free."""
+        port = self.port
         try:
             self.server.stop()
         finally:
             self.close_channels()
+        _wait_released(self.host, port, release_wait_s)
+
+
+def _wait_released(host: str, port: int, timeout_s: float) -> bool:
+    """Whether ``host:port`` (TCP) can be bound, polled every 10 ms for up to ``timeout_s``
+    (s). SO_REUSEADDR: only a listener, not a closed connection's TIME_WAIT, blocks the bind."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    deadline = time.monotonic() + timeout_s
+    while True:
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                probe.bind((host or "127.0.0.1", port))
+                return True
+            except OSError:
+                pass
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.01)
 
 
 def open_live_server(
@@ -126,4 +153,4 @@ def open_live_server(
             f"live view: cannot listen on {settings.host}:{settings.port} ({exc}); choose "
             "another live.port (0 = any free port) or set live.enabled = false"
         ) from None
-    return LiveServer(server, channels, scene, topic_of, context)
+    return LiveServer(server, channels, scene, topic_of, context, settings.host)
