@@ -95,7 +95,8 @@ def _write_check(args: argparse.Namespace, machine: Any, opts: Any, out: Path) -
 
 
 def add_parsers(sub: Subparsers) -> None:
-    """Register ``export`` on the top-level parser."""
+    """Register ``export`` on the top-level parser. Long on purpose: one flat list of the
+    subcommand's flags, in the order ``--help`` prints them."""
     p = sub.add_parser(
         "export",
         help="write the model as a controller's compensation tables (SINUMERIK CEC, TwinCAT, LinuxCNC)",

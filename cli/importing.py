@@ -82,7 +82,8 @@ def cmd_import_camonitor(args: argparse.Namespace) -> int:
 
 
 def add_parsers(subparsers: Any) -> None:
-    """Add the ``import`` group (``import camonitor``) to an argparse subparsers object."""
+    """Add the ``import`` group (``import camonitor``) to an argparse subparsers object. Long on purpose: one flat list of the
+    subcommand's flags, in the order ``--help`` prints them."""
     group = subparsers.add_parser("import", help="import real measurements (camonitor streams)")
     sub = group.add_subparsers(dest="import_command", required=True, metavar="SOURCE")
     p = sub.add_parser(

@@ -173,27 +173,24 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     stylus = _finite(list(args.probe), "--probe") if args.probe is not None else None
     if mode in ("--points", "--volume"):
         return _points_mode(args, machine, rng, temps, stylus, mode)
-    return _task_mode(args, machine, rng, temps, stylus, mode)
+    from .uncertainty_tasks import task_mode
+
+    return task_mode(args, machine, rng, temps, stylus, mode)
 
 
-def _points_mode(
+def _points_input(
     args: argparse.Namespace,
     machine: Machine,
-    rng: Any,
     temps: dict[str, float] | None,
     stylus: list[float] | None,
     mode: str,
-) -> int:
+) -> tuple[list[str], list[list[str]], Any, Any, dict[str, Any] | None, Any, list[Any] | None]:
+    """The points of ``--points`` (CSV) or ``--volume`` (a grid over the machine's volume, mm):
+    ``(header, rows, points_mm, stylus_mm, signals, inputs, axes)``; ``axes`` only for a volume."""
     import numpy as np
-
-    from cmm_comp.compensation.uncertainty import point_uncertainty
 
     from .grid import read_points_csv
 
-    header: list[str] = []
-    rows: list[list[str]] = []
-    axes = None
-    signals: dict[str, Any] | None = temps
     if mode == "--points":
         header, rows, cols = read_points_csv(Path(args.points))
         if not rows:
@@ -202,36 +199,37 @@ def _points_mode(
         sty: Any = stylus
         if all(c in cols for c in ("px", "py", "pz")):
             sty = np.c_[cols["px"], cols["py"], cols["pz"]]
-        signals = dict(temps or {})
+        signals: dict[str, Any] = dict(temps or {})
         signals.update({k: v for k, v in cols.items() if k.startswith("T_")})
         inputs = {k: v for k, v in cols.items() if k.startswith("dir_")} or None
-    else:
-        steps = args.volume
-        if any(s < 2 or s > 200 for s in steps):
-            raise ValueError(f"uncertainty: --volume needs 2…200 nodes per axis, got {steps}")
-        lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
-        axes = [np.linspace(lo[k], hi[k], steps[k]) for k in range(3)]
-        pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        sty, inputs = stylus, None
-        header = ["x", "y", "z"]
-        rows = [[f"{v:.6f}" for v in p] for p in pts]
-    result = point_uncertainty(
-        machine,
-        pts,
-        sty,
-        signals or None,
-        inputs,
-        rng=rng,
-        settings=_settings(args, default_ndig=1),
-        progress=_progress("uncertainty"),
-    )
-    _end_progress()
+        return header, rows, pts, sty, signals, inputs, None
+    steps = args.volume
+    if any(s < 2 or s > 200 for s in steps):
+        raise ValueError(f"uncertainty: --volume needs 2…200 nodes per axis, got {steps}")
+    lo, hi = machine.volume.lower_mm, machine.volume.upper_mm
+    axes = [np.linspace(lo[k], hi[k], steps[k]) for k in range(3)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    rows = [[f"{v:.6f}" for v in p] for p in pts]
+    return ["x", "y", "z"], rows, pts, stylus, temps, None, axes
+
+
+def _points_summary(
+    args: argparse.Namespace,
+    machine: Machine,
+    temps: dict[str, float] | None,
+    pts: Any,
+    signals: dict[str, Any] | None,
+    result: PointUncertainty,
+    axes: list[Any] | None,
+) -> dict[str, Any]:
+    """The ``--json`` summary of a points/volume run, with the first-order budget at the point
+    of largest U (µm)."""
+    import numpy as np
+
     ok = result.status == "ok"
     mc = result.mc
-    if args.out is not None:
-        _write_points_csv(Path(args.out), header, rows, result)
     summary: dict[str, Any] = {
-        "task": "points" if mode == "--points" else "volume",
+        "task": "points" if axes is None else "volume",
         "machine": machine.name,
         "points": len(pts),
         "ok": int(ok.sum()),
@@ -258,8 +256,43 @@ def _points_mode(
             "point_mm": pts[worst].tolist(),
             "u_um_by_input": {k: v[0].tolist() for k, v in budget.items()},
         }
+    return summary
+
+
+def _points_mode(
+    args: argparse.Namespace,
+    machine: Machine,
+    rng: Any,
+    temps: dict[str, float] | None,
+    stylus: list[float] | None,
+    mode: str,
+) -> int:
+    import numpy as np
+
+    from cmm_comp.compensation.uncertainty import point_uncertainty
+
+    header, rows, pts, sty, signals, inputs, axes = _points_input(
+        args, machine, temps, stylus, mode
+    )
+    result = point_uncertainty(
+        machine,
+        pts,
+        sty,
+        signals or None,
+        inputs,
+        rng=rng,
+        settings=_settings(args, default_ndig=1),
+        progress=_progress("uncertainty"),
+    )
+    _end_progress()
+    ok = result.status == "ok"
+    mc = result.mc
+    if args.out is not None:
+        _write_points_csv(Path(args.out), header, rows, result)
     if args.json is not None:
-        write_json_atomic(args.json, summary)
+        write_json_atomic(
+            args.json, _points_summary(args, machine, temps, pts, signals, result, axes)
+        )
     if args.plot is not None:
         from cmm_comp.compensation.uncertainty.plots import plot_points_u, plot_volume_u
 
@@ -349,123 +382,9 @@ def _ratio(gum: Any, mc: Any, ok: Any) -> dict[str, float] | None:
     return {"min": float(r.min()), "max": float(r.max())}
 
 
-def _task_mode(
-    args: argparse.Namespace,
-    machine: Machine,
-    rng: Any,
-    temps: dict[str, float] | None,
-    stylus: list[float] | None,
-    mode: str,
-) -> int:
-    import numpy as np
-
-    from cmm_comp.compensation import uncertainty as unc
-
-    settings = _settings(args, default_ndig=unc.E0_NDIG if mode == "--e0-test" else 2)
-    progress = _progress("uncertainty")
-    kw: dict[str, Any] = {"rng": rng, "settings": settings, "progress": progress}
-    mpe_ratio_limit = None
-    if mode == "--length":
-        c = _finite(list(args.length), "--length")
-        result = unc.length_uncertainty(machine, c[:3], c[3:], stylus, temps, **kw)
-    elif mode == "--e0-test":
-        from cmm_comp.sim_controller.iso10360 import length_test
-
-        tests = length_test(machine.volume.lower_mm, machine.volume.upper_mm)
-        pairs = np.array([[t.a_mm, t.b_mm] for t in tests])
-        mpe = None
-        if args.mpe is not None:
-            mpe = (float(args.mpe[0]), float(args.mpe[1]))
-            mpe_ratio_limit = 1.0
-        result = unc.e0_uncertainty(machine, pairs, stylus, temps, mpe=mpe, **kw)
-    elif mode == "--sphere":
-        x, y, z, r = _finite(list(args.sphere), "--sphere")
-        pts = unc.sphere_probing_points([x, y, z], r, args.sphere_points)
-        result = unc.sphere_uncertainty(machine, pts, stylus, temps, **kw)
-    else:
-        v = _finite(list(args.plane), "--plane")
-        pts = unc.plane_grid_points(v[0:3], v[3:6], v[6:9], args.plane_points, args.plane_points)
-        result = unc.flatness_uncertainty(machine, pts, stylus, temps, **kw)
-    _end_progress()
-    summary = result.summary()
-    summary["machine"] = machine.name
-    summary["seed"] = args.seed
-    summary["temperatures_C"] = temps or {}
-    if result.task == "e0":  # keep the JSON readable: the per-length outputs in one table
-        outputs = summary["outputs"]
-        lengths = result.nominal["lengths_mm"]
-        summary["length_errors"] = [
-            {"length_mm": lengths[i], **outputs.pop(f"length_error_um[{i}]")}
-            for i in range(len(lengths))
-        ]
-    if args.json is not None:
-        write_json_atomic(args.json, summary)
-    mc = result.mc
-    if args.plot is not None:
-        from cmm_comp.compensation.uncertainty.plots import plot_histogram
-
-        gum_u = result.gum["u"] if result.gum is not None else [None] * len(result.outputs)
-        shown = [
-            i for i, name in enumerate(result.outputs) if not name.startswith("length_error_um[")
-        ]
-        columns = {i: mc.column(i) for i in shown}
-        if any(c is None for c in columns.values()):  # not reachable with the tasks' defaults
-            raise ValueError(
-                f"uncertainty: the {mc.trials} trials' values were not kept "
-                "(more than keep_values_limit): no histogram; fewer --max-trials or --trials"
-            )
-        panels = [
-            (
-                result.outputs[i],
-                columns[i],
-                (float(mc.low[i]), float(mc.high[i])),
-                gum_u[i],
-                mpe_ratio_limit if result.outputs[i] == "E0_over_MPE" else None,
-            )
-            for i in shown
-        ]
-        title = f"{machine.name}: {_TASK_TITLES.get(result.task, result.task)}, {mc.trials} virtual machines"
-        if "p_pass" in result.nominal:
-            title += f", probability of passing {_p_pass_text(result.nominal)}"
-        if not mc.stable and args.trials is None:
-            title += " (NOT stable: --max-trials reached)"
-        plot_histogram(
-            panels,
-            args.plot,
-            title=title,
-            limit_label="pass limit E0/MPE =",
-            probability=mc.probability,
-        )
-    for i, name in enumerate(result.outputs):
-        if name.startswith("length_error_um["):
-            continue
-        print(
-            f"{name}: mean {mc.mean[i]:.4g}, u {mc.u[i]:.3g}, U (k = 2) {2 * mc.u[i]:.3g}, "
-            f"95 % interval [{mc.low[i]:.4g}, {mc.high[i]:.4g}]"
-        )
-    if "p_pass" in result.nominal:
-        print(f"probability of passing the E0 test: {_p_pass_text(result.nominal)}")
-    print(f"{mc.trials} trials{_stability(mc, args)}")
-    _warn_if_unstable(mc, args)
-    return 0
-
-
-_TASK_TITLES = {
-    "length": "length",
-    "e0": "ISO 10360-2 E0 test",
-    "sphere": "sphere",
-    "flatness": "flatness",
-}
-
-
-def _p_pass_text(nominal: dict[str, Any]) -> str:
-    two_s = nominal.get("p_pass_2s")
-    spread = "" if two_s is None else f" ± {two_s:.3f} (2s between the runs)"
-    return f"{nominal['p_pass']:.3f}{spread}"
-
-
 def add_parsers(sub: Subparsers) -> None:
-    """Add ``uncertainty`` to the ``cmm-comp`` subcommands."""
+    """Add ``uncertainty`` to the ``cmm-comp`` subcommands. Long on purpose: one flat list of the
+    subcommand's flags, in the order ``--help`` prints them."""
     p = sub.add_parser(
         "uncertainty",
         help="virtual CMM: U of corrected points and of measurement tasks (Monte Carlo)",

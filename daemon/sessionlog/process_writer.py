@@ -273,6 +273,8 @@ def child_main(end: ChildEnd) -> None:
 
 
 def _serve(end: ChildEnd) -> None:
+    """Write the ring into a :class:`.writer.SessionWriter` until the daemon asks to stop or is
+    gone, then finish the file and report ``stopped``."""
     settings: LogSettings = end.settings
     metadata = {
         **settings.metadata,
@@ -285,79 +287,92 @@ def _serve(end: ChildEnd) -> None:
     except BaseException as exc:
         end.send("start_error", portable(exc))
         return
-    lock = threading.Lock()  # one ring reader and file writer at a time
-    done = threading.Event()
-    received = 0
-    current: collections.deque[tuple[str, Any, int]] = collections.deque()
-    """The messages of the ring record being written (one record, taken whole from the ring)."""
+    _ChildWriter(end, writer, errors).run()
 
-    def step(limit: int = BATCH) -> int:
+
+class _ChildWriter:
+    """The child's two writers of one file: an idle-priority thread that writes whenever the
+    machine has a spare moment, and the main thread, which serves the pipe and helps while the
+    ring's backlog is high; :attr:`lock` lets one of them at a time read the ring and write."""
+
+    def __init__(
+        self, end: ChildEnd, writer: SessionWriter, errors: collections.deque[BaseException]
+    ) -> None:
+        self.end, self.writer, self.errors = end, writer, errors
+        self.lock = threading.Lock()
+        self.done = threading.Event()
+        self.received = 0
+        self.current: collections.deque[tuple[str, Any, int]] = collections.deque()
+        """The messages of the ring record being written (one record, taken whole)."""
+
+    def step(self, limit: int = BATCH) -> int:
         """Write at most ``limit`` messages: the current record's, else the ring's next (lock
         held; short, so a starved idle thread never holds the lock long). 0: nothing waits."""
-        nonlocal received
-        if not current:
-            for n, data in end.ring.read():
+        if not self.current:
+            for n, data in self.end.ring.read():
                 topic, payloads, t_ns, drops = pickle.loads(data)
                 if drops is not None:
-                    writer.set_upstream_drops(drops)
-                current.extend((topic, p, t_ns) for p in payloads)
-                received += n
+                    self.writer.set_upstream_drops(drops)
+                self.current.extend((topic, p, t_ns) for p in payloads)
+                self.received += n
                 break
-        k = min(limit, len(current))
+        k = min(limit, len(self.current))
         for _ in range(k):
-            writer.write(*current.popleft())
+            self.writer.write(*self.current.popleft())
         return k
 
-    def idle_writer() -> None:
+    def idle_writer(self) -> None:
         name_os_thread()
         took = lower_priority("idle")
         if took != expected_priority("idle"):
             _log.warning("MCAP writer priority idle not available: %s", took)
-        while not done.is_set():
-            with lock:
-                n = 0 if done.is_set() else step()
-                writer.tick()
+        while not self.done.is_set():
+            with self.lock:
+                n = 0 if self.done.is_set() else self.step()
+                self.writer.tick()
             if not n:
-                done.wait(POLL_S)
+                self.done.wait(POLL_S)
 
-    def status() -> dict[str, Any]:
-        st = writer.stats(upstream=False)  # the daemon adds its own drops
+    def status(self) -> dict[str, Any]:
+        st = self.writer.stats(upstream=False)  # the daemon adds its own drops
         st = replace(st, files=st.files[-FILES_REPORTED:])
-        return {"stats": st, "healthy": writer.healthy, "received": received}
+        return {"stats": st, "healthy": self.writer.healthy, "received": self.received}
 
-    def forward_errors() -> None:
-        while errors:
-            exc = errors.popleft()
+    def forward_errors(self) -> None:
+        while self.errors:
+            exc = self.errors.popleft()
             # the writer's error stops it; anything else (a message that could not be
             # encoded) is a warning: counted, recorded, the log goes on
-            end.send("error" if exc is writer.error else "warning", portable(exc))
+            self.end.send("error" if exc is self.writer.error else "warning", portable(exc))
 
-    def help_writer() -> float:
+    def help_writer(self) -> float:
         """The main thread writes too while the ring's backlog is high (for at most
         :data:`REPORT_S`, then the loop reports and helps again)."""
-        if end.ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
+        ring = self.end.ring
+        if ring.backlog_bytes() > HELP_HIGH * MESSAGE_BYTES:
             until = time.monotonic() + REPORT_S
-            while end.ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
-                with lock:
-                    if not step() or time.monotonic() > until:
+            while ring.backlog_bytes() > HELP_LOW * MESSAGE_BYTES:
+                with self.lock:
+                    if not self.step() or time.monotonic() > until:
                         break
-        forward_errors()
+        self.forward_errors()
         return POLL_S
 
-    threading.Thread(target=idle_writer, name="mcap-writer", daemon=True).start()
-    last = None
-    try:
-        last = end.serve(status(), help_writer, status, REPORT_S)
-    finally:
-        # what the daemon handed over before it stopped (or died), written and the file
-        # finished here, at this thread's normal priority: the writer thread at SCHED_IDLE
-        # gets next to no CPU on a saturated machine (the daemon bounds the wait)
-        done.set()
-        with lock:
-            while step(1 << 30):
-                pass
-            if last is not None:
-                writer.set_upstream_drops(last)
-            writer.stop()
-        forward_errors()
-        end.send("stopped", status())
+    def run(self) -> None:
+        threading.Thread(target=self.idle_writer, name="mcap-writer", daemon=True).start()
+        last = None
+        try:
+            last = self.end.serve(self.status(), self.help_writer, self.status, REPORT_S)
+        finally:
+            # what the daemon handed over before it stopped (or died), written and the file
+            # finished here, at this thread's normal priority: the writer thread at SCHED_IDLE
+            # gets next to no CPU on a saturated machine (the daemon bounds the wait)
+            self.done.set()
+            with self.lock:
+                while self.step(1 << 30):
+                    pass
+                if last is not None:
+                    self.writer.set_upstream_drops(last)
+                self.writer.stop()
+            self.forward_errors()
+            self.end.send("stopped", self.status())
