@@ -62,6 +62,8 @@ from calibration_generator.scoring import (  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 RESULTS = ROOT / "benchmarks" / "results" / "calibration_plate_reach.json"
+#: the machines of the 12:27 UTC run of 2026-12-05 (the development data of the diagnosis)
+REPLAY = ROOT / "benchmarks" / "results" / "calibration_truth_2026-12-05T1227.json"
 
 
 def read_plate(case: Case) -> tuple[NDArray[Any], FloatArray, FloatArray]:
@@ -209,7 +211,11 @@ def _summary(rows: list[dict[str, Any]], key: str) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--replay", required=True, help="a calibration_truth JSON (its seeds)")
+    ap.add_argument(
+        "--replay",
+        default=str(REPLAY),
+        help=f"a calibration_truth JSON (its seeds; default {REPLAY})",
+    )
     ap.add_argument("--orders", default="3,5", help="simple fit's polynomial orders (3,5)")
     ap.add_argument("--rcond", type=float, default=1e-4, help="simple fit's cut-off (1e-4)")
     ap.add_argument("--first", type=int, help="only the first N machines of the file")
