@@ -308,7 +308,11 @@ def decide_sources(
                 )
                 if apart > band and delta > band:
                     continue  # refuted
-                if apart > band and delta < -band and twin.cause not in READING_SHAPES:
+                # a twin that carried a table fits better as two causes: it imitates the term
+                # by construction (the shaped drift *is* a uniform drift and a curve), so the
+                # fit decides, parameters charged
+                carried = judged_with is not others
+                if (apart > band or carried) and delta < -band and twin.cause not in READING_SHAPES:
                     if better is None or delta < better[0]:
                         better = (delta, t_term, twin)
                     continue
