@@ -11,18 +11,26 @@ between the directions it is to be told by). The position-locked hypothesis, who
 the axis' own encoder — is clean, then wins whatever the truth. The two are compared on equal
 terms only with the reading taken as the position plus the *smooth* part of the error.
 
-The smooth part: per *segment* (consecutive samples of one direction of travel — the direction
-is that of the last motion — cut also where the time stamps jump by more than
-:data:`GAP_FACTOR` median intervals), the observed error fitted by a Legendre series of the
-position of order ≤ :data:`PASS_ORDER` (at most a quarter of the segment's distinct
-positions), plus a term proportional to the velocity where the segment has more than one (a
-latency's −v·τ: zero at rest, the sensor looked behind the axis while it moved). Within a
-segment the position is monotonic in time, so a drift is a smooth function of it too.
+The smooth part: per *piece of a pass* (consecutive samples of one direction of travel — the
+direction is that of the last motion — cut where the position steps back against that
+direction, a return that was not recorded as between one-directional scans, and where the
+carriage moves again after a gap in time of more than :data:`GAP_FACTOR` median intervals),
+the observed error fitted by a Legendre series of the position of order ≤ :data:`PASS_ORDER`
+(at most a quarter of the piece's distinct positions), plus a term proportional to the
+velocity where the piece has more than one (a latency's −v·τ: zero at rest, the sensor looked
+behind the axis while it moved). Within a pass the position is monotonic in time, so a drift
+is a smooth function of it too. A stop is part of the piece that brought the carriage there,
+whatever the gap in time before it (the importers drop the rows taken while accelerating);
+it is never a piece of its own.
 
-Known limit: where the rows taken while accelerating are dropped (the importer's default),
-the time gap cuts every stop of an ISO test into a segment of its own, whose coordinate is the
-stop's mean error — the sensor's own ripple value there included, which the moving rows' fit
-leaves out (docs/discovery.md, item 7).
+The sensor's own named cyclic error (``sensor_um``: a ``reference_ripple`` once fitted) is left
+out of the smoothing and out of the coordinate: it is an error of the reading, not of where the
+sensor looked. Left in, the smooth part of a stop — one position, the ripple's value there not
+averaged away, and the velocity term free to take the difference from the moving rows — is its
+mean error *with* that value: the coordinate moved by up to the ripple's amplitude (2π·A/p rad
+of phase; on `ripple_triangulation/bidirectional-separable/s1` the stops' coordinate was off by
+6.3 µm RMS against an 8.6 µm ripple of 0.092 mm, 0.2 µm once it is left out), and small cyclic
+terms of the machine took up the ripple's misfit there (docs/discovery.md, item 7).
 Where a position has one reading (one direction of travel) the map between the two
 coordinates stays exact (:func:`.reference_candidates.through_map`), as physics says.
 """
@@ -39,24 +47,45 @@ from ..formats.measurements import Measurements
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["PASS_ORDER", "denoised_reading"]
+__all__ = ["BACK_STEP_MM", "GAP_FACTOR", "PASS_ORDER", "denoised_reading", "passes"]
 
 #: Largest Legendre order of the smooth error along one pass (a positioning curve of order ≤ 5
 #: or a correlated curve of 1/6 of the travel).
 PASS_ORDER = 6
-#: A gap in time longer than this many median sample intervals starts a new pass.
+#: A step of the position against the direction of travel longer than this (mm) starts a new
+#: pass (a return not recorded); shorter ones are an encoder's jitter at rest (ESS: ≤ 0.04 µm).
+BACK_STEP_MM = 1e-3
+#: A gap in time longer than this many median sample intervals, followed by motion, starts a
+#: new piece of the pass.
 GAP_FACTOR = 20.0
 
 
-def _passes(direction: FloatArray, t: FloatArray) -> list[slice]:
-    """Passes of consecutive samples (already in time order) of one direction of travel."""
-    n = len(t)
+def passes(
+    direction: FloatArray,
+    q_mm: FloatArray,
+    t_s: FloatArray | None = None,
+    v_mm_s: FloatArray | None = None,
+) -> list[slice]:
+    """Pieces of passes of consecutive samples (already in time order) of one direction of
+    travel: cut where the direction changes or the position steps back against it by more
+    than :data:`BACK_STEP_MM`, and where the carriage moves again after a gap in time of more
+    than :data:`GAP_FACTOR` median intervals (a restart: the smooth part stays local along a
+    long pass). A stop — the rows at rest after a gap, at rest where ``v_mm_s`` is 0, else
+    where the position does not move — is never cut from the motion that brought it there."""
+    n = len(q_mm)
     brk = np.zeros(n, dtype=bool)
     brk[1:] |= direction[1:] != direction[:-1]
-    dt = np.diff(t)
-    med = float(np.median(dt)) if len(dt) else 0.0
-    if med > 0:
-        brk[1:] |= dt > GAP_FACTOR * med
+    brk[1:] |= direction[1:] * np.diff(q_mm) < -BACK_STEP_MM
+    if t_s is not None and n > 1:
+        dt = np.diff(t_s)
+        med = float(np.median(dt))
+        if med > 0:
+            if v_mm_s is not None:
+                moving = v_mm_s[1:] != 0
+            else:
+                after = np.r_[np.abs(np.diff(q_mm[1:])), np.inf]
+                moving = after >= BACK_STEP_MM
+            brk[1:] |= (dt > GAP_FACTOR * med) & moving
     cuts = np.r_[0, np.flatnonzero(brk), n]
     return [slice(int(a), int(b)) for a, b in itertools.pairwise(cuts) if b > a]
 
@@ -74,12 +103,18 @@ def _smooth_pass(q_mm: FloatArray, err_um: FloatArray, v: FloatArray | None) -> 
     return cols @ beta
 
 
-def denoised_reading(data: Measurements, carried_um: FloatArray | None = None) -> FloatArray | None:
+def denoised_reading(
+    data: Measurements,
+    carried_um: FloatArray | None = None,
+    sensor_um: FloatArray | None = None,
+) -> FloatArray | None:
     """(N, 3) the reference's reading as the position plus each measured axis' smooth error
     (module docstring), or ``None`` when the session has no times or no direction of travel
     (points, not a stream: the raw reading is used). ``carried_um`` (N, 3): what the carriage
     is known to carry beyond a smooth curve (the machine's named cyclic errors, fitted): kept in
-    the coordinate — the sensor looks at the carriage — and left out of the smoothing."""
+    the coordinate — the sensor looks at the carriage — and left out of the smoothing.
+    ``sensor_um`` (N, 3): the sensor's own named errors of its reading (fitted): left out of
+    both (µm)."""
     t = data.t_s
     if t is None or data.n < 3:
         return None
@@ -94,10 +129,14 @@ def denoised_reading(data: Measurements, carried_um: FloatArray | None = None) -
         q = data.indicated_mm[order, k]
         err = (data.reference_mm[order, k] - q) * 1000.0
         known = np.zeros_like(err) if carried_um is None else carried_um[order, k]
+        own = np.zeros_like(err) if sensor_um is None else sensor_um[order, k]
         v = None if speed is None else speed[order]
+        runs = passes(direction[order], q, t[order], v)
         smooth = np.empty_like(err)
-        for run in _passes(direction[order], t[order]):
-            smooth[run] = _smooth_pass(q[run], err[run] - known[run], None if v is None else v[run])
+        for run in runs:
+            smooth[run] = _smooth_pass(
+                q[run], err[run] - known[run] - own[run], None if v is None else v[run]
+            )
         out[order, k] = q + (smooth + known) / 1000.0
         done = True
     return out if done else None

@@ -8,8 +8,11 @@ drift that changes along the axis and a reference drift the same everywhere. Aft
 each named term is refitted as each of its twins (the other named terms kept, the twin's
 nonlinear parameter re-profiled about the term's; the twin at its default and at its rich shape,
 the better kept), and the residual sums of squares compared
-(a twin with more parameters charged one noise variance σ² per extra parameter, as
-:mod:`.alternatives` does; σ² per *effective* observation: neighbouring residuals of a dense
+(the difference in parameters counted both ways, one noise variance σ² each: a twin with more
+parameters charged for them, as :mod:`.alternatives` does, and one with fewer credited — a term
+at its rich shape fits ~one σ² better per extra parameter by chance alone, which must not refute
+a leaner twin; a drift shaped along the axis with 21 parameters refuted a reference drift of 10
+by Δχ² = 17 on a session that hides only the reference drift; σ² per *effective* observation: neighbouring residuals of a dense
 record are correlated, and a difference of fits is then worth fewer independent points — the
 variance is inflated by (1 + ρ)/(1 − ρ), ρ the residual's lag-one correlation in time):
 
@@ -170,7 +173,8 @@ def _best_twin_shape(
     sigma2: float,
 ) -> tuple[Term, float]:
     """The twin at its default and at its rich shape (when it has one), each charged one σ² per
-    parameter beyond the term's: the better of the two and its Δχ² (in units of σ²). The twin's
+    parameter beyond the term's (credited one per parameter fewer): the better of the two and
+    its Δχ² (in units of σ²). The twin's
     fair shape is not the term's: a drift selected with its rich (position-dependent) shape has
     a reference drift as twin that is the same everywhere, and a default reading-locked shape
     may imitate a rich positional one with fewer parameters."""
@@ -178,12 +182,53 @@ def _best_twin_shape(
     best: tuple[Term, float] | None = None
     for rich in shapes:
         t_term, rss = _twin_fit(problem, others, term, twin, rich)
-        extra = max(t_term.candidate.n_params - term.candidate.n_params, 0)
+        extra = t_term.candidate.n_params - term.candidate.n_params
         delta = (rss - rss_full) / sigma2 + extra
         if best is None or delta < best[1]:
             best = (t_term, delta)
     assert best is not None
     return best
+
+
+#: Twins that may carry a table of their axis: a drift that changes along the axis can take in
+#: a uniform drift *and* a smooth curve of the position (a table, a sensor's linearity) at once;
+#: its twin the same everywhere can only match that with the curve beside it.
+CARRIES_TABLE = {("drift", "reference_drift")}
+
+
+def _table_of(axis: str, pool: Sequence[Candidate], others: Sequence[Term]) -> Term | None:
+    """The positional table of ``axis`` (``d<a>_<a>``, its default shape) from ``pool``, or
+    ``None`` when one of ``others`` is already a table of that axis or none is in the pool."""
+    comp = f"d{axis}_{axis}"
+    if any(t.candidate.cause == "parametric" and _axis_of(t.candidate) == axis for t in others):
+        return None
+    for c in pool:
+        if c.cause == "parametric" and c.keys.get("component") == comp:
+            return Term(c, c.thetas[0])
+    return None
+
+
+def _twin_with_table(
+    problem: Problem,
+    others: list[Term],
+    term: Term,
+    twin: Candidate,
+    plain: tuple[Term, float],
+    table: Term | None,
+    rss_full: float,
+    sigma2: float,
+) -> tuple[Term, float, list[Term]]:
+    """The better of the twin alone (``plain``: term, Δχ²) and the twin carrying the table it
+    competes with (:data:`CARRIES_TABLE`; the table's parameters charged one σ² each, as the
+    twin's own extra ones): (twin term, Δχ², the others it was judged with)."""
+    if table is None:
+        return plain[0], plain[1], others
+    with_table = [*others, table]
+    t_term, delta = _best_twin_shape(problem, with_table, term, twin, rss_full, sigma2)
+    delta += table.candidate.n_params
+    if delta < plain[1]:
+        return t_term, delta, with_table
+    return plain[0], plain[1], others
 
 
 #: Largest variance inflation for dependent neighbours (ρ ≈ 0.95).
@@ -232,8 +277,17 @@ def decide_sources(
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
-                t_term, delta = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
-                misfit = _imitation_misfit(problem, others, t_term, target)
+                plain = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
+                axis = _axis_of(root)
+                table = (
+                    _table_of(axis, pool, others)
+                    if (root.cause, twin.cause) in CARRIES_TABLE and axis is not None
+                    else None
+                )
+                t_term, delta, judged_with = _twin_with_table(
+                    problem, others, term, twin, plain, table, rss_full, sigma2
+                )
+                misfit = _imitation_misfit(problem, judged_with, t_term, target)
                 apart = misfit / sigma2
                 # separable only by a difference that is a sizeable part of the term itself
                 # (≥ 1 % of its energy: a cyclic error moved by ~0.03 period between the
@@ -254,7 +308,11 @@ def decide_sources(
                 )
                 if apart > band and delta > band:
                     continue  # refuted
-                if apart > band and delta < -band and twin.cause not in READING_SHAPES:
+                # a twin that carried a table fits better as two causes: it imitates the term
+                # by construction (the shaped drift *is* a uniform drift and a curve), so the
+                # fit decides, parameters charged
+                carried = judged_with is not others
+                if (apart > band or carried) and delta < -band and twin.cause not in READING_SHAPES:
                     if better is None or delta < better[0]:
                         better = (delta, t_term, twin)
                     continue

@@ -97,11 +97,17 @@ def choose_variants(problem: Problem, slots: list[Slot], alpha: float, min_cv_ga
 
 
 def backward(
-    problem: Problem, slots: list[Slot], n_tried: int, alpha: float, min_cv_gain: float
+    problem: Problem,
+    slots: list[Slot],
+    n_tried: int,
+    alpha: float,
+    min_cv_gain: float,
+    causes: frozenset[str] | None = None,
 ) -> list[Slot]:
     """Backward elimination: drop, one at a time, the weakest accepted cause that is no longer
     needed given the others (F-test at ``alpha`` with the same corrections as when it was added,
-    or a CV gain below ``min_cv_gain``). Returns the dropped slots."""
+    or a CV gain below ``min_cv_gain``); only causes in ``causes`` when given. Returns the
+    dropped slots."""
     dropped: list[Slot] = []
     n_obs = problem.y.size
     while len(slots) > 1:
@@ -110,6 +116,8 @@ def backward(
         folds = problem.judged_folds(full)
         cv_full = cv_mse(problem, full, folds=folds)
         for i, s in enumerate(slots):
+            if causes is not None and s.root.cause not in causes:
+                continue
             # significance against the others at their rich shapes, as when a cause is added:
             # a cause taken early that is only the leftover of a later one's richer shape (a
             # stale squareness that is a thermal cause's static image) is not needed. (The
