@@ -57,7 +57,7 @@ def _grid() -> None:
 
 def _chain() -> None:
     """A few virtual-CMM trials: the chain kernels ``cmm-comp uncertainty`` and ``grid build
-    --uncertainty`` run (independent of the grid's)."""
+    --uncertainty`` run (independent of the grid's); and the diagnosis' period-scan kernel."""
     import numpy as np
 
     from cmm_comp.compensation import Machine
@@ -68,6 +68,10 @@ def _chain() -> None:
     rng = np.random.default_rng(0)
     next(cmm.residuals(prep, 2, rng))
     next(cmm.pose_residuals(prep, 2, rng))
+    # and the diagnosis' period-scan columns (its one kernel)
+    from cmm_comp.compensation.effects.harmonic_kernel import harmonic_columns
+
+    harmonic_columns(np.array([1.0, 2.0]), (3.0,), 0.0, 1)
 
 
 GROUPS: tuple[tuple[str, Callable[[], None]], ...] = (("grid", _grid), ("chain", _chain))

@@ -27,6 +27,7 @@ from cmm_comp.compensation.diagnosis.candidate import (
 from cmm_comp.compensation.diagnosis.candidates import all_candidates, all_twins
 from cmm_comp.compensation.diagnosis.residuals import Residuals, compute_residuals
 from cmm_comp.compensation.effects import CouplingEffect, EvalContext, ParametricEffect
+from cmm_comp.compensation.effects.harmonic_kernel import harmonic_columns
 from cmm_comp.compensation.effects.parametric import SHAPES
 from cmm_comp.compensation.machine import Machine
 from cmm_comp.sim_controller.true_machine import simulate
@@ -163,3 +164,19 @@ def test_hand_made_effects_match_numpy_legendre_with_and_without_memo() -> None:
         np.testing.assert_allclose(ctx.errors[:, 0, 0], dx, rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(ctx.errors[:, 0, 4], -slope_urad, rtol=1e-6, atol=1e-6)
     assert memo, "the shared memo was used"
+
+
+def test_harmonic_columns_are_numpy_s_cos_and_sin() -> None:
+    """The compiled period-scan columns against the numpy expression they replaced (phases
+    ``np.outer(q, n·ω)``, numpy's ``cos``/``sin``), harmonics 1–3, phases up to ~10⁵ rad."""
+    rng = np.random.default_rng(11)
+    q = rng.uniform(-50.0, 1500.0, 700)
+    periods = tuple(rng.uniform(0.05, 400.0, 37))
+    ref = 123.4
+    x = harmonic_columns(q, periods, ref, 3)
+    w = 2.0 * np.pi / np.asarray(periods)
+    assert x.shape == (700, 37, 6)
+    for h in range(1, 4):
+        ph, ph0 = np.outer(q, h * w), h * w * ref
+        np.testing.assert_allclose(x[:, :, 2 * h - 2], np.cos(ph) - np.cos(ph0), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(x[:, :, 2 * h - 1], np.sin(ph) - np.sin(ph0), rtol=0, atol=1e-12)
