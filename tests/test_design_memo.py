@@ -26,8 +26,12 @@ from cmm_comp.compensation.diagnosis.candidate import (
 )
 from cmm_comp.compensation.diagnosis.candidates import all_candidates, all_twins
 from cmm_comp.compensation.diagnosis.residuals import Residuals, compute_residuals
-from cmm_comp.compensation.effects import CouplingEffect, EvalContext, ParametricEffect
-from cmm_comp.compensation.effects.harmonic_kernel import harmonic_columns
+from cmm_comp.compensation.effects import (
+    CouplingEffect,
+    EvalContext,
+    ParametricEffect,
+    harmonic_kernel,
+)
 from cmm_comp.compensation.effects.parametric import SHAPES
 from cmm_comp.compensation.machine import Machine
 from cmm_comp.sim_controller.true_machine import simulate
@@ -166,14 +170,19 @@ def test_hand_made_effects_match_numpy_legendre_with_and_without_memo() -> None:
     assert memo, "the shared memo was used"
 
 
-def test_harmonic_columns_are_numpy_s_cos_and_sin() -> None:
-    """The compiled period-scan columns against the numpy expression they replaced (phases
-    ``np.outer(q, n·ω)``, numpy's ``cos``/``sin``), harmonics 1–3, phases up to ~10⁵ rad."""
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_harmonic_columns_are_numpy_s_cos_and_sin(
+    compiled: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The period-scan columns (compiled loop, and numpy below its threshold) against the numpy
+    expression they replaced (phases ``np.outer(q, n·ω)``, numpy's ``cos``/``sin``), harmonics
+    1–3, phases up to ~10⁵ rad."""
+    monkeypatch.setattr(harmonic_kernel, "COMPILED_FROM", 0 if compiled else 10**12)
     rng = np.random.default_rng(11)
     q = rng.uniform(-50.0, 1500.0, 700)
     periods = tuple(rng.uniform(0.05, 400.0, 37))
     ref = 123.4
-    x = harmonic_columns(q, periods, ref, 3)
+    x = harmonic_kernel.harmonic_columns(q, periods, ref, 3)
     w = 2.0 * np.pi / np.asarray(periods)
     assert x.shape == (700, 37, 6)
     for h in range(1, 4):

@@ -5,8 +5,9 @@ columns ``cos(n·ω·q) − cos(n·ω·ref)`` and ``sin(n·ω·q) − sin(n·ω�
 harmonics n = 1…H, each zero at the reference position (as :class:`.periodic.PeriodicEffect`).
 The phases are the products numpy forms in ``np.outer(q, n·ω)``; a compiled loop evaluates the
 cosine and sine of each phase together (libm's, as numpy's ``cos``/``sin``: the same values,
-in half the time of two array passes: ``benchmarks/bench_product_cpu.py``). numba is imported
-on the first call only: commands that never scan periods do not load it.
+in half the time of two array passes) for scans of at least :data:`COMPILED_FROM` values; a
+smaller scan is not worth numba's import and cache load (~0.5 s of CPU once per process) and is
+evaluated by numpy (the same expression). numba is imported on the first large scan only.
 """
 
 from __future__ import annotations
@@ -17,10 +18,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["harmonic_columns"]
+__all__ = ["COMPILED_FROM", "harmonic_columns"]
 
 FloatArray = NDArray[np.float64]
 _KERNEL: Any = None
+#: Phase values (N·T·harmonics) from which a call uses the compiled loop: saving ~15 ns a value,
+#: it repays the one-time ~0.5 s in well under 100 such calls (a dense record's scan makes
+#: hundreds of 2·10⁶-value calls; a 700-point session's stays with numpy).
+COMPILED_FROM = 1_000_000
 
 
 def _kernel() -> Any:
@@ -50,9 +55,14 @@ def harmonic_columns(
     q = np.ascontiguousarray(q_mm, dtype=np.float64)
     w = 2.0 * np.pi / np.asarray([float(p) for p in periods_mm])
     out = np.empty((q.shape[0], len(w), 2 * harmonics))
-    fill = _kernel()
+    fill = _kernel() if out.size // 2 >= COMPILED_FROM else None
     for h in range(1, harmonics + 1):
         hw = np.ascontiguousarray(h * w)
         ph0 = h * w * ref_mm
-        fill(q, hw, np.cos(ph0), np.sin(ph0), out, 2 * h - 2)
+        if fill is not None:
+            fill(q, hw, np.cos(ph0), np.sin(ph0), out, 2 * h - 2)
+        else:
+            ph = np.outer(q, hw)
+            out[:, :, 2 * h - 2] = np.cos(ph) - np.cos(ph0)
+            out[:, :, 2 * h - 1] = np.sin(ph) - np.sin(ph0)
     return out
