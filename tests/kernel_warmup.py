@@ -57,7 +57,7 @@ def _grid() -> None:
 
 def _chain() -> None:
     """A few virtual-CMM trials: the chain kernels ``cmm-comp uncertainty`` and ``grid build
-    --uncertainty`` run (independent of the grid's)."""
+    --uncertainty`` run (independent of the grid's); and the diagnosis' period-scan kernel."""
     import numpy as np
 
     from cmm_comp.compensation import Machine
@@ -68,6 +68,11 @@ def _chain() -> None:
     rng = np.random.default_rng(0)
     next(cmm.residuals(prep, 2, rng))
     next(cmm.pose_residuals(prep, 2, rng))
+    # and the diagnosis' period-scan kernel (a scan large enough to use it)
+    from cmm_comp.compensation.effects.harmonic_kernel import COMPILED_FROM, harmonic_columns
+
+    periods = tuple(np.linspace(1.0, 2.0, -(-COMPILED_FROM // 1000)))
+    harmonic_columns(np.linspace(0.0, 10.0, 1000), periods, 0.0, 1)
 
 
 GROUPS: tuple[tuple[str, Callable[[], None]], ...] = (("grid", _grid), ("chain", _chain))

@@ -94,4 +94,20 @@ def copy_dependencies(wheel: Path, site_packages: Path) -> list[str]:
             dst = site_packages / src.relative_to(root)
             dst.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(src, dst)
+            if src.suffix == ".py":
+                _copy_bytecode(src, dst)
     return sorted(done)
+
+
+def _copy_bytecode(src: Path, dst: Path) -> None:
+    """This interpreter's cached bytecode of ``src`` beside ``dst``, where it exists and RECORD
+    does not list it: an environment installed with ``pip install --no-compile`` (.ci/run) has
+    bytecode only for the modules something imported, and a read-only copy could never write
+    it (its daemon would compile those modules anew at every start)."""
+    import importlib.util
+
+    pyc = Path(importlib.util.cache_from_source(str(src)))
+    target = Path(importlib.util.cache_from_source(str(dst)))
+    if pyc.is_file() and not target.exists():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(pyc, target)

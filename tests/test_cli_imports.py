@@ -1,7 +1,8 @@
 """Each ``cmm-comp`` command imports only what it uses (whole processes, ``-X importtime``).
 
 ``cmm-comp --help`` must not load numpy; the model commands must not load the bus and logging
-stack (python-can, pymodbus, mcap) nor numba (only the grid needs it).
+stack (python-can, pymodbus, mcap) nor numba (only the grid, the virtual CMM and the
+diagnosis' period scans need it).
 """
 
 from __future__ import annotations

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..effects import Effect, EvalContext, StaticImageEffect
+from ..effects.parametric import SHAPES
 from ..parametric_errors import AXIS_INDEX
 from .residuals import FloatArray, Residuals
 
@@ -33,8 +34,12 @@ _REFINED_CACHE = 8
 EffectBuilder = Callable[[list[float], Any], Effect]
 
 
-def effect_displacement_um(res: Residuals, effect: Effect) -> FloatArray:
-    """(N, 3) µm that ``effect`` alone adds at the points of ``res`` (first order in the chain)."""
+def effect_displacement_um(
+    res: Residuals, effect: Effect, shapes: dict[Any, FloatArray] | None = None
+) -> FloatArray:
+    """(N, 3) µm that ``effect`` alone adds at the points of ``res`` (first order in the chain).
+    ``shapes``: a memo of the Legendre shapes at these points, shared by calls on the same
+    ``res`` (``EvalContext.extras[SHAPES]``, :func:`~..effects.parametric.shape_at`)."""
     n = res.n
     ctx = EvalContext(
         q_mm=res.q_mm,
@@ -45,6 +50,7 @@ def effect_displacement_um(res: Residuals, effect: Effect) -> FloatArray:
         direct_um=np.zeros((n, 3)),
         reference_C=res.machine.thermal.reference_C,
         reference_mm=res.machine.volume.reference_mm,
+        extras={} if shapes is None else {SHAPES: shapes},
     )
     effect.transform_signals(ctx)
     effect.modify_errors(ctx)
@@ -191,14 +197,16 @@ class Candidate:
         return static
 
     def design_uncached(self, res: Residuals, theta: Any = None) -> FloatArray:
-        """(N, 3, p) displacement per unit amplitude, computed afresh."""
+        """(N, 3, p) displacement per unit amplitude, computed afresh: one effect per unit
+        amplitude, their Legendre shapes evaluated once for all of them (a shared memo)."""
         if self.design_fn is not None:
             return self.design_fn(res, theta)
+        shapes: dict[Any, FloatArray] = {}
         cols = []
         for j in range(self.n_params):
             amps = [0.0] * self.n_params
             amps[j] = 1.0
-            cols.append(effect_displacement_um(res, self.build(amps, theta)))
+            cols.append(effect_displacement_um(res, self.build(amps, theta), shapes))
         return np.stack(cols, axis=2)
 
 

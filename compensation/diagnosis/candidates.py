@@ -22,6 +22,7 @@ from ..effects import (
     ReversalEffect,
     default_orders,
 )
+from ..effects.harmonic_kernel import harmonic_columns
 from ..parametric_errors import ANGULAR, AXES, AXIS_INDEX, LINEAR, SQUARENESS, TABLE_COMPONENTS
 from .candidate import (
     Candidate,
@@ -46,16 +47,8 @@ def _periodic_columns(
     positional error (that component only), each minus its value at the reference point
     (PeriodicEffect)."""
     k = AXIS_INDEX[axis]
-    q = res.q_mm[:, k]
     ref = float(res.machine.volume.reference_mm[k])
-    w = 2.0 * np.pi / np.asarray([float(p) for p in periods])
-    x = np.empty((res.n, len(w), 2 * harmonics))
-    for h in range(1, harmonics + 1):
-        ph = np.outer(q, h * w)
-        ph0 = h * w * ref
-        x[:, :, 2 * h - 2] = np.cos(ph) - np.cos(ph0)
-        x[:, :, 2 * h - 1] = np.sin(ph) - np.sin(ph0)
-    return x
+    return harmonic_columns(res.q_mm[:, k], periods, ref, harmonics)
 
 
 def _periodic_design(axis: str, harmonics: int = 1) -> Callable[[Residuals, Any], FloatArray]:

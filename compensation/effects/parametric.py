@@ -16,7 +16,7 @@ Units: positions mm, linear errors µm, angles and squareness µrad.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -62,6 +62,43 @@ def legendre_shape(
     c[order] = 1.0
     ref = float(legendre.legval(normalised(np.array([ref_mm]), span_mm), c)[0])
     return np.asarray(legendre.legval(normalised(q_mm, span_mm), c) - ref, dtype=float)
+
+
+#: ``EvalContext.extras`` key of a memo of the Legendre shapes evaluated at the context's points:
+#: a caller evaluating several effects at the same positions (the diagnosis builds a design one
+#: unit amplitude at a time) shares one dict between their contexts, so each shape is evaluated
+#: once per axis position vector instead of once per effect. The memo's arrays are read-only
+#: by contract (every user adds them into arrays of its own).
+SHAPES = "legendre_shapes"
+
+
+def shape_at(ctx: EvalContext, axis: int, span_mm: tuple[float, float], order: int) -> FloatArray:
+    """``P_k(s) − P_k(s_ref)`` along ``axis`` (index) at the points of ``ctx`` (1 for order 0),
+    the reference taken from ``ctx.reference_mm``; memoised in ``ctx.extras[SHAPES]`` when the
+    caller put a dict there (same values as :func:`legendre_shape`, evaluated once)."""
+    ref_mm = float(ctx.reference_mm[axis])
+    return _memo(
+        ctx,
+        ("shape", axis, span_mm, order),
+        lambda: _shape_or_one(ctx.q_mm[:, axis], ref_mm, span_mm, order),
+    )
+
+
+def _memo(
+    ctx: EvalContext,
+    key: tuple[str, int, tuple[float, float], int],
+    compute: Callable[[], FloatArray],
+) -> FloatArray:
+    """``compute()``, memoised under ``key`` (kind, axis, span, order) and the axis' reference
+    in ``ctx.extras[SHAPES]`` when there is such a dict (computed afresh otherwise)."""
+    memo = ctx.extras.get(SHAPES)
+    if memo is None:
+        return compute()
+    kind, axis, span_mm, order = key
+    full = (kind, axis, float(ctx.reference_mm[axis]), float(span_mm[0]), float(span_mm[1]), order)
+    if full not in memo:
+        memo[full] = compute()
+    return memo[full]  # type: ignore[no-any-return]
 
 
 def default_orders(component: str) -> list[int]:
@@ -124,9 +161,10 @@ class ParametricEffect(Effect):
             add_to_component(ctx, self.component, np.full(ctx.n, self.coefficients[0]))
             return
         k = AXIS_INDEX[self.component[-1]]
-        add_to_component(
-            ctx, self.component, self.value(ctx.q_mm[:, k], float(ctx.reference_mm[k]))
-        )
+        out = np.zeros(ctx.n)  # as value(), with the shapes from the context's memo
+        for order, c in zip(self.orders, self.coefficients, strict=True):
+            out = out + (c if order == 0 else c * shape_at(ctx, k, self.span_mm, order))
+        add_to_component(ctx, self.component, out)
 
     def to_table(self) -> dict[str, Any]:
         return {
@@ -227,13 +265,12 @@ class CouplingEffect(Effect):
         b = AXIS_INDEX[self.varies_with]
         total = np.full(ctx.n, self.offset)
         for k, c in enumerate(self.along, start=1):
-            total += c * legendre_shape(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
+            total += c * shape_at(ctx, a, self.span_mm, k)
         i = 0
         for j in self.with_orders:
-            sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
+            sb = shape_at(ctx, b, self.span_with_mm, j)
             for k in self.orders:
-                sa = _shape_or_one(ctx.q_mm[:, a], float(ctx.reference_mm[a]), self.span_mm, k)
-                total += self.coefficients[i] * sb * sa
+                total += self.coefficients[i] * sb * shape_at(ctx, a, self.span_mm, k)
                 i += 1
         add_to_component(ctx, self.component, total)
         if self.slope is not None:
@@ -243,22 +280,25 @@ class CouplingEffect(Effect):
     def _slope_urad(self, ctx: EvalContext, a: int, b: int) -> FloatArray:
         """d(straightness)/d(q_a) in µrad (µm/mm · 1000) at the context's points."""
         lo, hi = self.span_mm
-        s = normalised(ctx.q_mm[:, a], self.span_mm)
         scale = 2.0 / (hi - lo) * 1000.0
 
-        def dshape(k: int) -> FloatArray:
+        def slope(k: int) -> FloatArray:
             if k == 0:
                 return np.zeros(ctx.n)
             c = np.zeros(k + 1)
             c[k] = 1.0
+            s = normalised(ctx.q_mm[:, a], self.span_mm)
             return np.asarray(legendre.legval(s, legendre.legder(c)), dtype=float) * scale
+
+        def dshape(k: int) -> FloatArray:
+            return _memo(ctx, ("slope", a, self.span_mm, k), lambda: slope(k))
 
         total = np.zeros(ctx.n)
         for k, c in enumerate(self.along, start=1):
             total += c * dshape(k)
         i = 0
         for j in self.with_orders:
-            sb = legendre_shape(ctx.q_mm[:, b], float(ctx.reference_mm[b]), self.span_with_mm, j)
+            sb = shape_at(ctx, b, self.span_with_mm, j)
             for k in self.orders:
                 total += self.coefficients[i] * sb * dshape(k)
                 i += 1

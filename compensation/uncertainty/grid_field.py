@@ -55,8 +55,12 @@ class _Moments:
     def add(self, y: FloatArray) -> None:  # y (T, N, 6)
         t = y.shape[0]
         mean_c = y.mean(axis=0)
-        dev = y - mean_c
-        m2_c = np.einsum("tnp,tnp->np", dev[:, :, _A], dev[:, :, _B])
+        # one (t, N) product per stored pair, summed over the trials (no gathered copies)
+        dev = np.ascontiguousarray((y - mean_c).transpose(2, 0, 1))  # (6, t, N)
+        m2_c = np.empty((len(PAIRS), y.shape[1]))
+        for p, (a, b) in enumerate(PAIRS):
+            m2_c[p] = np.einsum("tn,tn->n", dev[a], dev[b])
+        m2_c = m2_c.T
         delta = mean_c - self.mean
         total = self.count + t
         self.m2 += m2_c + delta[:, _A] * delta[:, _B] * (self.count * t / total)
@@ -96,10 +100,12 @@ def node_covariance(
     done, worst, stable = 0, math.nan, False
     while done < target:
         m = min(run, target - done)
-        mom = _Moments(prep.n)
+        # a fixed number of trials is one run: its moments are the total's (kept once)
+        mom = _Moments(prep.n) if rel_tolerance is not None else total
         for y in vcmm.pose_residuals(prep, m, rng):
             mom.add(y)
-            total.add(y)
+            if mom is not total:
+                total.add(y)
             done_now = done + mom.count
             if progress is not None:
                 progress(min(1.0, done_now / target), f"{done_now} trials at {prep.n} nodes")

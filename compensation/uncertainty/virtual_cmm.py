@@ -304,11 +304,15 @@ class VirtualCMM:
         rot, trans = exact_pose_compiled(self._axes, u, errors.reshape(-1, 3, 6), sq_rows)
         rot = rot.reshape(t, n, 3, 3)
         d_t = trans.reshape(t, n, 3) - prep.translation0_um[None]
-        rel = np.einsum("tnij,nkj->tnik", rot, prep.rotation0)  # R_true · R_modelᵀ
+        r0 = prep.rotation0
+
+        def rel(i: int, k: int) -> FloatArray:  # (R_true · R_modelᵀ)[i, k], only those needed
+            return np.einsum("tnj,nj->tn", rot[..., i, :], r0[:, k, :])
+
         w = np.empty((t, n, 3))
-        w[..., 0] = 0.5 * (rel[..., 2, 1] - rel[..., 1, 2])
-        w[..., 1] = 0.5 * (rel[..., 0, 2] - rel[..., 2, 0])
-        w[..., 2] = 0.5 * (rel[..., 1, 0] - rel[..., 0, 1])
+        w[..., 0] = 0.5 * (rel(2, 1) - rel(1, 2))
+        w[..., 1] = 0.5 * (rel(0, 2) - rel(2, 0))
+        w[..., 2] = 0.5 * (rel(1, 0) - rel(0, 1))
         return np.concatenate([d_t, 1e6 * w], axis=-1)
 
     def _add_thermal_and_probing(
