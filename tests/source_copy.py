@@ -101,8 +101,8 @@ def copy_dependencies(wheel: Path, site_packages: Path) -> list[str]:
 
 def _copy_bytecode(src: Path, dst: Path) -> None:
     """This interpreter's cached bytecode of ``src`` beside ``dst``, where it exists and RECORD
-    does not list it: an environment installed with ``pip install --no-compile`` (.ci/run) has
-    bytecode only for the modules something imported, and a read-only copy could never write
+    does not list it: an environment installed with ``pip install --no-compile`` has bytecode
+    only for the modules something imported, and a read-only copy could never write
     it (its daemon would compile those modules anew at every start)."""
     import importlib.util
 
