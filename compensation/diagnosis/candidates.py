@@ -250,9 +250,9 @@ def all_twins(res: Residuals) -> list[Candidate]:
     return twin_candidates(res, moved, scans)
 
 
-def all_candidates(res: Residuals) -> list[Candidate]:
-    """Every cause of docs/formats.md §4 that the measurements can show (signals present, axis moved)."""
-    moved = _moved(res)
+def _table_candidates(res: Residuals, moved: dict[str, bool]) -> list[Candidate]:
+    """A table (Legendre shape along its axis) of each component whose axis moved, and the
+    squareness angles."""
     out: list[Candidate] = []
     for comp in (*TABLE_COMPONENTS, *SQUARENESS):
         orders = candidate_orders(comp)
@@ -266,6 +266,12 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             r_orders = rich_orders(comp)
             cand.with_rich(n_params=len(r_orders), build=_parametric_builder(comp, span, r_orders))
         out.append(cand)
+    return out
+
+
+def _coupling_candidates(res: Residuals, moved: dict[str, bool]) -> list[Candidate]:
+    """A carriage's tilt or straightness that changes with another moved axis' position."""
+    out: list[Candidate] = []
     # a carriage's tilt or its straightness that changes with another axis' position (a bridge
     # twist; a ram or beam whose bow depends on where the carriage stands)
     straightness = tuple(c for c in LINEAR if c[1] != c[-1])
@@ -299,7 +305,13 @@ def all_candidates(res: Residuals) -> list[Candidate]:
             )
             if comp in LINEAR:
                 out.append(_bend_candidate(comp, other, sa, sb))
+    return out
 
+
+def _axis_candidates(res: Residuals, moved: dict[str, bool]) -> list[Candidate]:
+    """Per moved axis: its reversal (both directions seen), its drift in time (a time column),
+    its cyclic errors (the period scans)."""
+    out: list[Candidate] = []
     for a in AXES:
         if not moved[a]:
             continue
@@ -343,6 +355,14 @@ def all_candidates(res: Residuals) -> list[Candidate]:
                     design_many=_periodic_design_many(a, h_hi),
                 )
             )
+    return out
+
+
+def all_candidates(res: Residuals) -> list[Candidate]:
+    """Every cause of docs/formats.md §4 that the measurements can show (signals present, axis moved)."""
+    moved = _moved(res)
+    out = _table_candidates(res, moved) + _coupling_candidates(res, moved)
+    out += _axis_candidates(res, moved)
     out += thermal_candidates(res, moved)
     out += forward_candidates(res, moved, {a: periodic_scans(res, a) for a in AXES if moved[a]})
     if res.has("nx", "ny", "nz"):

@@ -28,7 +28,14 @@ from .residuals import Residuals, length_error_e0_um, rms3d
 from .sources import SourceCall, twins_of
 from .unexplained import is_local
 
-__all__ = ["SEPARATE_BY", "Diagnosis", "Finding", "describe_terms", "session_summary"]
+__all__ = [
+    "SEPARATE_BY",
+    "Diagnosis",
+    "Finding",
+    "describe_terms",
+    "public_refusal",
+    "session_summary",
+]
 
 #: How to tell the two instruments apart, per pair of twin causes.
 SEPARATE_BY: dict[frozenset[str], str] = {
@@ -179,7 +186,7 @@ def _evidence(f: Finding, index: int, beta: Any, call: SourceCall, label: str) -
     if root.cause == "reversal":
         ev.update(_reversal_by_state(f, index, beta, axis))
     if root.cause in ("parametric", "reference_nonlinearity"):
-        refused = [r for r in f.refused_periods if r.get("axis") == axis]
+        refused = [public_refusal(r) for r in f.refused_periods if r.get("axis") == axis]
         if refused:
             ev["refused_periods"] = refused
     return ev
@@ -313,3 +320,9 @@ def session_summary(
         ),
         **extra,
     }
+
+
+def public_refusal(refusal: dict[str, Any]) -> dict[str, Any]:
+    """A refused period as the diagnosis JSON shows it: without ``candidate``, the search's
+    in-process identity of the refused candidate (an object id, different on every run)."""
+    return {k: v for k, v in refusal.items() if k != "candidate"}

@@ -468,6 +468,57 @@ def _pass_duration_s(
     return float(np.median(spans)) if spans and np.median(spans) > 0 else None
 
 
+class _ErrorMap:
+    """The observed error ē (µm) along one coordinate ``own`` (mm) of a session, per direction
+    of travel and per window of a pass and a half in time (:func:`through_map`)."""
+
+    def __init__(
+        self, own: FloatArray, err: FloatArray, direction: FloatArray, t: FloatArray | None
+    ) -> None:
+        window = _pass_duration_s(t, direction, own)
+        self.window = 1.5 * window if window is not None else None
+        self.t = t
+        self.chunk = (
+            np.zeros(len(own), dtype=int)
+            if self.window is None or t is None
+            else np.floor((t - float(np.min(t))) / self.window).astype(int)
+        )
+        self.groups: dict[tuple[float, int], tuple[FloatArray, FloatArray]] = {}
+        for g in np.unique(direction):
+            for c in np.unique(self.chunk):
+                sel = (direction == g) & (np.abs(self.chunk - c) <= 1)
+                order = np.argsort(own[sel], kind="stable")
+                self.groups[(float(g), int(c))] = (own[sel][order], err[sel][order])
+        self.dirs = np.unique(direction)
+
+    def ebar(
+        self, q: FloatArray, times: FloatArray | None, own_err: FloatArray, own_dir: FloatArray
+    ) -> FloatArray:
+        """ē at coordinates ``q`` (mm) observed at ``times`` (s), each point's own direction
+        giving its own error ``own_err`` (µm), the other directions interpolated."""
+        t, chunk, groups = self.t, self.chunk, self.groups
+        if self.window is None or times is None or t is None:
+            qc = np.zeros(len(q), dtype=int)
+        else:
+            qc = np.floor((times - float(np.min(t))) / self.window).astype(int)
+        qc = np.clip(qc, int(np.min(chunk)), int(np.max(chunk)))
+        out = np.zeros(len(q))
+        for c in np.unique(qc):
+            sel = qc == c
+            # a point's own direction gives its own error (interpolating among the passes of
+            # a window would mix in other passes' noise and drift: the map would no longer
+            # be exact where a position has one reading); the other directions interpolated
+            means = [
+                np.where(
+                    own_dir[sel] == g, own_err[sel], np.interp(q[sel], *groups[(float(g), int(c))])
+                )
+                for g in self.dirs
+                if len(groups[(float(g), int(c))][0])
+            ]
+            out[sel] = np.mean(means, axis=0)
+        return out
+
+
 def through_map(cand: Candidate, res: Residuals) -> Candidate:
     """``cand`` (a term of one coordinate) evaluated through the session's own map between the
     axis' position x and the reference's reading r: a position-locked term at x + ē/1000, a
@@ -489,45 +540,7 @@ def through_map(cand: Candidate, res: Residuals) -> Candidate:
     own = res.q_mm[:, k] if locked == "position" else res.ref_mm[:, k]
     err = (res.ref_mm[:, k] - res.q_mm[:, k]) * 1000.0
     direction = res.signals.get(f"dir_{'xyz'[k]}", np.zeros(res.n))
-    t = res.data.t_s
-    window = _pass_duration_s(t, direction, own)
-    window = 1.5 * window if window is not None else None
-    chunk = (
-        np.zeros(res.n, dtype=int)
-        if window is None or t is None
-        else np.floor((t - float(np.min(t))) / window).astype(int)
-    )
-    groups: dict[tuple[float, int], tuple[FloatArray, FloatArray]] = {}
-    for g in np.unique(direction):
-        for c in np.unique(chunk):
-            sel = (direction == g) & (np.abs(chunk - c) <= 1)
-            order = np.argsort(own[sel], kind="stable")
-            groups[(float(g), int(c))] = (own[sel][order], err[sel][order])
-    dirs = np.unique(direction)
-
-    def ebar(
-        q: FloatArray, times: FloatArray | None, own_err: FloatArray, own_dir: FloatArray
-    ) -> FloatArray:
-        if window is None or times is None:
-            qc = np.zeros(len(q), dtype=int)
-        else:
-            qc = np.floor((times - float(np.min(t))) / window).astype(int)  # type: ignore[arg-type]
-        qc = np.clip(qc, int(np.min(chunk)), int(np.max(chunk)))
-        out = np.zeros(len(q))
-        for c in np.unique(qc):
-            sel = qc == c
-            # a point's own direction gives its own error (interpolating among the passes of
-            # a window would mix in other passes' noise and drift: the map would no longer
-            # be exact where a position has one reading); the other directions interpolated
-            means = [
-                np.where(
-                    own_dir[sel] == g, own_err[sel], np.interp(q[sel], *groups[(float(g), int(c))])
-                )
-                for g in dirs
-                if len(groups[(float(g), int(c))][0])
-            ]
-            out[sel] = np.mean(means, axis=0)
-        return out
+    emap = _ErrorMap(own, err, direction, res.data.t_s)
 
     sign = 1.0 if locked == "position" else -1.0
 
@@ -536,7 +549,7 @@ def through_map(cand: Candidate, res: Residuals) -> Candidate:
         col = (r.q_mm if locked == "position" else r.ref_mm).copy()
         own_err = (r.ref_mm[:, k] - r.q_mm[:, k]) * 1000.0
         own_dir = r.signals.get(f"dir_{'xyz'[k]}", np.zeros(r.n))
-        col[:, k] = col[:, k] + sign * ebar(col[:, k], r.data.t_s, own_err, own_dir) / 1000.0
+        col[:, k] = col[:, k] + sign * emap.ebar(col[:, k], r.data.t_s, own_err, own_dir) / 1000.0
         if locked == "reference":
             return replace(r, reading_mm=col)
         data = r.data.subset(slice(None))

@@ -13,7 +13,6 @@ time, temperatures, directions) tests whether structure remains that no cause ex
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -35,13 +34,15 @@ from .fitting import (
     f_test_p,
     fit,
     make_problem,
+    one_blas_thread,
     predictions,
 )
+from .leftover import UNEXPLAINED_SOURCE, leftover_entry
 from .merge import one_for_several
-from .outcome import Diagnosis, Finding, describe_terms, session_summary
+from .outcome import Diagnosis, Finding, describe_terms, public_refusal, session_summary
 from .periods import CYCLIC, check_period
 from .reading import denoised_reading
-from .residuals import compute_residuals
+from .residuals import Residuals, compute_residuals
 from .sources import decide_sources
 from .steps import (
     Slot,
@@ -50,17 +51,9 @@ from .steps import (
     model_cv,
     other_gain,
     reprofile,
-    still_significant,
     terms_of,
 )
-from .unexplained import (
-    is_local,
-    local_candidates,
-    local_entry,
-    local_unexplained,
-    locate,
-    unexplained_candidate,
-)
+from .unexplained import is_local, local_candidates
 
 __all__ = ["Diagnosis", "diagnose"]
 
@@ -69,13 +62,6 @@ __all__ = ["Diagnosis", "diagnose"]
 #: explanations on a few hundred points (paired CV differences of that size come and go with
 #: the fold assignment).
 SIMPLER_WITHIN = 0.005
-#: What an ``unexplained`` entry says of its source: structure no cause of either instrument
-#: explains.
-UNEXPLAINED_SOURCE = {
-    "source": "either",
-    "locked_to": "undetermined",
-    "evidence": {"summary": "structure no cause of the machine or of the reference explains"},
-}
 
 
 def _round(
@@ -449,22 +435,76 @@ def _resume_after_replacement(
     return [id(s.root) for s in slots] != before
 
 
-def _one_blas_thread(fn: Callable[..., Diagnosis]) -> Callable[..., Diagnosis]:
-    """Run ``fn`` with BLAS on one thread: the matrices are a few thousand rows by tens of
-    columns, where threads only cost (measured on a busy 2-core machine: an SVD of 2100 × 132
-    took 2.6–4.1 s with two OpenBLAS threads, 0.02–0.05 s with one)."""
+def _search_all(
+    problem: Problem,
+    pool: list[Candidate],
+    search: _Search,
+    max_effects: int,
+    alpha: float,
+    min_cv_gain: float,
+    say: Callable[[str], None],
+) -> Problem:
+    """The forward search's passes (a cyclic error refused by the final period test is removed
+    and the search runs again), then the problem at the distance the sensor looked at."""
+    for _ in range(MAX_PASSES):
+        _rounds(problem, pool, search, max_effects, say)
+        refused_ids = {r["candidate"] for r in search.refused}
+        usable = [c for c in pool if id(c) not in refused_ids]
+        if _merge_causes(problem, search.slots, usable, alpha, min_cv_gain, say):
+            search.cv_history.append(model_cv(problem, terms_of(search.slots)))
+        if not _final_periods(problem, search, say):
+            break
+    # the distance the sensor looked at includes the machine's named cyclic errors, not the
+    # sensor's own; with the sensor's ripple named, a cyclic error of the machine named beside
+    # it is judged again there (:func:`_cyclic_beside_ripple`)
+    refined = _carried_reading(problem, terms_of(search.slots))
+    if refined is not problem and _cyclic_beside_ripple(refined, search, say):
+        refined = _carried_reading(problem, terms_of(search.slots))
+    return refined
 
-    @functools.wraps(fn)
-    def run(*args: Any, **kwargs: Any) -> Diagnosis:
-        from threadpoolctl import threadpool_limits
 
-        with threadpool_limits(limits=1, user_api="blas"):
-            return fn(*args, **kwargs)
+def _sources(
+    problem: Problem,
+    res: Residuals,
+    pool: list[Candidate],
+    search: _Search,
+    max_effects: int,
+    alpha: float,
+    say: Callable[[str], None],
+) -> tuple[list[Term], list[Candidate], Any, list[Candidate]]:
+    """Which instrument carries each named term, and which coordinate it is locked to:
+    ``(accepted terms, their roots, the source calls, the twins)``; the search resumes once when
+    a term was replaced by its twin."""
+    slots = search.slots
+    accepted = terms_of(slots)
+    roots = [s.root for s in slots]
+    twins = all_twins(res)
+    say("sources: each term against its twins")
+    calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
+    if _resume_after_replacement(problem, pool, search, roots, accepted, max_effects, say):
+        accepted, roots = terms_of(slots), [s.root for s in slots]
+        say("sources: each term against its twins, again")
+        calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
+    for s, t, root in zip(slots, accepted, roots, strict=True):
+        s.root, s.term = root, t
+    return accepted, roots, calls, twins
 
-    return run
+
+def _thinned(
+    data: Measurements, max_points: int | None, say: Callable[[str], None]
+) -> Measurements:
+    """Every k-th point of a dense record (in file order), at most ``max_points``: thousands of
+    samples a minute apart by millimetres say nothing more about a cause than every k-th of
+    them; thinned openly (said here, and ``n_points_given`` in the summary)."""
+    if max_points is None or data.n <= max_points:
+        return data
+    stride = int(np.ceil(data.n / max_points))
+    thinned = data.subset(np.arange(0, data.n, stride))
+    say(f"dense record: every {stride}th of {data.n} points used ({thinned.n})")
+    return thinned
 
 
-@_one_blas_thread
+@one_blas_thread
 def diagnose(
     machine: Machine,
     data: Measurements,
@@ -482,16 +522,11 @@ def diagnose(
     More than ``max_points`` points (a dense record) are thinned to every k-th point (in file
     order) before anything is fitted; ``n_points_given`` in the summary says so.
 
-    BLAS runs on one thread meanwhile (:func:`_one_blas_thread`)."""
+    BLAS runs on one thread meanwhile (:func:`.fitting.one_blas_thread`)."""
     t0 = time.perf_counter()
     say = progress or (lambda _msg: None)
     n_given = data.n
-    if max_points is not None and data.n > max_points:
-        # a dense record (thousands of samples a minute apart by millimetres) says nothing more
-        # about a cause than every k-th sample of it; thinned openly, reported in the summary
-        stride = int(np.ceil(data.n / max_points))
-        data = data.subset(np.arange(0, data.n, stride))
-        say(f"dense record: every {stride}th of {n_given} points used ({data.n})")
+    data = _thinned(data, max_points, say)
     res = compute_residuals(machine, data)
     problem = make_problem(res, n_folds)
     pool = [c for c in all_candidates(res) if is_finite_design(c.design(res, c.thetas[0]))]
@@ -499,36 +534,11 @@ def diagnose(
     pool += local_candidates(res)
     n_tried = max(len(pool), 1)
     search = _Search([cv_mse(problem, [])], n_tried, alpha, min_cv_gain)
-    for _ in range(MAX_PASSES):
-        _rounds(problem, pool, search, max_effects, say)
-        refused_ids = {r["candidate"] for r in search.refused}
-        usable = [c for c in pool if id(c) not in refused_ids]
-        if _merge_causes(problem, search.slots, usable, alpha, min_cv_gain, say):
-            search.cv_history.append(model_cv(problem, terms_of(search.slots)))
-        if not _final_periods(problem, search, say):
-            break
-    # the distance the sensor looked at includes the machine's named cyclic errors, not the
-    # sensor's own; with the sensor's ripple named, a cyclic error of the machine named beside
-    # it is judged again there (:func:`_cyclic_beside_ripple`)
-    refined = _carried_reading(problem, terms_of(search.slots))
-    if refined is not problem and _cyclic_beside_ripple(refined, search, say):
-        refined = _carried_reading(problem, terms_of(search.slots))
-    problem = refined
+    problem = _search_all(problem, pool, search, max_effects, alpha, min_cv_gain, say)
     slots, rounds, cv_history = search.slots, search.rounds, search.cv_history
     local_hits, refused = search.local_hits, search.refused
 
-    # which instrument carries each term, and which coordinate it is locked to
-    accepted = terms_of(slots)
-    roots = [s.root for s in slots]
-    twins = all_twins(res)
-    say("sources: each term against its twins")
-    calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
-    if _resume_after_replacement(problem, pool, search, roots, accepted, max_effects, say):
-        accepted, roots = terms_of(slots), [s.root for s in slots]
-        say("sources: each term against its twins, again")
-        calls = decide_sources(problem, accepted, roots, [*pool, *twins], alpha)
-    for s, t, root in zip(slots, accepted, roots, strict=True):
-        s.root, s.term = root, t
+    accepted, roots, calls, twins = _sources(problem, res, pool, search, max_effects, alpha, say)
     finding = Finding(problem, accepted, roots, calls, [*pool, *twins], alpha, refused, pool)
     entries, effects, sources, either_machine, terms, _ = describe_terms(finding, say)
     beta, _, _ = fit(problem, accepted, ridge=True)
@@ -536,29 +546,13 @@ def diagnose(
     say("held-out predictions")
     held_folds = problem.judged_folds(accepted)
     heldout_pred = cv_predictions(problem, accepted, folds=held_folds)
-    local = [i for i, t in enumerate(accepted) if is_local(t.candidate)]
-    if local:
-        entries.append(local_entry(problem, accepted, local, beta))
-    else:
-        unexplained = unexplained_candidate(
-            problem,
-            accepted,
-            alpha,
-            min_cv_gain,
-            cv_history[-1],
-            terms_of(slots, rich=True),
-            held_folds,
-        )
-        if unexplained is None and local_hits:
-            hits = still_significant(
-                problem, slots, local_hits, n_tried, alpha, min_cv_gain, cv_history[-1]
-            )
-            if hits:
-                unexplained = local_unexplained(problem, accepted, hits)
-        if unexplained is not None:
-            unexplained["parameters"].update(locate(res, res.residual_um - fitted))
-            unexplained.update(UNEXPLAINED_SOURCE)
-            entries.append(unexplained)
+    left = leftover_entry(
+        problem, res, accepted, slots, local_hits, n_tried=n_tried, alpha=alpha,
+        min_cv_gain=min_cv_gain, cv_last=cv_history[-1], beta=beta, fitted=fitted,
+        held_folds=held_folds,
+    )  # fmt: skip
+    if left is not None:
+        entries.append(left)
     for e in entries:
         if e["cause"] == "unexplained":
             e.update({k: v for k, v in UNEXPLAINED_SOURCE.items() if k not in e})
@@ -567,7 +561,7 @@ def diagnose(
         "alpha": alpha,
         "min_cv_gain": min_cv_gain,
         "candidates_tried": len(pool),
-        "refused_periods": refused,
+        "refused_periods": [public_refusal(r) for r in refused],
     }
     summary = session_summary(
         problem, data, n_given, accepted, fitted, heldout_pred, held_folds, extra

@@ -209,6 +209,47 @@ def _axis_candidates(res: Residuals, a: str, ref_c: float) -> list[Candidate]:
     return out
 
 
+def _squareness_drift_candidates(res: Residuals, ref_c: float) -> list[Candidate]:
+    """A squareness that follows the air temperature (µrad/°C), at once and, with a time column,
+    through a lag (10 min … hours: the same cause)."""
+    out: list[Candidate] = []
+    for comp in SQUARENESS:
+        out.append(
+            imaged(
+                Candidate(
+                    "squareness_drift",
+                    {"component": comp},
+                    1,
+                    _squareness_drift_builder(comp, ref_c),
+                    drivers=("T_air",),
+                ),
+                res,
+            )
+        )
+    if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
+        # the structure follows the air through a lag (10 min … hours): the same cause
+        for comp in SQUARENESS:
+            out.append(
+                imaged(
+                    Candidate(
+                        "squareness_drift",
+                        {"component": comp},
+                        2,
+                        _lagged_squareness_builder(comp, ref_c),
+                        thetas=LAG_TIME_CONSTANTS_S,
+                        look_elsewhere=4.0,
+                        design_fn=_lagged_squareness_design(comp, ref_c),
+                        drivers=("T_air",),
+                        static_columns=1,
+                        prior_sd=(START_STATE_SD_C * SQUARENESS_DRIFT_SD_URAD_PER_C, None),
+                        transient_columns=(0,),
+                    ),
+                    res,
+                )
+            )
+    return out
+
+
 def thermal_candidates(res: Residuals, moved: dict[str, bool]) -> list[Candidate]:
     """Every thermal cause the session's temperatures (and time) can show."""
     m = res.machine
@@ -236,40 +277,7 @@ def thermal_candidates(res: Residuals, moved: dict[str, bool]) -> list[Candidate
         out.append(imaged(workpiece, res))
         out.append(imaged(_workpiece_fixture_candidate(res, fx, ref_c), res))
     if res.has("T_air"):
-        for comp in SQUARENESS:
-            out.append(
-                imaged(
-                    Candidate(
-                        "squareness_drift",
-                        {"component": comp},
-                        1,
-                        _squareness_drift_builder(comp, ref_c),
-                        drivers=("T_air",),
-                    ),
-                    res,
-                )
-            )
-        if res.has("t") and float(np.ptp(res.signals["t"])) > 0:
-            # the structure follows the air through a lag (10 min … hours): the same cause
-            for comp in SQUARENESS:
-                out.append(
-                    imaged(
-                        Candidate(
-                            "squareness_drift",
-                            {"component": comp},
-                            2,
-                            _lagged_squareness_builder(comp, ref_c),
-                            thetas=LAG_TIME_CONSTANTS_S,
-                            look_elsewhere=4.0,
-                            design_fn=_lagged_squareness_design(comp, ref_c),
-                            drivers=("T_air",),
-                            static_columns=1,
-                            prior_sd=(START_STATE_SD_C * SQUARENESS_DRIFT_SD_URAD_PER_C, None),
-                            transient_columns=(0,),
-                        ),
-                        res,
-                    )
-                )
+        out += _squareness_drift_candidates(res, ref_c)
     if (
         res.has("t")
         and any(m.thermal.expansion)
