@@ -259,6 +259,16 @@ def test_given_latency_and_scale(synthetic) -> None:
     assert a.latency_s == 0.0 and a.gain == GAIN
 
 
+def test_nothing_left_after_alignment_is_a_clear_error(synthetic) -> None:
+    """A latency that moves every reference sample outside the position stream leaves nothing
+    to keep: a RealDataError naming why, not numpy's "zero-size array" from the map fit (seen
+    on the real ESS log with the raw encoder-count PV as the position)."""
+    path, _, _ = synthetic
+    log = read_camonitor_log(path)
+    with pytest.raises(RealDataError, match="no reference sample is left to keep"):
+        align_streams(log, options(latency_s=1e6))
+
+
 # ---------------------------------------------------------------- malformed logs
 @pytest.mark.parametrize(
     ("content", "message"),

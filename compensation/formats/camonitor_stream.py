@@ -444,6 +444,13 @@ def align_streams(
         cycle, cycles_from = _cycles(log, opts, tr, direction)
     v, a = np.where(motion.rest[k], 0.0, motion.v[k]), motion.a[k]
     keep, counts = _kept(inside, direction, cycle, state, v, opts)
+    if int(keep.sum()) < 3:
+        why = ", ".join(f"{k.replace('_', ' ')} {n}" for k, n in counts.items() if n)
+        raise RealDataError(
+            f"no reference sample is left to keep after aligning the streams with a latency of "
+            f"{latency * 1000:.1f} ms ({method}): {why}; check that {opts.position_pv} is the "
+            f"axis position and {opts.reference_pv} the reference, or give --latency"
+        )
     x = motion.at(tq[keep])
     gain, offset = _fit_map(raw[keep], x, opts.reference_scale)
     h = float(np.median(np.diff(motion.t)))
