@@ -116,16 +116,9 @@ def test_hand_made_effects_match_numpy_legendre_with_and_without_memo() -> None:
     q = rng.uniform([0, -200, 100], [900, 700, 600], size=(200, 3))
     ref = np.array([300.0, 50.0, 400.0])
     span_a, span_b = (0.0, 900.0), (-200.0, 700.0)
+    shape: dict[str, Any] = {"orders": (0, 1, 2), "along": [0.4, -0.2], "offset": 0.1}
     coupling = CouplingEffect(
-        "dz_x",
-        "y",
-        [1.5, -0.7, 0.3],
-        span_a,
-        span_b,
-        orders=(0, 1, 2),
-        along=[0.4, -0.2],
-        with_slope=True,
-        offset=0.1,
+        "dz_x", "y", [1.5, -0.7, 0.3], span_a, span_b, **shape, with_slope=True
     )
     parametric = ParametricEffect("dx_x", [2.0, -1.0, 0.5], [0.0, 900.0], [1, 2, 4])  # type: ignore[arg-type]
     memo: dict[Any, Any] = {}
@@ -150,16 +143,7 @@ def test_hand_made_effects_match_numpy_legendre_with_and_without_memo() -> None:
         xs = np.stack([x + h, y, q[:, 2]], axis=1)
         xm = np.stack([x - h, y, q[:, 2]], axis=1)
         plus, minus = _ctx(xs, ref, None), _ctx(xm, ref, None)
-        no_slope = CouplingEffect(
-            "dz_x",
-            "y",
-            [1.5, -0.7, 0.3],
-            span_a,
-            span_b,
-            orders=(0, 1, 2),
-            along=[0.4, -0.2],
-            offset=0.1,
-        )
+        no_slope = CouplingEffect("dz_x", "y", [1.5, -0.7, 0.3], span_a, span_b, **shape)
         no_slope.modify_errors(plus)
         no_slope.modify_errors(minus)
         slope_urad = (plus.errors[:, 0, 2] - minus.errors[:, 0, 2]) / (2 * h) * 1000.0
