@@ -399,6 +399,19 @@ def _kept(
     return keep, counts
 
 
+def _enough_kept(
+    keep: NDArray[np.bool_], counts: dict[str, int], latency: str, opts: StreamOptions
+) -> None:
+    """Raise a RealDataError naming why when fewer than 3 reference samples are kept."""
+    if int(keep.sum()) < 3:
+        why = ", ".join(f"{k.replace('_', ' ')} {n}" for k, n in counts.items() if n)
+        raise RealDataError(
+            f"no reference sample is left to keep after aligning the streams with a latency of "
+            f"{latency}: {why}; check that {opts.position_pv} is the axis position and "
+            f"{opts.reference_pv} the reference, or give --latency"
+        )
+
+
 def align_streams(
     log: Mapping[str, PvSeries], opts: StreamOptions, progress: Progress | None = None
 ) -> AlignedStream:
@@ -444,13 +457,7 @@ def align_streams(
         cycle, cycles_from = _cycles(log, opts, tr, direction)
     v, a = np.where(motion.rest[k], 0.0, motion.v[k]), motion.a[k]
     keep, counts = _kept(inside, direction, cycle, state, v, opts)
-    if int(keep.sum()) < 3:
-        why = ", ".join(f"{k.replace('_', ' ')} {n}" for k, n in counts.items() if n)
-        raise RealDataError(
-            f"no reference sample is left to keep after aligning the streams with a latency of "
-            f"{latency * 1000:.1f} ms ({method}): {why}; check that {opts.position_pv} is the "
-            f"axis position and {opts.reference_pv} the reference, or give --latency"
-        )
+    _enough_kept(keep, counts, f"{latency * 1000:.1f} ms ({method})", opts)
     x = motion.at(tq[keep])
     gain, offset = _fit_map(raw[keep], x, opts.reference_scale)
     h = float(np.median(np.diff(motion.t)))
