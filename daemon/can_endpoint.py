@@ -6,7 +6,8 @@ answered at once, then every frame already waiting (up to ``_DRAIN_MAX``) is tak
 readings they complete are corrected together
 (:meth:`daemon.engine.CorrectionEngine.correct_many`: one vectorised grid call for a batch,
 the same answers bit for bit as one at a time). The answers' frames (three corrected axes,
-the uncertainty frame with ``[can] send_uncertainty``, the correction status, per reading) go
+the uncertainty frame with ``[can] send_uncertainty``, the correction status, per reading; or,
+for a reading that came as one CAN FD RAW_XYZ frame, one CORRECTED_XYZ frame) go
 out in one batch (:func:`daemon.can_send.send_batch`), then are counted. A temperature frame or an
 ``incomplete_reading`` answer first answers the readings completed before it, so the order of
 the wire is kept.
@@ -37,6 +38,7 @@ from cmm_comp.protocol import (
     BadValue,
     CanIds,
     CorrectedAxis,
+    CorrectedReading,
     CorrectionStatus,
     CorrectionUncertainty,
     Duplicate,
@@ -46,6 +48,7 @@ from cmm_comp.protocol import (
     OutOfOrder,
     ProbeDirection,
     RawAxis,
+    RawReading,
     Superseded,
     TemperatureSample,
     Triplet,
@@ -53,6 +56,7 @@ from cmm_comp.protocol import (
     UnknownId,
     decode_message,
     encode_corrected_axes,
+    encode_corrected_reading,
     encode_correction_status,
     encode_correction_uncertainty,
     encode_message,
@@ -164,6 +168,7 @@ class CanEndpoint(can.Listener):
         # and out of the way of the peer that is still taking in the answer.
         self._deferred: list[tuple[Reading, Answer, float]] = []
         self._ready: list[Reading] = []  # completed, not yet answered (this wake-up)
+        self._ready_fd: list[bool] = []  # per ready reading: came as RAW_XYZ (answer in kind)
         self._log_backlog: list[tuple[str, can.Message]] = []
         self._last_axis_s = 0.0
         self._frames_rx = 0  # folded into the metrics by the housekeeping
@@ -174,6 +179,7 @@ class CanEndpoint(can.Listener):
             self.ids.corrected_id(Axis.Z),
             self.ids.id_of(MessageKind.CORRECTION_STATUS),
             self.ids.id_of(MessageKind.CORRECTION_UNCERTAINTY),
+            self.ids.id_of(MessageKind.CORRECTED_XYZ),
         )
         self._own_tx_ids = self.ids.daemon_tx_ids()  # received back: our own frames (echo)
         self._send_u = config.send_uncertainty
@@ -329,6 +335,18 @@ class CanEndpoint(can.Listener):
             self._last_axis_s = t_rx
             for event in self._assembler.feed(frame):
                 self._on_assembler(event, t_rx)
+        elif type(frame) is RawReading:
+            self._last_axis_s = t_rx
+            if self.config.fd:
+                self._ready_reading(frame, t_rx)
+            else:  # its answer could not go out as a CAN FD frame on a classic bus
+                self.metrics.fault("fd_frame_on_classic_bus")
+                self.events.emit(
+                    "fd_frame_on_classic_bus",
+                    "warning",
+                    reason=f"RAW_XYZ seq {frame.seq} (CAN FD) not answered: the bus is opened "
+                    "for classic CAN; set [can] fd = true (docs/can.md)",
+                )
         elif isinstance(frame, TemperatureSample):
             self._answer_ready()  # readings completed before this sample are corrected without it
             self.engine.temperature(frame.sensor, frame.temp_C, frame.counter, frame.valid, "can")
@@ -338,7 +356,8 @@ class CanEndpoint(can.Listener):
                 while len(self._probe) > _PROBE_MEMORY:
                     self._probe.popitem(last=False)
         elif isinstance(
-            frame, CorrectedAxis | CorrectionStatus | CorrectionUncertainty | Heartbeat
+            frame,
+            CorrectedAxis | CorrectionStatus | CorrectionUncertainty | CorrectedReading | Heartbeat,
         ):
             self.metrics.count("own_frames_ignored")  # udp_multicast echoes our own frames
         else:
@@ -403,6 +422,7 @@ class CanEndpoint(can.Listener):
                 source="can",
             )
             self._ready.append(reading)  # answered with the others of this wake-up
+            self._ready_fd.append(False)
         elif isinstance(event, Incomplete | Superseded):
             self._answer_ready()
             self._answer_incomplete(event.seq, event.reason, t_rx)
@@ -412,6 +432,22 @@ class CanEndpoint(can.Listener):
         elif isinstance(event, OutOfOrder):
             self.metrics.fault("out_of_order")
             self.events.emit("out_of_order", "warning", reason=event.reason)
+
+    def _ready_reading(self, frame: RawReading, t_rx: float) -> None:
+        """A whole reading in one CAN FD frame: ready to answer (no assembly; a repeat of a
+        seq is a new reading, as a restarted controller's would be)."""
+        d = frame.directions
+        reading = Reading(
+            seq=frame.seq,
+            position_nm=frame.position_nm,
+            directions=(d[0].sign, d[1].sign, d[2].sign),
+            valid=frame.valid,
+            probe=self._probe.pop(frame.seq, None),
+            received_s=t_rx,
+            source="can",
+        )
+        self._ready.append(reading)
+        self._ready_fd.append(True)
 
     def _answer_incomplete(self, seq: int, reason: str, t_rx: float) -> None:
         self.metrics.fault("incomplete_reading")
@@ -425,32 +461,51 @@ class CanEndpoint(can.Listener):
     def _answer_ready(self) -> None:
         """Correct the readings completed so far (one batch), send every answer (one batch),
         count them; their reports wait for the bookkeeping."""
-        ready = self._ready
+        ready, fd = self._ready, self._ready_fd
         if not ready:
             return
-        self._ready = []
+        self._ready, self._ready_fd = [], []
         if len(ready) == 1:  # one reading (the paced case): no batch bookkeeping on its path
             reading = ready[0]
             answer = self.engine.correct(reading)  # = correct_many([reading])
-            latency_us = self._send_answer(answer, reading.received_s)
+            latency_us = self._send_answer(answer, reading.received_s, fd[0])
             self.engine.count_many((answer,), (latency_us,))
             self._deferred.append((reading, answer, latency_us))
             return
         answers = self.engine.correct_many(ready)
         msgs: list[can.Message] = []
         latencies = [
-            self._answer_frames(a, r.received_s, msgs) for r, a in zip(ready, answers, strict=True)
+            self._answer_frames(a, r.received_s, msgs, f)
+            for r, a, f in zip(ready, answers, fd, strict=True)
         ]
         self._send_msgs(msgs)
         self.engine.count_many(answers, latencies)
         # reported when the bus is quiet
         self._deferred += zip(ready, answers, latencies, strict=True)
 
-    def _answer_frames(self, answer: Answer, t_rx: float, out: list[can.Message]) -> float:
+    def _answer_frames(
+        self, answer: Answer, t_rx: float, out: list[can.Message], fd: bool = False
+    ) -> float:
         """Append the answer frames of ``answer`` to ``out`` (X, Y, Z, U when configured,
-        STATUS last); return the latency, µs."""
+        STATUS last; ``fd``: the one CORRECTED_XYZ frame, U always in it); return the
+        latency, µs."""
         seq, st = answer.seq, int(answer.status)
         ids = self._corrected_ids
+        if fd:
+            latency_us = (time.perf_counter() - t_rx) * 1e6
+            data = encode_corrected_reading(
+                seq,
+                st,
+                int(answer.applied),
+                answer.position_nm,
+                latency_us,
+                answer.correction_norm_um,
+                answer.uncertainty_um,
+            )
+            out.append(
+                can.Message(arbitration_id=ids[5], is_extended_id=False, is_fd=True, data=data)
+            )
+            return latency_us
         x, y, z = encode_corrected_axes(seq, st, answer.position_nm)
         out += (
             can.Message(arbitration_id=ids[0], is_extended_id=False, data=x),
@@ -467,10 +522,10 @@ class CanEndpoint(can.Listener):
         out.append(can.Message(arbitration_id=ids[3], is_extended_id=False, data=status))
         return latency_us
 
-    def _send_answer(self, answer: Answer, t_rx: float) -> float:
+    def _send_answer(self, answer: Answer, t_rx: float, fd: bool = False) -> float:
         """Send the frames of one answer now; return the latency in its status frame, µs."""
         msgs: list[can.Message] = []
-        latency_us = self._answer_frames(answer, t_rx, msgs)
+        latency_us = self._answer_frames(answer, t_rx, msgs, fd)
         self._send_msgs(msgs)
         return latency_us
 

@@ -24,6 +24,7 @@ from .can_codec import (
     decode_message,
     encode_message,
 )
+from .can_fd_frames import CorrectedReading, RawReading, encode_corrected_reading
 from .can_frames import (
     CorrectedAxis,
     CorrectionStatus,
@@ -56,6 +57,7 @@ __all__ = [
     "CanIds",
     "ControllerClient",
     "CorrectedAxis",
+    "CorrectedReading",
     "CorrectionStatus",
     "CorrectionUncertainty",
     "DaemonBlock",
@@ -79,6 +81,7 @@ __all__ = [
     "OutOfOrder",
     "ProbeDirection",
     "RawAxis",
+    "RawReading",
     "ReadingBlock",
     "Request",
     "Status",
@@ -97,6 +100,7 @@ __all__ = [
     "decode_output",
     "device_id_response",
     "encode_corrected_axes",
+    "encode_corrected_reading",
     "encode_correction_status",
     "encode_correction_uncertainty",
     "encode_message",

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import can
 
-from .can_frames import FRAME_CLASS, PAYLOAD_SIZE, Frame, RawAxis
+from .can_frames import FRAME_CLASS, PAYLOAD_SIZE, PAYLOAD_SIZES, Frame, RawAxis
 from .can_ids import CanIds, MessageKind
 from .codes import Axis
 
@@ -66,7 +66,7 @@ def decode_message(msg: can.Message, ids: CanIds) -> DecodeResult:
     """Decode a received message for node ``ids``; never raises on any message content.
 
     Returns the frame, or :class:`UnknownId` (not ours), :class:`NotData` (remote/error frame),
-    :class:`BadLength` (dlc ≠ 8) or :class:`BadValue` (undefined code, axis field ≠ id).
+    :class:`BadLength` (not the message's data length: 8, RAW_XYZ 20, CORRECTED_XYZ 32) or :class:`BadValue` (undefined code, axis field ≠ id).
     """
     can_id = -1
     kind: MessageKind | None = None
@@ -82,8 +82,9 @@ def decode_message(msg: can.Message, ids: CanIds) -> DecodeResult:
         if msg.is_remote_frame:
             return NotData(can_id, kind, f"remote frame on {kind.name}")
         data = bytes(msg.data or b"")
-        if len(data) != PAYLOAD_SIZE:
-            return BadLength(can_id, kind, PAYLOAD_SIZE, len(data))
+        size = PAYLOAD_SIZES[kind]
+        if len(data) != size:
+            return BadLength(can_id, kind, size, len(data))
         frame = FRAME_CLASS[kind].decode(data)
         if kind.axis is not None and frame.axis != kind.axis:  # type: ignore[union-attr]
             axis = frame.axis.name  # type: ignore[union-attr]
@@ -124,10 +125,13 @@ class RawAxisDecoder:
 
 
 def encode_message(frame: Frame, ids: CanIds, timestamp_s: float = 0.0) -> can.Message:
-    """Build the ``can.Message`` (standard id, classic 8 bytes) carrying ``frame``."""
+    """Build the ``can.Message`` (standard id) carrying ``frame``: a classic 8-byte frame, or
+    a CAN FD frame (``is_fd``) for RAW_XYZ and CORRECTED_XYZ."""
+    data = frame.encode()
     return can.Message(
         timestamp=timestamp_s,
         arbitration_id=ids.id_of(frame.kind),
         is_extended_id=False,
-        data=frame.encode(),
+        is_fd=len(data) > PAYLOAD_SIZE,
+        data=data,
     )

@@ -1,4 +1,6 @@
-"""CAN frames of the CMM compensation message set: classic 8-byte payloads, little-endian.
+"""CAN frames of the CMM compensation message set: classic 8-byte payloads, little-endian
+(the CAN FD pair RAW_XYZ / CORRECTED_XYZ is in :mod:`.can_fd_frames`; :data:`FRAME_CLASS` and
+:data:`PAYLOAD_SIZES` cover both).
 
 Each frame is a frozen dataclass with ``encode() -> bytes`` and ``decode(data) -> Self``; the
 layout is a named :class:`struct.Struct` with one comment per field. Fields hold raw integer
@@ -17,6 +19,7 @@ import struct
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self, TypeVar
 
+from .can_fd_frames import CORRECTED_XYZ_SIZE, RAW_XYZ_SIZE, CorrectedReading, RawReading
 from .can_ids import CORRECTED_KIND, RAW_KIND, MessageKind
 from .codes import (
     APPLIED_MASK,
@@ -468,8 +471,10 @@ Frame = (
     | CorrectionStatus
     | CorrectionUncertainty
     | Heartbeat
+    | RawReading
+    | CorrectedReading
 )
-"""Any frame of the message set."""
+"""Any frame of the message set (classic and CAN FD)."""
 
 FRAME_CLASS: dict[MessageKind, type[Frame]] = {
     MessageKind.RAW_X: RawAxis,
@@ -483,4 +488,11 @@ FRAME_CLASS: dict[MessageKind, type[Frame]] = {
     MessageKind.CORRECTION_STATUS: CorrectionStatus,
     MessageKind.CORRECTION_UNCERTAINTY: CorrectionUncertainty,
     MessageKind.HEARTBEAT: Heartbeat,
+    MessageKind.RAW_XYZ: RawReading,
+    MessageKind.CORRECTED_XYZ: CorrectedReading,
 }
+PAYLOAD_SIZES: dict[MessageKind, int] = {kind: PAYLOAD_SIZE for kind in FRAME_CLASS} | {
+    MessageKind.RAW_XYZ: RAW_XYZ_SIZE,
+    MessageKind.CORRECTED_XYZ: CORRECTED_XYZ_SIZE,
+}
+"""Data bytes of each message (8 for the classic frames; the CAN FD pair: 20 and 32)."""

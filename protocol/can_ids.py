@@ -29,11 +29,15 @@ class MessageKind(enum.IntEnum):
     RAW_Z = 0x2
     PROBE_DIRECTION = 0x3
     TEMPERATURE = 0x4
+    RAW_XYZ = 0x5
+    """CAN FD: a whole reading in one 20-byte frame (:mod:`.can_fd_frames`)."""
     CORRECTED_X = 0x8
     CORRECTED_Y = 0x9
     CORRECTED_Z = 0xA
     CORRECTION_STATUS = 0xB
     CORRECTION_UNCERTAINTY = 0xC
+    CORRECTED_XYZ = 0xD
+    """CAN FD: the whole answer to a RAW_XYZ reading in one 32-byte frame."""
     HEARTBEAT = 0xF
 
     @property
@@ -58,7 +62,7 @@ CORRECTED_KIND = {
 }
 _BY_OFFSET = {int(k): k for k in MessageKind}
 CONTROLLER_KINDS = frozenset(
-    {*RAW_KIND.values(), MessageKind.PROBE_DIRECTION, MessageKind.TEMPERATURE}
+    {*RAW_KIND.values(), MessageKind.RAW_XYZ, MessageKind.PROBE_DIRECTION, MessageKind.TEMPERATURE}
 )
 """Messages the controller transmits (DBC transmitter ``Controller``)."""
 DAEMON_KINDS = frozenset(
@@ -66,6 +70,7 @@ DAEMON_KINDS = frozenset(
         *CORRECTED_KIND.values(),
         MessageKind.CORRECTION_UNCERTAINTY,
         MessageKind.CORRECTION_STATUS,
+        MessageKind.CORRECTED_XYZ,
         MessageKind.HEARTBEAT,
     }
 )

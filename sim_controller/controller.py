@@ -7,6 +7,9 @@ answer (lock-step); :meth:`CanController.stream` sends at a fixed rate with a bo
 of readings in flight. Latency is measured at the controller: from just after the last raw
 frame was sent to the arrival of the status frame, µs (``time.perf_counter``).
 
+With ``fd=True`` it speaks the CAN FD pair instead (docs/can.md): one RAW_XYZ frame a reading,
+one CORRECTED_XYZ frame an answer (U always in it); the bus must be opened with ``fd=True``.
+
 On ``udp_multicast`` a bus receives its own frames: the controller ignores its own TX ids.
 It is a context manager with ``stop(timeout_s)``; receive errors are counted and kept in
 ``errors``, never silent.
@@ -24,6 +27,7 @@ import can
 from cmm_comp.protocol import (
     CanIds,
     CorrectedAxis,
+    CorrectedReading,
     CorrectionStatus,
     CorrectionUncertainty,
     Heartbeat,
@@ -35,6 +39,7 @@ from cmm_comp.protocol import (
     decode_message,
     encode_message,
 )
+from cmm_comp.protocol import RawReading as RawReadingFrame
 from cmm_comp.protocol.codes import NM_PER_MM, Axis, Direction, Status
 
 
@@ -71,10 +76,19 @@ class CanController(can.Listener):
 
     :param ids: the node's CAN ids.
     :param answer_timeout_s: how long :meth:`exchange` waits for an answer, s.
+    :param fd: send each reading as one CAN FD RAW_XYZ frame (the answer comes as one
+        CORRECTED_XYZ frame) instead of the classic RAW_X/Y/Z frames.
     """
 
-    def __init__(self, bus: can.BusABC, ids: CanIds | None = None, answer_timeout_s: float = 1.0):
+    def __init__(
+        self,
+        bus: can.BusABC,
+        ids: CanIds | None = None,
+        answer_timeout_s: float = 1.0,
+        fd: bool = False,
+    ):
         self.bus = bus
+        self.fd = fd
         self.ids = ids or CanIds()
         self.answer_timeout_s = answer_timeout_s
         self._own = self.ids.controller_tx_ids()
@@ -147,6 +161,8 @@ class CanController(can.Listener):
                 del self._uncertainty[next(iter(self._uncertainty))]
         elif isinstance(frame, CorrectionStatus):
             self._complete(frame, t)
+        elif isinstance(frame, CorrectedReading):
+            self._complete_fd(frame, t)
         elif isinstance(frame, Heartbeat):
             self.heartbeat = frame
             self.heartbeats += 1
@@ -176,6 +192,22 @@ class CanController(can.Listener):
             )
             self._cond.notify_all()
 
+    def _complete_fd(self, a: CorrectedReading, t: float) -> None:
+        x, y, z = a.position_nm
+        with self._cond:
+            sent = self._sent_at.pop(a.seq, t)
+            self._answers[a.seq] = AnswerRecord(
+                a.seq,
+                Status(a.status).label,
+                (x / NM_PER_MM, y / NM_PER_MM, z / NM_PER_MM),
+                (t - sent) * 1e6,
+                a.latency_us,
+                a.correction_um,
+                int(a.applied),
+                a.u_um,
+            )
+            self._cond.notify_all()
+
     # ------------------------------------------------------------------ send
     def send_temperatures(self, temps_by_sensor: dict[int, float], valid: bool = True) -> None:
         """Send one sample per sensor (°C), each with its counter incremented."""
@@ -191,9 +223,24 @@ class CanController(can.Listener):
         if r.probe_dir is not None:
             pd = ProbeDirection.from_unit_vector(r.seq, r.probe_dir)
             msgs.append(encode_message(pd, self.ids))
-        for axis, pos, sign, ok in zip(Axis, r.indicated_mm, r.travel_dir, r.valid, strict=True):
-            frame = RawAxis(axis, r.seq, round(pos * NM_PER_MM), Direction.from_sign(sign), ok)
-            msgs.append(encode_message(frame, self.ids))
+        if self.fd:
+            whole = RawReadingFrame(
+                r.seq,
+                (
+                    round(r.indicated_mm[0] * NM_PER_MM),
+                    round(r.indicated_mm[1] * NM_PER_MM),
+                    round(r.indicated_mm[2] * NM_PER_MM),
+                ),
+                tuple(Direction.from_sign(s) for s in r.travel_dir),  # type: ignore[arg-type]
+                r.valid,
+            )
+            msgs.append(encode_message(whole, self.ids))
+        else:
+            for axis, pos, sign, ok in zip(
+                Axis, r.indicated_mm, r.travel_dir, r.valid, strict=True
+            ):
+                frame = RawAxis(axis, r.seq, round(pos * NM_PER_MM), Direction.from_sign(sign), ok)
+                msgs.append(encode_message(frame, self.ids))
         with self._cond:
             self._answers.pop(r.seq, None)
         for msg in msgs:

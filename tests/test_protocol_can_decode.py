@@ -12,29 +12,35 @@ from cmm_comp.protocol import (
     BadLength,
     BadValue,
     CanIds,
+    CorrectedReading,
     CorrectionStatus,
     Direction,
     Heartbeat,
     MessageKind,
     NotData,
     RawAxis,
+    RawReading,
     TemperatureSample,
     UnknownId,
     decode_message,
     encode_message,
 )
-from cmm_comp.protocol.can_frames import FRAME_CLASS
+from cmm_comp.protocol.can_frames import FRAME_CLASS, PAYLOAD_SIZES
 
-USED_BITS = {RawAxis: (7, 0x1F), TemperatureSample: (1, 0x01), CorrectionStatus: (3, 0x3F)}
-"""(byte index, mask of defined bits) for the frames that have reserved bits."""
+USED_BITS: dict[type, tuple[tuple[int, int], ...]] = {
+    RawAxis: ((7, 0x1F),),
+    TemperatureSample: ((1, 0x01),),
+    CorrectionStatus: ((3, 0x3F),),
+    RawReading: ((17, 0x3F), (18, 0x07), (19, 0x00)),
+    CorrectedReading: ((18, 0x3F), (19, 0x00), (30, 0x00), (31, 0x00)),
+}
+"""(byte index, mask of defined bits) for the frames that have reserved bits (docs/can.md)."""
 
 
 def clear_reserved(cls: type, data: bytes) -> bytes:
-    if cls not in USED_BITS:
-        return data
-    index, used = USED_BITS[cls]
     out = bytearray(data)
-    out[index] &= used
+    for index, used in USED_BITS.get(cls, ()):
+        out[index] &= used
     return bytes(out)
 
 
@@ -74,12 +80,16 @@ def test_fuzz_never_raises_and_is_typed(
 
 
 @settings(max_examples=500, deadline=None)
-@given(st.sampled_from(MessageKind), st.binary(min_size=8, max_size=8))
-def test_any_8_byte_payload_on_a_known_id_is_frame_or_bad_value(
-    kind: MessageKind, data: bytes
+@given(st.sampled_from(MessageKind), st.data())
+def test_any_payload_of_the_right_length_on_a_known_id_is_frame_or_bad_value(
+    kind: MessageKind, draw: st.DataObject
 ) -> None:
+    size = PAYLOAD_SIZES[kind]  # 8; the CAN FD pair: 20 and 32
+    data = draw.draw(st.binary(min_size=size, max_size=size))
     ids = CanIds()
-    msg = can.Message(arbitration_id=ids.id_of(kind), data=data, is_extended_id=False)
+    msg = can.Message(
+        arbitration_id=ids.id_of(kind), data=data, is_extended_id=False, is_fd=size > 8
+    )
     result = decode_message(msg, ids)
     assert isinstance(result, (FRAME_CLASS[kind], BadValue))
 
@@ -93,8 +103,8 @@ def test_specific_results() -> None:
     assert decode_message(can.Message(arbitration_id=0x211, is_extended_id=True), ids) == UnknownId(
         0x211, True
     )
-    unused = can.Message(arbitration_id=0x215, data=b"\0" * 8, is_extended_id=False)
-    assert decode_message(unused, ids) == UnknownId(0x215, False)
+    unused = can.Message(arbitration_id=0x216, data=b"\0" * 8, is_extended_id=False)
+    assert decode_message(unused, ids) == UnknownId(0x216, False)
     # remote and error frames
     rtr = decode_message(
         can.Message(arbitration_id=0x21F, is_extended_id=False, is_remote_frame=True, dlc=8), ids
@@ -132,9 +142,13 @@ def test_ids_helpers() -> None:
     assert ids.id_of(MessageKind.HEARTBEAT) == 0x22F
     assert ids.kind_of(0x22B) is MessageKind.CORRECTION_STATUS
     assert ids.kind_of(0x22C) is MessageKind.CORRECTION_UNCERTAINTY
-    assert ids.kind_of(0x22D) is None and ids.kind_of(0x21B) is None
-    assert ids.controller_tx_ids() == {0x220, 0x221, 0x222, 0x223, 0x224}
-    assert ids.daemon_tx_ids() == {0x228, 0x229, 0x22A, 0x22B, 0x22C, 0x22F}
+    assert (
+        ids.kind_of(0x22D) is MessageKind.CORRECTED_XYZ
+        and ids.kind_of(0x225) is MessageKind.RAW_XYZ
+    )
+    assert ids.kind_of(0x22E) is None and ids.kind_of(0x21B) is None
+    assert ids.controller_tx_ids() == {0x220, 0x221, 0x222, 0x223, 0x224, 0x225}
+    assert ids.daemon_tx_ids() == {0x228, 0x229, 0x22A, 0x22B, 0x22C, 0x22D, 0x22F}
     assert ids.can_filters() == [{"can_id": 0x220, "can_mask": 0x7F0, "extended": False}]
     assert Heartbeat.kind is MessageKind.HEARTBEAT
 

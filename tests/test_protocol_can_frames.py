@@ -33,6 +33,7 @@ from cmm_comp.protocol import (
     grid_id_from_sha256,
     sent_by_daemon,
 )
+from cmm_comp.protocol.can_frames import PAYLOAD_SIZES
 
 GOLDEN = Path(__file__).parent / "data" / "protocol_golden_frames.json"
 DB = cantools.database.load_string(dbc_text(), database_format="dbc")
@@ -158,7 +159,10 @@ def test_dbc_lists_every_message_kind_once() -> None:
     assert sorted(m.frame_id for m in DB.messages) == sorted(0x200 + k for k in MessageKind)
     for kind in MessageKind:
         assert DB.get_message_by_frame_id(0x200 + kind).name == kind.name
-        assert DB.get_message_by_frame_id(0x200 + kind).length == 8
+        size = PAYLOAD_SIZES[kind]  # 8, the CAN FD pair 20 and 32
+        assert DB.get_message_by_frame_id(0x200 + kind).length == size
+        assert DB.get_message_by_frame_id(0x200 + kind).is_fd == (size > 8)
+    assert {k.name for k in MessageKind if PAYLOAD_SIZES[k] > 8} == {"RAW_XYZ", "CORRECTED_XYZ"}
 
 
 def test_dbc_status_names_are_the_status_labels() -> None:

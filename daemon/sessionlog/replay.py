@@ -286,7 +286,7 @@ class BusReplayReport:
         return (
             f"{self.by_can_id} frame(s) carry no direction (a log written before frames were "
             "tagged): the daemon's own recognised by CAN id (DBC transmitter Daemon: offsets "
-            "0x8-0xC and 0xF of a node's 16-id block), the rest re-sent as the controller's"
+            "0x8-0xD and 0xF of a node's 16-id block), the rest re-sent as the controller's"
         )
 
 
@@ -351,6 +351,7 @@ def replay_to_bus(
                 arbitration_id=int(p["arbitration_id"]),
                 is_extended_id=bool(p["is_extended"]),
                 is_remote_frame=bool(p.get("is_remote_frame", False)),
+                is_fd=bool(p.get("is_fd", False)),
                 data=bytes.fromhex(p["data"]),
                 dlc=int(p["dlc"]),
             ),

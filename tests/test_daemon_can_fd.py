@@ -1,0 +1,100 @@
+"""The daemon on CAN FD: a RAW_XYZ reading gets one CORRECTED_XYZ answer that says exactly what
+the classic answer (X, Y, Z, U and status frames) says for the same reading; cantools decodes
+it from the DBC; classic and FD readings may share the bus; a classic-only bus refuses FD
+readings with a named event instead of answering wrongly."""
+
+from __future__ import annotations
+
+import math
+
+import can
+import cantools
+import pytest
+from test_daemon_support import base_config, channel, send_temps
+from test_daemon_uncertainty import OK_POINTS_MM, TEMP_C, u_grid_path
+
+from cmm_comp.daemon.service import DaemonService
+from cmm_comp.protocol import CanIds, MessageKind, dbc_text
+from cmm_comp.sim_controller.controller import CanController, RawReading
+
+DB = cantools.database.load_string(dbc_text(), database_format="dbc")
+IDS = CanIds()
+READINGS = [
+    *(RawReading(i + 1, p, travel_dir=(1, -1, 0)) for i, p in enumerate(OK_POINTS_MM)),
+    RawReading(20, (-30.0, 100.0, 100.0)),  # outside the volume
+    RawReading(21, (100.0, 100.0, 100.0), valid=(True, False, True)),  # invalid scale
+]
+
+
+def _fd_config() -> object:
+    cfg = base_config(channel(), u_grid_path())
+    cfg.can.fd = True
+    cfg.can.send_uncertainty = True  # the classic answer carries U too, to compare
+    cfg.metrics.enabled = False
+    return cfg.check()
+
+
+def test_fd_answer_equals_the_classic_answer_and_cantools_reads_it() -> None:
+    cfg = _fd_config()
+    with DaemonService(cfg, events_stream=None):  # type: ignore[arg-type]
+        ch = cfg.can.channel  # type: ignore[attr-defined]
+        classic_bus = can.Bus(interface="virtual", channel=ch, fd=True)
+        fd_bus = can.Bus(interface="virtual", channel=ch, fd=True)
+        spy = can.Bus(interface="virtual", channel=ch, fd=True)
+        try:
+            with (
+                CanController(classic_bus, answer_timeout_s=10.0) as classic,
+                CanController(fd_bus, answer_timeout_s=10.0, fd=True) as fd,
+            ):
+                send_temps(classic, TEMP_C)
+                a_classic = {r.seq: classic.exchange(r) for r in READINGS}
+                # the same readings again (new seqs), one CAN FD frame each
+                shifted = [RawReading(r.seq + 100, *_rest(r)) for r in READINGS]
+                a_fd = {r.seq - 100: fd.exchange(r) for r in shifted}
+            frames = []
+            while (msg := spy.recv(0.0)) is not None:
+                frames.append(msg)
+        finally:
+            for bus in (classic_bus, fd_bus, spy):
+                bus.shutdown()
+    fd_answers = [m for m in frames if m.arbitration_id == IDS.id_of(MessageKind.CORRECTED_XYZ)]
+    fd_readings = [m for m in frames if m.arbitration_id == IDS.id_of(MessageKind.RAW_XYZ)]
+    assert len(fd_answers) == len(fd_readings) == len(READINGS)  # one frame each way
+    assert all(m.is_fd and len(m.data) == 32 for m in fd_answers)
+    by_seq = {DB.decode_message(m.arbitration_id, m.data)["Seq"]: m for m in fd_answers}
+    for r in READINGS:
+        c, f = a_classic[r.seq], a_fd[r.seq]
+        assert c.status != "timeout" and f.status == c.status
+        assert f.corrected_mm == c.corrected_mm  # same nm on the wire
+        assert (f.applied, f.correction_um) == (c.applied, c.correction_um)
+        assert c.uncertainty_um is not None and f.uncertainty_um is not None
+        for uc, uf in zip(c.uncertainty_um, f.uncertainty_um, strict=True):
+            assert uc == uf or (math.isnan(uc) and math.isnan(uf))
+        # the DBC (cantools, physical values) says the same as the controller read
+        sig = DB.decode_message(by_seq[r.seq + 100].arbitration_id, by_seq[r.seq + 100].data)
+        assert sig["Status"] == f.status
+        want = pytest.approx(f.corrected_mm, abs=1e-9)  # cantools scales by 1e-6 in floats
+        assert (sig["PositionX"], sig["PositionY"], sig["PositionZ"]) == want
+    assert a_fd[20].status == "outside_volume" and a_fd[21].status == "invalid_reading"
+    assert a_fd[1].status == "ok"
+
+
+def _rest(r: RawReading) -> tuple[object, ...]:
+    return (r.indicated_mm, r.travel_dir, r.probe_dir, r.valid)
+
+
+def test_fd_reading_on_a_classic_bus_is_refused_by_name() -> None:
+    cfg = base_config(channel(), u_grid_path())
+    cfg.metrics.enabled = False
+    cfg.check()
+    with DaemonService(cfg, events_stream=None) as d:
+        bus = can.Bus(interface="virtual", channel=cfg.can.channel, fd=True)
+        try:
+            with CanController(bus, answer_timeout_s=0.5, fd=True) as ctl:
+                send_temps(ctl, TEMP_C)
+                answer = ctl.exchange(RawReading(1, OK_POINTS_MM[0]))
+        finally:
+            bus.shutdown()
+        faults = d.metrics.faults
+    assert answer.status == "timeout"  # not answered: never a classic answer it did not ask for
+    assert faults.get("fd_frame_on_classic_bus") == 1
