@@ -61,8 +61,9 @@ from cmm_comp.daemon.can_send import send_batch  # noqa: E402
 from cmm_comp.daemon.config import DaemonConfig  # noqa: E402
 from cmm_comp.daemon.service import DaemonService  # noqa: E402
 from cmm_comp.protocol import CanIds, RawAxis, encode_message  # noqa: E402
+from cmm_comp.protocol import RawReading as RawReadingFD  # noqa: E402
 from cmm_comp.protocol.can_ids import MessageKind  # noqa: E402
-from cmm_comp.protocol.codes import NM_PER_MM, Axis, Direction, Status  # noqa: E402
+from cmm_comp.protocol.codes import NM_PER_MM, Axis, Direction, Status, nm3_from_mm  # noqa: E402
 from cmm_comp.sim_controller.controller import CanController, RawReading  # noqa: E402
 from cmm_comp.sim_controller.sim_machine import Environment  # noqa: E402
 
@@ -229,8 +230,11 @@ def bench_virtual(grid: Path, u_grid: Path, rs: list[RawReading], args: Any, tmp
 
 
 # ----------------------------------------------------------------------------- throughput
-def raw_frames(rs: list[RawReading]) -> list[can.Message]:
-    """The 3 raw axis frames of each reading, encoded once (the flood sends them as they are)."""
+def raw_frames(rs: list[RawReading], fd: bool = False) -> list[can.Message]:
+    """The 3 raw axis frames of each reading (``fd``: its one RAW_XYZ CAN FD frame), encoded
+    once (the flood sends them as they are)."""
+    if fd:
+        return [encode_message(RawReadingFD(r.seq, nm3_from_mm(r.indicated_mm)), IDS) for r in rs]
     return [
         encode_message(RawAxis(axis, r.seq, round(pos * NM_PER_MM), Direction.UNKNOWN, True), IDS)
         for r in rs
@@ -238,11 +242,16 @@ def raw_frames(rs: list[RawReading]) -> list[can.Message]:
     ]
 
 
-def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> dict[str, Any]:
+def flood(
+    bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0, fd: bool = False
+) -> dict[str, Any]:
     """Send the readings of ``frames`` (16 readings per batch, ≤ 512 unanswered), unpaced or
-    paced at ``rate_hz`` readings/s (by sleeping); count status frames in a receive thread."""
-    n, window, chunk = len(frames) // 3, 512, 16
-    status_id = IDS.id_of(MessageKind.CORRECTION_STATUS)
+    paced at ``rate_hz`` readings/s (by sleeping); count status frames (``fd``: CORRECTED_XYZ
+    frames, one a reading) in a receive thread."""
+    per = 1 if fd else 3  # frames a reading
+    n, window, chunk = len(frames) // per, 512, 16
+    status_id = IDS.id_of(MessageKind.CORRECTED_XYZ if fd else MessageKind.CORRECTION_STATUS)
+    status_byte = 17 if fd else 2
     got, statuses = [0], Counter[int]()
     cond, stop = threading.Condition(), threading.Event()
 
@@ -251,7 +260,7 @@ def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> d
             msg, k = bus.recv(0.01), 0
             while msg is not None:
                 if msg.arbitration_id == status_id:
-                    statuses[msg.data[2]] += 1
+                    statuses[msg.data[status_byte]] += 1
                     k += 1
                 msg = bus.recv(0.0)
             if k:
@@ -271,7 +280,7 @@ def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> d
             if rate_hz > 0 and (delay := t0 + i / rate_hz - time.perf_counter()) > 0:
                 time.sleep(delay)
             j = min(n, i + chunk)
-            send_batch(bus, frames[3 * i : 3 * j], None)
+            send_batch(bus, frames[per * i : per * j], None)
             i = j
         with cond:
             while got[0] < n and cond.wait(10.0):
@@ -289,15 +298,25 @@ def flood(bus: can.BusABC, frames: list[can.Message], rate_hz: float = 0.0) -> d
     }
 
 
-def virtual_raw(frames: list[can.Message]) -> dict[str, Any]:
+def virtual_raw(frames: list[can.Message], fd: bool = False) -> dict[str, Any]:
     """python-can's ``virtual`` bus alone, no daemon, no thread, no wait: per batch of 16
     readings the controller's bus sends the 3 raw frames of each, a second bus receives them
     and sends 4 answer frames each, the first receives those. The bus's own cost (a copy of
     each frame per receiver, a ``queue.Queue`` put and get): the ceiling of any reader of 3 and
-    writer of 4 frames a reading on this bus in one process."""
-    n, chunk = len(frames) // 3, 16
+    writer of 4 frames a reading on this bus in one process. ``fd``: the CAN FD pair, one
+    20-byte frame a reading and one 32-byte answer."""
+    per, back = (1, 1) if fd else (3, 4)  # frames a reading, frames an answer
+    n, chunk = len(frames) // per, 16
     ch = f"bench-{uuid.uuid4().hex[:8]}"
-    answer = _answers({}, bytes(8))
+    answer = (
+        [
+            can.Message(
+                arbitration_id=IDS.id_of(MessageKind.CORRECTED_XYZ), is_fd=True, data=bytes(32)
+            )
+        ]
+        if fd
+        else _answers({}, bytes(8))
+    )
     lost = 0
     with (
         can.Bus(interface="virtual", channel=ch) as ctl,
@@ -306,10 +325,10 @@ def virtual_raw(frames: list[can.Message]) -> dict[str, Any]:
         t0, c0 = time.perf_counter(), time.process_time()
         for i in range(0, n, chunk):
             k = min(n, i + chunk) - i
-            send_batch(ctl, frames[3 * i : 3 * (i + k)], None)
-            lost += sum(dev.recv(0.0) is None for _ in range(3 * k))
+            send_batch(ctl, frames[per * i : per * (i + k)], None)
+            lost += sum(dev.recv(0.0) is None for _ in range(per * k))
             send_batch(dev, answer * k, None)
-            lost += sum(ctl.recv(0.0) is None for _ in range(4 * k))
+            lost += sum(ctl.recv(0.0) is None for _ in range(back * k))
         dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     return {"readings": n, "lost": lost, "readings_per_s": n / dt, "readings_per_cpu_s": n / cpu}
 
@@ -318,20 +337,24 @@ def flood_one(name: str, grid: Path, n: int, rate_hz: float, tmp: Path) -> dict[
     """One flood of ``n`` readings (``rate_hz`` 0: unpaced) against the batch echo or the
     daemon (``daemon_no_mcap``: logging off), in this process; for the daemon, the MCAP log's
     own counts once it has stopped (every answer in the file? drops per topic)."""
-    frames = raw_frames(readings(n, np.random.default_rng(2)))
+    fd = name.endswith("_fd")  # the CAN FD pair (one frame a reading, one an answer)
+    name = name.removesuffix("_fd")
+    frames = raw_frames(readings(n, np.random.default_rng(2)), fd)
     if name == "virtual_raw":
-        return virtual_raw(frames)
+        return virtual_raw(frames, fd)
     ch = f"bench-{uuid.uuid4().hex[:8]}"
     if name == "echo":
         with virtual_echo(ch, True), can.Bus(interface="virtual", channel=ch) as bus:
             return flood(bus, frames)
     path = "" if name == "daemon_no_mcap" else str(tmp / f"{ch}.mcap")
+    cfg = config(grid, ch, path)
+    cfg.can.fd = fd
     with (
-        DaemonService(config(grid, ch, path), events_stream=None) as d,
-        can.Bus(interface="virtual", channel=ch) as bus,
+        DaemonService(cfg, events_stream=None) as d,
+        can.Bus(interface="virtual", channel=ch, fd=fd) as bus,
     ):
         CanController(bus).send_temperatures(Environment().samples(0.0))
-        r = flood(bus, frames, rate_hz)
+        r = flood(bus, frames, rate_hz, fd)
     if d.logger is not None:  # stopped with the service: its counts are final
         st = d.logger.stats()
         r["mcap_dropped_by_topic"] = dict(st.dropped_by_topic)
@@ -346,14 +369,17 @@ def bench_throughput(grid: Path, args: Any, tmp: Path, pythonpath: str) -> dict[
     baseline's: ``baseline_*`` cases), in 2 interleaved rounds; best round of each (the least
     disturbed) and all rounds."""
     cases = ["virtual_raw", "echo", "daemon_mcap", "daemon_no_mcap", "sustained"]
+    if args.fd:  # the CAN FD pair: the bus alone, the daemon unpaced and paced
+        cases += ["virtual_raw_fd", "daemon_mcap_fd", "sustained_fd"]
     if pythonpath:
         cases += ["baseline_daemon_mcap", "baseline_sustained"]
     runs: dict[str, list[dict[str, Any]]] = {c: [] for c in cases}
     for k in range(2):
         for name in cases[k % len(cases) :] + cases[: k % len(cases)]:
             case = name.removeprefix("baseline_")
-            paced = case == "sustained"
-            cmd = [sys.executable, __file__, "--flood-one", "daemon_mcap" if paced else case,
+            paced = case.startswith("sustained")
+            one = case.replace("sustained", "daemon_mcap")
+            cmd = [sys.executable, __file__, "--flood-one", one,
                    "--grid", str(grid), "--flood", str(args.sustain_n if paced else args.flood),
                    "--rate", str(args.sustain_hz if paced else 0.0)]  # fmt: skip
             env = {**os.environ, "PYTHONPATH": pythonpath} if name != case else None
@@ -640,6 +666,11 @@ def print_table(result: dict[str, Any]) -> None:
             f"bus alone {best / tp['virtual_raw']['readings_per_s']:.2f}× (per CPU s "
             f"{cpu / max(tp['virtual_raw']['all_readings_per_cpu_s']):.2f}×)"
         )
+    for fd, classic in (("daemon_mcap_fd", "daemon_mcap"), ("virtual_raw_fd", "virtual_raw")):
+        if fd in tp and classic in tp:
+            wall = tp[fd]["readings_per_s"] / tp[classic]["readings_per_s"]
+            cpu = max(tp[fd]["all_readings_per_cpu_s"]) / max(tp[classic]["all_readings_per_cpu_s"])
+            print(f"throughput {fd} / {classic} (classic frames), same run: wall {wall:.2f}×, per CPU s {cpu:.2f}×")  # fmt: skip
     if "modbus" in result:
         m = result["modbus"]
         print(f"Modbus p50 daemon {m['daemon']['p50']:.0f} / bare {m['bare']['p50']:.0f} µs: {m['ratio_p50']:.2f}×")  # fmt: skip
@@ -657,6 +688,9 @@ def main() -> int:
     ap.add_argument("--flood", type=int, default=50_000, help="readings per unpaced flood")
     ap.add_argument("--sustain-hz", type=float, default=10_000.0, help="pace of 'sustained'")
     ap.add_argument("--sustain-n", type=int, default=100_000, help="readings of 'sustained'")
+    ap.add_argument(
+        "--fd", action="store_true", help="throughput: also the CAN FD pair (RAW_XYZ/CORRECTED_XYZ)"
+    )
     ap.add_argument("--modbus-n", type=int, default=2000)
     ap.add_argument("--settle-max-s", type=float, default=20.0, help="udp: wait for quiet, s")
     ap.add_argument("--out", type=Path, default=RESULTS)
