@@ -129,7 +129,7 @@ class CanSection(Table):
     bitrate: Annotated[int, Num(0, 20_000_000, "bit/s")] = 0
     """Bit rate, bit/s; 0 = leave the interface's setting alone."""
     fd: bool = False
-    """Open the bus in CAN FD mode."""
+    """Open the bus in CAN FD mode (needed for the one-frame pair RAW_XYZ / CORRECTED_XYZ)."""
     node_id: Annotated[int, Num(0, (STANDARD_ID_MAX + 1) // NODE_STRIDE - 1)] = 0
     """Node number: the daemon's ids are ``base_id + 0x10·node_id`` … ``+ 0xF`` (docs/can.md);
     they must stay 11-bit (0 .. 95 at base_id 0x200)."""
