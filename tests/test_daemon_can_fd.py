@@ -6,6 +6,7 @@ readings with a named event instead of answering wrongly."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import can
 import cantools
@@ -14,7 +15,10 @@ from test_daemon_support import base_config, channel, send_temps
 from test_daemon_uncertainty import OK_POINTS_MM, TEMP_C, u_grid_path
 
 from cmm_comp.daemon.service import DaemonService
-from cmm_comp.protocol import CanIds, MessageKind, dbc_text
+from cmm_comp.daemon.sessionlog.replay import replay_to_bus
+from cmm_comp.protocol import CanIds, MessageKind, dbc_text, encode_message
+from cmm_comp.protocol import RawReading as RawReadingFrame
+from cmm_comp.protocol.codes import nm3_from_mm
 from cmm_comp.sim_controller.controller import CanController, RawReading
 
 DB = cantools.database.load_string(dbc_text(), database_format="dbc")
@@ -98,3 +102,38 @@ def test_fd_reading_on_a_classic_bus_is_refused_by_name() -> None:
         faults = d.metrics.faults
     assert answer.status == "timeout"  # not answered: never a classic answer it did not ask for
     assert faults.get("fd_frame_on_classic_bus") == 1
+
+
+def test_replay_re_sends_fd_frames_as_fd_frames(tmp_path: Path) -> None:
+    """A session of RAW_XYZ readings, logged to MCAP, replayed onto a fresh bus: the receiver
+    gets each reading back as the same 20-byte CAN FD frame (replay used to drop ``is_fd``)."""
+    cfg = base_config(channel(), u_grid_path())
+    cfg.can.fd = True
+    cfg.metrics.enabled = False
+    cfg.mcap.path = str(tmp_path / "fd.mcap")
+    cfg.check()
+    sent = [RawReading(i + 1, p) for i, p in enumerate(OK_POINTS_MM)]
+    with DaemonService(cfg, events_stream=None):
+        bus = can.Bus(interface="virtual", channel=cfg.can.channel, fd=True)
+        try:
+            with CanController(bus, answer_timeout_s=10.0, fd=True) as ctl:
+                send_temps(ctl, TEMP_C)
+                assert all(ctl.exchange(r).status == "ok" for r in sent)
+        finally:
+            bus.shutdown()
+    logs = sorted(tmp_path.glob("*.mcap"))
+    assert logs, "no session log written"
+    ch = channel()
+    with (
+        can.Bus(interface="virtual", channel=ch, fd=True) as out,
+        can.Bus(interface="virtual", channel=ch, fd=True) as rx,
+    ):
+        report = replay_to_bus(logs[0], out, speed=0.0)
+        got = []
+        while (msg := rx.recv(0.2)) is not None:
+            got.append(msg)
+    raw_xyz = [m for m in got if m.arbitration_id == IDS.id_of(MessageKind.RAW_XYZ)]
+    assert report.sent == len(got) and len(raw_xyz) == len(sent)
+    assert all(m.is_fd and len(m.data) == 20 for m in raw_xyz)
+    want = [encode_message(RawReadingFrame(r.seq, nm3_from_mm(r.indicated_mm)), IDS) for r in sent]
+    assert [bytes(m.data) for m in raw_xyz] == [bytes(w.data) for w in want]
