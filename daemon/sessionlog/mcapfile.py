@@ -68,7 +68,7 @@ _SWAP = sys.byteorder != "little"
 COPY_BLOCK = 64 * 1024
 """Bytes read from the chunk index spool at a time when it is copied into the summary."""
 
-Compress = Callable[[bytearray], bytes | bytearray]
+Compress = Callable[[bytearray], bytes]
 """Compresses one chunk's records (a buffer) into the bytes the Chunk record holds."""
 
 
@@ -92,7 +92,7 @@ def compressor(compression: CompressionType) -> tuple[str, Compress]:
 
         return "lz4", lz4.frame.compress
     if compression == CompressionType.NONE:
-        return "", lambda data: data
+        return "", bytes
     raise ValueError(f"compression {compression!r}; allowed: ZSTD, LZ4, NONE")
 
 
