@@ -75,7 +75,6 @@ class EventLog:
         self._min_level = LEVELS[level]
         self._throttle = Throttle(1.0 / max_per_s if max_per_s > 0 else 0.0)
         self._lock = threading.Lock()
-        self.write_errors = 0
 
     def emit(self, event: str, level: str = "info", **fields: Any) -> None:
         """Write one event line (unless below the level or rate-limited)."""
@@ -100,5 +99,5 @@ class EventLog:
             try:
                 self._stream.write(line + "\n")
                 self._stream.flush()
-            except (OSError, ValueError):
-                self.write_errors += 1
+            except (OSError, ValueError):  # a closed or broken stdout: the event is lost
+                pass

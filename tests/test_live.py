@@ -14,7 +14,6 @@ import math
 import os
 import socket
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -351,56 +350,6 @@ def test_nothing_is_encoded_without_a_subscriber(
     s = sink.stats()
     assert calls == ["object", "encode"]  # one record, by the session log's encoding
     assert (s.offered, s.not_encoded, s.sent, s.dropped) == (2001, 2000, 1, 0)
-
-
-def test_overload_drops_the_oldest_and_counts_each(
-    errors: list[BaseException], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """An update is held inside its first message; 100 more arrive in batches of 7 into a queue
-    of 10: exactly the 90 oldest are dropped and the 10 newest are sent by the next update."""
-    entered, gate = threading.Event(), threading.Event()
-
-    def hold(name: str) -> None:
-        if not entered.is_set():
-            entered.set()
-            assert gate.wait(10.0)
-
-    wrap_encoders(monkeypatch, hold)
-    with (
-        LiveSink(settings(queue=10), on_error=errors.append).start() as sink,
-        connect(sink, ["/cmm/raw"]) as client,
-    ):
-        sink.log("/cmm/raw", raw_rec(0, 0.0, 0.0, 0.0), T0_NS)
-        update = threading.Thread(target=sink.tick)  # the view process's loop, held inside
-        update.start()
-        assert entered.wait(5.0)
-        recs = [raw_rec(i, 0.0, 0.0, 0.0) for i in range(1, 101)]
-        for k in range(0, 100, 7):
-            assert sink.log_many("/cmm/raw", recs[k : k + 7], T0_NS + k) == len(recs[k : k + 7])
-        held_stats = sink.stats()
-        gate.set()
-        update.join(10.0)
-        sink.tick()
-        got = [m.json()["seq"] for m in client.receive(11)]
-        deadline = time.monotonic() + 5.0
-        while not client.statuses and time.monotonic() < deadline:
-            client.drain_text(0.05)
-    s = sink.stats()
-    assert (held_stats.dropped, held_stats.queue_len) == (90, 10)
-    assert held_stats.dropped_by_topic == {"/cmm/raw": 90}
-    assert got == [0, *range(91, 101)]
-    assert (s.offered, s.dropped, s.sent, s.not_encoded, s.encode_errors, s.queue_len) == (
-        101,
-        90,
-        11,
-        0,
-        0,
-        0,
-    )
-    assert s.counters()["live_dropped"] == 90
-    assert client.statuses and client.statuses[0]["level"] == 1  # warning
-    assert "90 messages dropped" in client.statuses[0]["message"]
-    assert errors == []
 
 
 def test_bad_values_never_stop_the_sink(sink: LiveSink, errors: list[BaseException]) -> None:

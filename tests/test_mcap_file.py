@@ -1,4 +1,4 @@
-"""The session log's MCAP writer (``mcapfile.McapFileWriter``, written from the spec): the same
+"""The session log's MCAP writer (``mcapfile.McapFileWriter``): the same
 bytes as the ``mcap`` library's writer with all indexes, every chunk indexed by message
 indexes, memory that does not grow with the number of chunks, nothing left behind.
 
@@ -28,7 +28,6 @@ from mcap.writer import CompressionType, Writer
 
 from cmm_comp.daemon.sessionlog.mcapfile import McapFileWriter
 from cmm_comp.daemon.sessionlog.recover import recover
-from cmm_comp.daemon.sessionlog.summary import ChunkIndexSpool
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 WRITER_PY = Path(__file__).resolve().parents[1] / "daemon" / "sessionlog"
@@ -172,25 +171,6 @@ def test_bad_calls_raise_and_leave_the_file_writable(tmp_path: Path) -> None:
         w.add_message(ch, 6, b"{}", 6)
     reader = make_reader(io.BytesIO(out.getvalue()))
     assert [m.log_time for _, _, m in reader.iter_messages()] == [5]
-
-
-def test_spool_keeps_records_in_order(tmp_path: Path) -> None:
-    records = [bytes([8]) + struct.pack("<Q", i % 50) + bytes(i % 50) for i in range(2500)]
-    spool = ChunkIndexSpool(tmp_path)
-    try:
-        for r in records:
-            spool.append(r)
-        assert len(spool) == len(records)
-        assert spool.nbytes == sum(map(len, records))
-        assert b"".join(spool.blocks(1000)) == b"".join(records)
-        assert all(len(b) <= 1000 for b in spool.blocks(1000))
-        spool.append(records[0])  # iteration leaves the spool appendable
-        assert b"".join(spool.blocks()) == b"".join(records) + records[0]
-    finally:
-        spool.close()
-    spool.close()  # idempotent
-    with pytest.raises(ValueError, match="closed"):
-        spool.append(records[0])
 
 
 def _held_bytes(n_messages: int, tmp_path: Path) -> int:

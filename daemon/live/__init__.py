@@ -5,7 +5,7 @@ over the Foxglove WebSocket protocol (``foxglove-sdk``, optional extra ``live``;
 * :mod:`.scene` - the correction vectors as ``foxglove.SceneUpdate`` arrows;
 * :mod:`.server` - the ``foxglove-sdk`` side: its own context, the channels, the server;
 * :mod:`.decimate` - which messages of an update are sent (the high-rate topics decimated);
-* :mod:`.sink` - :class:`LiveSink`: bounded queue, updates (``tick``), WebSocket server: what
+* :mod:`.sink` - :class:`LiveSink`: updates (``tick``), WebSocket server: what
   runs in the view's process;
 * :mod:`.process` - :class:`LiveProcessSink`, the daemon's live view: the daemon copies the
   watched records into shared memory (:mod:`..childproc`: no thread, no system call), a child

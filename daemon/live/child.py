@@ -6,7 +6,7 @@ threads inherit it: they run only on CPU time nothing else wants).
 Its loop runs ``update_rate_hz`` times a second (:data:`IDLE_PERIOD_S` while no client watches):
 a heartbeat and the watched topics into the shared memory, the daemon's records from the ring
 straight into the update of an ordinary :class:`LiveSink` (:meth:`LiveSink.tick`: decimate,
-encode, send, scene; its own queue stays empty), and
+encode, send, scene), and
 every :data:`STATUS_PERIOD_S` its status (:class:`LiveStats`); errors go to the daemon as
 ``warning`` events on the pipe, at most :data:`ERRORS_PER_S` a second (the next one says how
 many were held back). It ends when the daemon asks, or when the daemon is gone.

@@ -54,12 +54,6 @@ class LiveServer:
         """The bound port."""
         return int(self.server.port)
 
-    def warn_clients(self, text: str, status_id: str) -> None:
-        """Send a protocol ``status`` message (level warning) to every client."""
-        from foxglove.websocket import StatusLevel
-
-        self.server.publish_status(text, StatusLevel.Warning, id=status_id)
-
     def close_channels(self) -> None:
         """Close every channel (clients see them unadvertised); never raises."""
         for ch in [*self.channels.values(), self.scene]:

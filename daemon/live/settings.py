@@ -61,9 +61,9 @@ class LiveSection(Table):
     """Allow a non-loopback ``host`` (the protocol has no authentication: anyone who reaches the
     port sees every reading)."""
     queue: Annotated[int, Num(1, 1_000_000, "messages")] = 4096
-    """Messages the live view holds between two updates (its process's queue: when full the
-    oldest are dropped; also the size of the shared-memory ring between the daemon and the
-    process, 256 bytes a message: when full the newest are dropped); every drop is counted."""
+    """Size of the shared-memory ring between the daemon and the view's process, in messages
+    (256 bytes a message): what arrives between two updates waits there; when it is full the
+    newest are dropped, every drop counted (``live_dropped``)."""
     update_rate_hz: Annotated[float, _RATE_HZ] = 10.0
     """Updates sent to clients per second, at most (what arrived in between goes out
     together, the high-rate topics decimated). 10 by default: a viewer on the daemon's host

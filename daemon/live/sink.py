@@ -1,18 +1,15 @@
 """:class:`LiveSink`: the daemon's session-log topics, live, over the Foxglove WebSocket protocol.
 
 The sink is one more consumer of what the daemon already hands its session log (compact record
-tuples and dicts, ``log`` / ``log_many``, see ``sessionlog``): :class:`.fanout.LiveFanOut` gives
-each call to the MCAP logger and to the sink. On the calling (reply) thread the sink only
+tuples and dicts, ``log`` / ``log_many``, see ``sessionlog``). In the daemon those calls go to
+:class:`.process.LiveProcessSink`, which copies them into shared memory; the view's process
+(:mod:`.child`) hands what it read to :meth:`LiveSink.tick`. Used on its own (tests, a
+program of its own), :meth:`LiveSink.log_many` keeps the batches for the next update.
 
-* drops the call at once when nobody is subscribed to the topic (counted ``not_encoded``; the
-  newest ``/cmm/status`` and ``/cmm/grid`` are kept by reference, to greet a new subscriber),
-* else appends the batch to a bounded queue under one short lock; when the queue holds more than
-  ``queue`` messages the **oldest** are dropped (a live view wants the newest), counted exactly
-  per topic.
-
-Each update (:meth:`LiveSink.tick`, called by the live view's process at most
-``update_rate_hz`` times a second: :mod:`.child`) takes the queue, decimates the high-rate
-topics (:mod:`.decimate`: at most ``max_per_update`` messages of ``/cmm/raw`` and of
+Each update (:meth:`LiveSink.tick`, at most ``update_rate_hz`` times a second) takes the
+batches offered since the last one (a topic nobody is subscribed to is counted
+``not_encoded`` and never encoded; the newest ``/cmm/status`` and ``/cmm/grid`` are kept to
+greet a new subscriber), decimates the high-rate topics (:mod:`.decimate`: at most ``max_per_update`` messages of ``/cmm/raw`` and of
 ``/cmm/corrected`` per update, counted ``decimated``), encodes each message as the session log
 does (``sessionlog.encoding``: the topic's Struct, ``stamp = {sec, nsec}``; a non-finite
 number as ``null``, counted) and hands it to the SDK's server (``foxglove-sdk``: a Rust
@@ -26,7 +23,6 @@ that cannot listen raises :class:`LiveStartError` (one line) from :meth:`LiveSin
 
 from __future__ import annotations
 
-import collections
 import logging
 import threading
 import time
@@ -59,8 +55,6 @@ LATCHED_TOPICS: frozenset[str] = frozenset({"/cmm/status", "/cmm/grid"})
 SCENE_TOPIC = "/cmm/scene"
 """The derived ``foxglove.SceneUpdate`` channel (protobuf) of the correction vectors."""
 CORRECTED = "/cmm/corrected"
-STATUS_PERIOD_S = 1.0
-"""Drops are reported to clients (a protocol ``status`` message) at most this often, s."""
 Batch = tuple[str, Sequence[Any], int]
 """``(topic, payloads, log_time_ns)``: what one ``log_many`` call offers."""
 _TIME_NS_MAX = 2**64 - 1
@@ -75,7 +69,8 @@ class LiveStats:
     encoded), ``decimated`` (left out of an update, :mod:`.decimate`), ``dropped`` (a queue
     was full), ``sent`` (encoded and handed to the server) or ``encode_errors`` (could not be
     built or encoded), or still waits (``queue_len``); so ``offered = not_encoded + decimated +
-    dropped + sent + encode_errors + queue_len``. ``up``: the view runs (its process is alive
+    dropped + sent + encode_errors + queue_len`` (``dropped`` and ``queue_len``: the daemon's
+    shared-memory ring, :class:`.process.LiveProcessSink`). ``up``: the view runs (its process is alive
     and has looped within :data:`.process.STALL_S`).
     ``nulled``: non-finite numbers sent as ``null``. ``replayed``: latched messages sent again
     to new subscribers. Scene: ``scene_updates`` sent, ``scene_points`` drawn, ``scene_decimated``
@@ -120,8 +115,8 @@ class LiveSink(ReportingConsumer):
     """Stream the session-log topics and ``/cmm/scene`` to Foxglove WebSocket clients.
 
     ``with LiveSink(settings).start() as live: live.log_many(topic, records); live.tick()``;
-    or :meth:`start`, :meth:`tick` at the update rate, then :meth:`stop`. Thread-safe
-    producers; never blocks them.
+    or :meth:`start`, :meth:`tick` at the update rate (with the batches, in the view's
+    process), then :meth:`stop`. Thread-safe producers; never blocks them.
 
     :param settings: the ``[live]`` section (checked again here: a bad host is refused).
     :param on_error: called with each problem (a message that could not be encoded, a failure in
@@ -144,16 +139,14 @@ class LiveSink(ReportingConsumer):
         self.settings = settings
         self._name = name
         self._lock = threading.Lock()
-        self._batches: collections.deque[Batch] = collections.deque()
-        self._queued = 0
-        self._limit = int(settings.queue)
+        self._batches: list[Batch] = []
         self._wanted: frozenset[str] = frozenset()
         self._latest: dict[str, tuple[Any, int]] = {}
         self._replay: set[str] = set()
         self._subs: dict[int, set[int]] = {}  # channel id -> client ids
         self._sub_lock = threading.Lock()
         self._topic_of: dict[int, str] = {}
-        # counters (feeders, under _lock)
+        # counters (under _lock; idle and dropped: the daemon's side, LiveProcessSink)
         self._offered = 0
         self._idle = 0
         self._dropped = 0
@@ -172,11 +165,6 @@ class LiveSink(ReportingConsumer):
         self._pending: list[Any] = []
         self._next_slot = 0
         self._last_scene = 0.0
-        self._last_status = 0.0
-        self._reported_drops = 0
-        self.upstream_dropped = 0
-        """Messages dropped before they reached this sink (the daemon's queue, when this sink
-        runs in the child of :class:`.process.LiveProcessSink`): told to clients with ours."""
         self._server: LiveServer | None = None
         self._channels: dict[str, Any] = {}
         self._topics: frozenset[str] = frozenset()  # taken by log_many once started
@@ -236,53 +224,29 @@ class LiveSink(ReportingConsumer):
     # ------------------------------------------------------------------ producers
     def log_many(self, topic: str, payloads: Sequence[Any], log_time_ns: int | None = None) -> int:
         """Offer ``payloads`` of ``topic`` (record tuples or dicts, as the session log takes
-        them) with one log time (integer ns since the epoch; now if None). Never blocks; the
-        sequence and its payloads must not be changed afterwards. Returns ``len(payloads)``
+        them) with one log time (integer ns since the epoch; now if None) to the next
+        :meth:`tick` (a topic nobody watches: counted ``not_encoded`` at once; beyond ``queue``
+        batches waiting, dropped and counted). Never blocks;
+        the sequence and its payloads must not be changed afterwards. Returns ``len(payloads)``
         (0 once stopped); topics the view does not stream are ignored."""
         n = len(payloads)
-        if topic not in self._wanted:  # the common case: nobody watches this topic
-            if n and topic in self._topics:
-                if topic in LATCHED_TOPICS:
-                    self._latest[topic] = (payloads[-1], log_time_ns or time.time_ns())
-                if self._stopped:
-                    return 0
-                with self._lock:
-                    self._offered += n
-                    self._idle += n
+        if not n or topic not in self._topics:
             return n
-        if not n:
-            return 0
-        if log_time_ns is None:
-            log_time_ns = time.time_ns()
+        t_ns = time.time_ns() if log_time_ns is None else log_time_ns
         if topic in LATCHED_TOPICS:
-            self._latest[topic] = (payloads[-1], log_time_ns)
+            self._latest[topic] = (payloads[-1], t_ns)
         if self._stopped:
             return 0
         with self._lock:
             self._offered += n
-            self._batches.append((topic, payloads, log_time_ns))
-            self._queued += n
-            if self._queued > self._limit:
-                self._drop_oldest()
+            if topic not in self._wanted:  # the common case: nobody watches this topic
+                self._idle += n
+            elif len(self._batches) < self.settings.queue:
+                self._batches.append((topic, payloads, t_ns))
+            else:  # nobody ticks: bounded, the newest dropped (as by the daemon's ring)
+                self._dropped += n
+                self._dropped_by[topic] = self._dropped_by.get(topic, 0) + n
         return n
-
-    def _drop_oldest(self) -> None:
-        """Drop the oldest messages until the queue holds ``queue`` (lock held)."""
-        excess = self._queued - self._limit
-        batches = self._batches
-        while excess > 0:
-            topic, items, t_ns = batches[0]
-            k = len(items)
-            if k <= excess:
-                batches.popleft()
-                cut = k
-            else:
-                batches[0] = (topic, items[excess:], t_ns)
-                cut = excess
-            excess -= cut
-            self._queued -= cut
-            self._dropped += cut
-            self._dropped_by[topic] = self._dropped_by.get(topic, 0) + cut
 
     def kick(self) -> None:
         """Nothing to wake: updates run at their own rate (the :class:`SessionLogger` call)."""
@@ -322,7 +286,7 @@ class LiveSink(ReportingConsumer):
         """A snapshot of the counters (exact after :meth:`stop`)."""
         with self._lock:
             offered, idle, dropped = self._offered, self._idle, self._dropped
-            queued, by_topic = self._queued, dict(self._dropped_by)
+            by_topic = dict(self._dropped_by)
         clients, subs = self._sub_counts()
         return LiveStats(
             offered=offered,
@@ -331,7 +295,7 @@ class LiveSink(ReportingConsumer):
             dropped=dropped,
             sent=self._sent,
             encode_errors=self._errors,
-            queue_len=queued,
+            queue_len=0,
             nulled=self._nulled,
             replayed=self._replayed,
             scene_updates=self._scene_updates,
@@ -349,24 +313,22 @@ class LiveSink(ReportingConsumer):
 
     # ------------------------------------------------------------------ updates
     def tick(self, final: bool = False, batches: Iterable[Batch] | None = None) -> None:
-        """One update: send what waits (decimated), greet new subscribers, the scene (forced
-        when ``final``), the drop warning. Never raises (a bug is reported). What waits is the
-        queue's, or ``batches`` when given: ``(topic, payloads, log_time_ns)`` offered straight
-        to this update, as :meth:`log_many` would (the view's process hands it what it read
-        from shared memory: no second queue)."""
+        """One update: send what was offered (decimated), greet new subscribers, the scene
+        (forced when ``final``). Never raises (a bug is reported). What was offered: the
+        batches of :meth:`log_many` since the last update, or ``batches`` when given:
+        ``(topic, payloads, log_time_ns)`` (the view's process hands it what it read from
+        shared memory)."""
         try:
             self._drain(self._take() if batches is None else self._offer(batches))
             self._replay_latched()
             self._scene_tick(time.monotonic(), force=final)
-            self._status_tick(time.monotonic())
         except Exception as exc:  # a bug: reported, the loop goes on
             self._report(exc)
 
-    def _take(self) -> Sequence[Batch]:
-        """The queue's batches, the queue emptied."""
+    def _take(self) -> list[Batch]:
+        """The batches :meth:`log_many` kept, taken."""
         with self._lock:
-            batches, self._batches = self._batches, collections.deque()
-            self._queued = 0
+            batches, self._batches = self._batches, []
         return batches
 
     def _offer(self, batches: Iterable[Batch]) -> list[Batch]:
@@ -503,19 +465,3 @@ class LiveSink(ReportingConsumer):
         self._scene_channel.log(update, log_time=picked[-1].t_ns)
         self._scene_updates += 1
         self._scene_points += len(picked)
-
-    def _status_tick(self, now: float) -> None:
-        dropped = self._dropped + self.upstream_dropped
-        if self._server is None or dropped == self._reported_drops:
-            return
-        if now - self._last_status < STATUS_PERIOD_S:
-            return
-        self._last_status = now
-        new, self._reported_drops = dropped - self._reported_drops, dropped
-        try:
-            self._server.warn_clients(
-                f"cmm-comp live view: {new} messages dropped (queue full; {dropped} in all)",
-                "live-drops",
-            )
-        except Exception as exc:
-            self._report(exc)

@@ -7,9 +7,8 @@
   :class:`LogSettings`, :class:`LoggerStats` and what the writers share;
 * :mod:`.writer` - session files: naming (and rotating an existing name), opening, finishing,
   and :class:`SessionWriter`, which writes messages into them in the calling thread;
-* :mod:`.mcapfile` - :class:`McapFileWriter`, a chunked MCAP file with every index, written from
-  the format's specification (:mod:`.mcapwire`: the records as bytes; :mod:`.summary`: the chunk
-  index spooled to disk, the summary section);
+* :mod:`.mcapfile` - :class:`McapFileWriter`, a chunked MCAP file with every index (records
+  built by ``mcap.records``; the message path and the chunk index spooled to disk are ours);
 * :mod:`.process_writer` - :class:`McapProcessLogger`, the daemon's log: a :class:`SessionWriter`
   in a child process (:mod:`..childproc`), fed straight from shared memory;
 * :mod:`.reader` - read sessions back (rolled sets, files cut by a crash);

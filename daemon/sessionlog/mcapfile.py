@@ -1,18 +1,16 @@
-"""A chunked MCAP writer with every index, built on the format's specification.
+"""A chunked MCAP file with every index: :class:`McapFileWriter`.
 
-:class:`McapFileWriter` writes what the ``mcap`` package's ``Writer`` writes with all indexes
-(``IndexType.ALL``, the defaults): the same records in the same order, byte for byte
-(``tests/test_mcap_file.py`` compares whole files), with three differences that are why it
-exists:
+It writes what the ``mcap`` package's ``Writer`` writes with all indexes (``IndexType.ALL``,
+its defaults): the same records in the same order, byte for byte (``tests/test_mcap_file.py``
+compares whole files). Every record but the per-message ones is built by that package's public
+record classes (``mcap.records``: ``.write(RecordBuilder)``). What is ours, and why it exists:
 
-* it depends on the published MCAP format only (:mod:`.mcapwire`), never on a library's private
-  attributes (the session log used to reach into ``mcap``'s name-mangled internals to make
-  writing cheap: a patch release could have broken it);
-* a message costs about what it cost before with message indexes switched off (one packed
-  header, two buffer appends, one index entry; docs/mcap.md, "The writer's cost per message"), while
-  ``Writer.add_message`` with message indexes costs ~5× more;
-* the Chunk Index records wait on disk (:class:`.summary.ChunkIndexSpool`) and the summary is
-  streamed from there (:func:`.summary.write_summary`): memory does not grow with the file.
+* a message costs one packed header, two buffer appends and one index entry (docs/mcap.md,
+  "The writer's cost per message"); ``Writer.add_message`` with message indexes costs ~5× more;
+* the Chunk Index records wait on disk, in an anonymous temporary file next to the log (nothing
+  is left behind by a crash; ``cmm-comp mcap recover`` rebuilds them from the chunks), and the
+  summary is streamed from there: memory does not grow with the file (the ``mcap`` writer keeps
+  ~1.4 KiB per chunk until it finishes: ~40 MiB an hour for a file that never rolls at 1 kHz).
 
 Message Index records are written after every chunk: ``@mcap/core``'s ``McapIndexedReader``
 (what Foxglove and Lichtblick use for local files) refuses a chunk index without them.
@@ -20,31 +18,66 @@ Message Index records are written after every chunk: ``@mcap/core``'s ``McapInde
 Layout: Header; then, in call order, Metadata and Attachment records (written at once) and
 Chunks (each followed by its Message Index records; Schema and Channel records go into the
 chunk in progress and reach the file with its first message); Data End; the summary (schemas,
-channels, statistics, chunk indexes, attachment indexes, metadata indexes, summary offsets);
-Footer. A chunk is written when its uncompressed records exceed ``chunk_size`` or at
+channels, statistics, chunk indexes, attachment indexes, metadata indexes, one summary offset
+per group); Footer. A chunk is written when its uncompressed records exceed ``chunk_size`` or at
 :meth:`McapFileWriter.flush`: a process killed between two flushes loses the chunk in progress
 and nothing before it.
 """
 
 from __future__ import annotations
 
+import struct
+import sys
+import tempfile
 import zlib
-from collections.abc import Callable, Mapping
+from array import array
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import IO
 
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    McapRecord,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
 from mcap.writer import CompressionType
 
-from . import mcapwire
-from .mcapwire import MAGIC, MESSAGE_FIXED, MESSAGE_HEAD, Op
-from .summary import ChunkIndexSpool, write_summary
-
+MAGIC = b"\x89MCAP0\r\n"
+"""Starts and ends every MCAP file."""
+MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+"""A whole Message record up to its data: opcode, length (22 + data), channel id, sequence,
+log time, publish time (ns)."""
+_MESSAGE_FIXED = 22
+_OP_MESSAGE = int(Opcode.MESSAGE)
 _pack_message_head = MESSAGE_HEAD.pack
-_OP_MESSAGE = Op.MESSAGE
+_MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")
+_SWAP = sys.byteorder != "little"
+COPY_BLOCK = 64 * 1024
+"""Bytes read from the chunk index spool at a time when it is copied into the summary."""
 
-
-Compress = Callable[[bytearray], bytes | bytearray]
+Compress = Callable[[bytearray], bytes]
 """Compresses one chunk's records (a buffer) into the bytes the Chunk record holds."""
+
+
+def record_bytes(*records: McapRecord) -> bytes:
+    """``records`` as the file holds them (``mcap``'s own serialization)."""
+    builder = RecordBuilder()
+    for rec in records:
+        rec.write(builder)
+    return builder.end()
 
 
 def compressor(compression: CompressionType) -> tuple[str, Compress]:
@@ -59,12 +92,19 @@ def compressor(compression: CompressionType) -> tuple[str, Compress]:
 
         return "lz4", lz4.frame.compress
     if compression == CompressionType.NONE:
-        return "", _as_is
+        return "", bytes
     raise ValueError(f"compression {compression!r}; allowed: ZSTD, LZ4, NONE")
 
 
-def _as_is(data: bytearray) -> bytearray:
-    return data
+def message_index(channel_id: int, times_offsets: list[int]) -> bytes:
+    """Message Index record of one channel in one chunk; ``times_offsets`` holds the
+    ``(log time, offset in the uncompressed chunk)`` pairs flattened: ``[t0, o0, t1, o1, …]``."""
+    packed = array("Q", times_offsets)  # OverflowError if one is not a uint64
+    if _SWAP:
+        packed.byteswap()
+    n = 8 * len(times_offsets)
+    head = _MESSAGE_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + n, channel_id, n)
+    return head + packed.tobytes()
 
 
 class McapFileWriter:
@@ -105,14 +145,12 @@ class McapFileWriter:
         """Per channel of the chunk in progress, ``[log time, offset, log time, offset, …]``."""
         self._schemas: dict[int, bytes] = {}
         self._channels: dict[int, bytes] = {}
-        self._counts: dict[int, int] = {}
-        self._message_count = 0
-        self._start_ns = 0
-        self._end_ns = 0
-        self._chunk_count = 0
+        self._stats = Statistics(0, 0, {}, 0, 0, 0, 0, 0, 0)
         self._attachment_indexes: list[bytes] = []
         self._metadata_indexes: list[bytes] = []
-        self._spool = ChunkIndexSpool(spool_dir)
+        self._spool_dir = None if spool_dir is None else str(spool_dir)
+        self._spool: IO[bytes] | None = None
+        self._spooled = 0
         self._state = "new"
 
     # ------------------------------------------------------------------ records
@@ -122,14 +160,14 @@ class McapFileWriter:
         if self._state != "new":
             raise ValueError("MCAP writer already started")
         self._state = "open"
-        self._write(MAGIC)
-        self._write(mcapwire.header(profile, library))
+        self._write(MAGIC + record_bytes(Header(profile, library)))
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
         """Add a Schema record (to the chunk in progress); returns its id (1, 2, …)."""
         self._check_open()
         schema_id = len(self._schemas) + 1
-        self._to_chunk(mcapwire.schema(schema_id, name, encoding, data), self._schemas, schema_id)
+        rec = record_bytes(Schema(id=schema_id, data=data, encoding=encoding, name=name))
+        self._to_chunk(rec, self._schemas, schema_id)
         return schema_id
 
     def register_channel(
@@ -145,8 +183,8 @@ class McapFileWriter:
         if schema_id and schema_id not in self._schemas:
             raise ValueError(f"channel {topic!r}: schema id {schema_id} is not registered")
         channel_id = len(self._channels) + 1
-        rec = mcapwire.channel(channel_id, schema_id, topic, message_encoding, metadata or {})
-        self._to_chunk(rec, self._channels, channel_id)
+        rec = Channel(channel_id, topic, message_encoding, dict(metadata or {}), schema_id)
+        self._to_chunk(record_bytes(rec), self._channels, channel_id)
         return channel_id
 
     def add_message(
@@ -156,7 +194,7 @@ class McapFileWriter:
         chunk when it exceeds ``chunk_size``. The hot path of the session log."""
         size = len(data)
         head = _pack_message_head(
-            _OP_MESSAGE, MESSAGE_FIXED + size, channel_id, sequence, log_time, publish_time
+            _OP_MESSAGE, _MESSAGE_FIXED + size, channel_id, sequence, log_time, publish_time
         )  # raises (struct.error) before anything changes on a value out of range
         chunk = self._chunk
         pos = len(chunk)
@@ -176,10 +214,9 @@ class McapFileWriter:
     def add_metadata(self, name: str, values: Mapping[str, str]) -> None:
         """Write a Metadata record now (outside chunks) and index it."""
         self._check_open()
-        offset = self._pos
-        rec = mcapwire.metadata(name, values)
+        offset, rec = self._pos, record_bytes(Metadata(name, dict(values)))
         self._write(rec)
-        self._metadata_indexes.append(mcapwire.metadata_index(offset, len(rec), name))
+        self._metadata_indexes.append(record_bytes(MetadataIndex(offset, len(rec), name)))
 
     def add_attachment(
         self, create_time: int, log_time: int, name: str, media_type: str, data: bytes
@@ -187,13 +224,12 @@ class McapFileWriter:
         """Write an Attachment record now (outside chunks) and index it."""
         self._check_open()
         offset = self._pos
-        rec = mcapwire.attachment(log_time, create_time, name, media_type, data)
+        rec = record_bytes(Attachment(create_time, log_time, name, media_type, data))
         self._write(rec)
-        self._attachment_indexes.append(
-            mcapwire.attachment_index(
-                offset, len(rec), log_time, create_time, len(data), name, media_type
-            )
+        index = AttachmentIndex(
+            offset, len(rec), log_time, create_time, len(data), name, media_type
         )
+        self._attachment_indexes.append(record_bytes(index))
 
     # ------------------------------------------------------------------ flushing and finishing
 
@@ -209,48 +245,47 @@ class McapFileWriter:
         self._check_open()
         self._finish_chunk()
         self._state = "finished"
-        self._write(mcapwire.data_end())
-        stats = mcapwire.statistics(
-            self._message_count,
-            len(self._schemas),
-            len(self._channels),
-            len(self._attachment_indexes),
-            len(self._metadata_indexes),
-            self._chunk_count,
-            self._start_ns,
-            self._end_ns,
-            self._counts,
-        )
-        groups = [
-            (Op.SCHEMA, self._schemas.values()),
-            (Op.CHANNEL, self._channels.values()),
-            (Op.STATISTICS, [stats]),
-            (Op.CHUNK_INDEX, self._spool.blocks()),
-            (Op.ATTACHMENT_INDEX, self._attachment_indexes),
-            (Op.METADATA_INDEX, self._metadata_indexes),
+        self._write(record_bytes(DataEnd(0)))
+        st = self._stats
+        st.schema_count, st.channel_count = len(self._schemas), len(self._channels)
+        st.attachment_count = len(self._attachment_indexes)
+        st.metadata_count = len(self._metadata_indexes)
+        groups: list[tuple[Opcode, Iterable[bytes]]] = [
+            (Opcode.SCHEMA, self._schemas.values()),
+            (Opcode.CHANNEL, self._channels.values()),
+            (Opcode.STATISTICS, [record_bytes(st)]),
+            (Opcode.CHUNK_INDEX, self._spooled_blocks()),
+            (Opcode.ATTACHMENT_INDEX, self._attachment_indexes),
+            (Opcode.METADATA_INDEX, self._metadata_indexes),
         ]
-        self._write(write_summary(self._write, self._pos, groups))
-        self._write(MAGIC)
+        summary_start = self._pos
+        crc = 0
+        offsets = []
+        for opcode, blocks in groups:  # one summary offset per group, also an empty one
+            start = self._pos
+            for block in blocks:
+                self._write(block)
+                crc = zlib.crc32(block, crc)
+            offsets.append(SummaryOffset(opcode, start, self._pos - start))
+        tail = record_bytes(*offsets, Footer(summary_start, self._pos, 0))
+        # the summary CRC covers the summary section and the footer up to the CRC itself
+        crc = zlib.crc32(tail[:-4], crc)
+        self._write(tail[:-4] + struct.pack("<I", crc) + MAGIC)
         self._stream.flush()
 
     def release(self) -> None:
         """Delete the chunk index spool (after :meth:`finish`, or when the file is abandoned
         after an error); idempotent. The stream is the caller's to close."""
-        self._spool.close()
+        spool, self._spool = self._spool, None
+        if spool is not None:
+            spool.close()
         if self._state == "open":
             self._state = "abandoned"
-
-    # ------------------------------------------------------------------ counters
-
-    @property
-    def message_count(self) -> int:
-        """Messages written so far, including those in the chunk in progress."""
-        return self._message_count + sum(len(v) for v in self._index.values()) // 2
 
     @property
     def chunk_count(self) -> int:
         """Chunks written so far."""
-        return self._chunk_count
+        return self._stats.chunk_count
 
     # ------------------------------------------------------------------ internals
 
@@ -268,6 +303,20 @@ class McapFileWriter:
         if len(self._chunk) > self._chunk_size:
             self._finish_chunk()
 
+    def _spooled_blocks(self) -> Iterator[bytes]:
+        """The spooled Chunk Index records, :data:`COPY_BLOCK` bytes at a time."""
+        if self._spool is None:
+            return
+        self._spool.flush()
+        self._spool.seek(0)
+        left = self._spooled
+        while left > 0:
+            block = self._spool.read(min(COPY_BLOCK, left))
+            if not block:
+                raise OSError(f"chunk index spool is short by {left} bytes")
+            left -= len(block)
+            yield block
+
     def _finish_chunk(self) -> None:
         """Write the chunk in progress and its Message Index records, spool its Chunk Index
         record, count its messages. Nothing without a message (schema and channel records
@@ -280,38 +329,33 @@ class McapFileWriter:
         start_ns, end_ns = min(map(min, times)), max(map(max, times))
         data = self._compress(raw)
         chunk_start = self._pos
-        self._write(
-            mcapwire.chunk_head(
-                start_ns, end_ns, len(raw), zlib.crc32(raw), self._compression, len(data)
-            )
-        )
-        self._write(data)
+        crc = zlib.crc32(raw)
+        self._write(record_bytes(Chunk(self._compression, data, end_ns, start_ns, crc, len(raw))))
         chunk_length = self._pos - chunk_start
-        index_start = self._pos
         offsets: dict[int, int] = {}
-        n = 0
+        counts = self._stats.channel_message_counts
         for channel_id, times_offsets in index.items():
             offsets[channel_id] = self._pos
-            self._write(mcapwire.message_index(channel_id, times_offsets))
-            k = len(times_offsets) // 2
-            self._counts[channel_id] = self._counts.get(channel_id, 0) + k
-            n += k
-        self._spool.append(
-            mcapwire.chunk_index(
-                start_ns,
-                end_ns,
-                chunk_start,
-                chunk_length,
-                offsets,
-                self._pos - index_start,
-                self._compression,
-                len(data),
-                len(raw),
-            )
+            self._write(message_index(channel_id, times_offsets))
+            counts[channel_id] = counts.get(channel_id, 0) + len(times_offsets) // 2
+        rec = ChunkIndex(
+            chunk_length=chunk_length,
+            chunk_start_offset=chunk_start,
+            compression=self._compression,
+            compressed_size=len(data),
+            message_end_time=end_ns,
+            message_index_length=self._pos - chunk_start - chunk_length,
+            message_index_offsets=offsets,
+            message_start_time=start_ns,
+            uncompressed_size=len(raw),
         )
-        self._start_ns = start_ns if self._message_count == 0 else min(self._start_ns, start_ns)
-        self._end_ns = max(self._end_ns, end_ns)
-        self._message_count += n
-        self._chunk_count += 1
+        if self._spool is None:  # closed by release()
+            self._spool = tempfile.TemporaryFile(dir=self._spool_dir, prefix=".mcap-chunk-index-")  # noqa: SIM115
+        self._spooled += self._spool.write(record_bytes(rec))
+        st = self._stats
+        st.message_start_time = min(st.message_start_time, start_ns) if st.chunk_count else start_ns
+        st.message_end_time = max(st.message_end_time, end_ns)
+        st.message_count += sum(len(v) for v in index.values()) // 2
+        st.chunk_count += 1
         self._chunk = bytearray()
         self._index = {}

@@ -20,7 +20,7 @@ from typing import IO, Any
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.records import Channel, Footer, McapRecord, Message, Metadata, Schema
+from mcap.records import Channel, Footer, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from .schemas import ns_from_stamp
@@ -95,7 +95,6 @@ class MessageStream:
 
     def _iter_file(self, path: Path) -> Iterator[LoggedMessage]:
         channels: dict[int, Channel] = {}
-        schemas: dict[int, Schema] = {}
         complete = False
         cut: list[str] = []
         with open(path, "rb") as f:
@@ -112,8 +111,6 @@ class MessageStream:
                     yield LoggedMessage(channel.topic, record.log_time, json.loads(record.data))
                 elif isinstance(record, Channel):
                     channels[record.id] = record
-                elif isinstance(record, Schema):
-                    schemas[record.id] = record
                 elif isinstance(record, Metadata):
                     self.metadata.append((record.name, dict(record.metadata)))
                 elif isinstance(record, Footer):
