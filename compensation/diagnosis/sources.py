@@ -49,9 +49,12 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from ..parametric_errors import AXIS_INDEX
 from .candidate import Candidate
+from .coordinate_map import through_map
 from .fitting import Problem, Term, best_theta, fit
-from .reference_candidates import through_map
+from .reference_candidates import cyclic_builder, cyclic_design
+from .residuals import Residuals
 
 #: A twin is separable only when it misses at least this share of the named term's energy.
 SEPARATION_FLOOR = 0.01
@@ -147,21 +150,64 @@ class SourceCall:
 
 
 def _twin_fit(
-    problem: Problem, others: list[Term], term: Term, twin: Candidate, rich: bool
+    problem: Problem, others: list[Term], term: Term, cand: Candidate
 ) -> tuple[Term, float]:
-    """The twin at its default or rich shape (``rich``), its parameter profiled about the term's;
-    a twin in the other coordinate (position ↔ reading) through the session's map between them
-    (:func:`.reference_candidates.through_map`: a function of the reading beside functions of
+    """The twin ``cand`` (one of its shapes), its parameter profiled about the term's; a twin
+    in the other coordinate (position ↔ reading) through the session's map between them
+    (:func:`.coordinate_map.through_map`: a function of the reading beside functions of
     the position would otherwise span the observed error itself)."""
-    if {twin.locked_to, term.candidate.locked_to} == {"position", "reference"}:
-        twin = through_map(twin, problem.res)
-    cand = twin.rich if rich and twin.rich is not None else twin
+    if {cand.locked_to, term.candidate.locked_to} == {"position", "reference"}:
+        cand = through_map(cand, problem.res)
     near = term.theta if isinstance(term.theta, float) else None
     if isinstance(term.theta, tuple) and cand.theta_step is not None:
         # the same law to start from: only its continuous refinement is needed
         cand = replace(cand, thetas=(term.theta,), _cache={}, _statics={})
     theta, rss, _ = best_theta(problem, others, cand, near=near)
     return Term(cand, theta), rss
+
+
+def _cyclic_shape(cand: Candidate) -> tuple[int, int]:
+    """(harmonics, envelope order) of a cyclic candidate's columns."""
+    return cand.n_params // (2 * (cand.envelope + 1)), cand.envelope
+
+
+def mirror(res: Residuals, term: Term, twin: Candidate) -> Candidate | None:
+    """The cyclic twin at the *term's own* shape (harmonics and envelope), or ``None`` when
+    the pair is not two constant-period cyclic errors or the twin already has that shape.
+
+    Without a reversal a position has one reading, and a cyclic error of one coordinate *is*
+    the same columns of the other: the twin must be offered the term's shape, or the test
+    compares two shapes instead of two coordinates (a sensor's ripple whose amplitude changes
+    along its range, fitted with its envelope, refuted the machine's constant-amplitude twin
+    by Δχ² ≈ 5 000–60 000 in sessions without a reversal, where the physics has Δχ² = 0)."""
+    if {term.candidate.cause, twin.cause} != {"periodic", "reference_ripple"}:
+        return None
+    if twin.theta_step is not None or not isinstance(term.theta, float):
+        return None  # chirped laws: both instruments already have the same shapes
+    shape = _cyclic_shape(term.candidate)
+    own = [twin] + ([twin.rich] if twin.rich is not None else [])
+    if any(_cyclic_shape(c) == shape for c in own):
+        return None
+    axis = _axis_of(twin)
+    assert axis is not None
+    k = AXIS_INDEX[axis]
+    span = (float(np.min(res.q_mm[:, k])), float(np.max(res.q_mm[:, k])))
+    centre = 0.5 * (span[0] + span[1])
+    ref_point = float(res.machine.volume.reference_mm[k])
+    h, e = shape
+    return Candidate(
+        twin.cause,
+        dict(twin.keys),
+        2 * h * (e + 1),
+        cyclic_builder(axis, twin.locked_to, shape, centre, span),
+        thetas=twin.thetas,
+        look_elsewhere=twin.look_elsewhere,
+        design_fn=cyclic_design(axis, twin.locked_to, shape, centre, span, ref_point),
+        design_component=k,
+        source=twin.source,
+        locked_to=twin.locked_to,
+        envelope=e,
+    )
 
 
 def _best_twin_shape(
@@ -172,16 +218,19 @@ def _best_twin_shape(
     rss_full: float,
     sigma2: float,
 ) -> tuple[Term, float]:
-    """The twin at its default and at its rich shape (when it has one), each charged one σ² per
-    parameter beyond the term's (credited one per parameter fewer): the better of the two and
-    its Δχ² (in units of σ²). The twin's
-    fair shape is not the term's: a drift selected with its rich (position-dependent) shape has
-    a reference drift as twin that is the same everywhere, and a default reading-locked shape
-    may imitate a rich positional one with fewer parameters."""
-    shapes = [False] + ([True] if twin.rich is not None else [])
+    """The twin at its default and at its rich shape (when it has one) — and a cyclic twin at
+    the term's own shape (:func:`mirror`) — each charged one σ² per parameter beyond the
+    term's (credited one per parameter fewer): the better and its Δχ² (in units of σ²). The
+    twin's fair shape is not the term's: a drift selected with its rich (position-dependent)
+    shape has a reference drift as twin that is the same everywhere, and a default
+    reading-locked shape may imitate a rich positional one with fewer parameters."""
+    shapes = [twin] + ([twin.rich] if twin.rich is not None else [])
+    same = mirror(problem.res, term, twin)
+    if same is not None:
+        shapes.append(same)
     best: tuple[Term, float] | None = None
-    for rich in shapes:
-        t_term, rss = _twin_fit(problem, others, term, twin, rich)
+    for cand in shapes:
+        t_term, rss = _twin_fit(problem, others, term, cand)
         extra = t_term.candidate.n_params - term.candidate.n_params
         delta = (rss - rss_full) / sigma2 + extra
         if best is None or delta < best[1]:
