@@ -297,6 +297,53 @@ def dependence_factor(problem: Problem, terms: Sequence[Term], beta: Any) -> flo
     return float(min((1.0 + rho) / (1.0 - rho), MAX_DEPENDENCE))
 
 
+def _time_order(problem: Problem) -> Any:
+    t = problem.res.data.t_s
+    return np.argsort(t, kind="stable") if t is not None else np.arange(problem.res.n)
+
+
+def _residual_in_time(problem: Problem, terms: Sequence[Term], beta: Any) -> Any:
+    """(N, axes) the model's residual in time order."""
+    r = problem.y - (problem.stacked(terms) @ beta).reshape(problem.y.shape)
+    return r.reshape(problem.res.n, -1)[_time_order(problem)]
+
+
+def _autocorrelation(x: Any, max_lag: int) -> Any:
+    """Lag 1…``max_lag`` autocorrelation of the columns of ``x`` (N, a) pooled (FFT)."""
+    n = x.shape[0]
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    f = np.fft.rfft(x, size, axis=0)
+    acov = np.fft.irfft(f * np.conj(f), size, axis=0)[: max_lag + 1].sum(axis=1)
+    return acov[1:] / acov[0] if acov[0] > 0 else np.zeros(max_lag)
+
+
+#: Longest lag (share of the record) of the residual's autocorrelation summed.
+MAX_LAG_SHARE = 0.25
+
+
+def direction_factor(problem: Problem, resid_t: Any, gap: Any, fallback: float) -> float:
+    """The variance inflation of a difference of fits along ``gap`` (stacked) for the
+    residual ``resid_t`` (in time order): 1 + 2·Σ_k ρ_k·c_k, ρ_k the residual's
+    autocorrelation at lag k (summed while positive: Geyer's initial positive sequence) and
+    c_k that of ``gap`` — noise correlated over seconds inflates a slow difference (a
+    reversal's change along the travel, a drift's shape) by its whole correlation time and a
+    cyclic one of a short period hardly at all. The lag-one factor :func:`dependence_factor`
+    (``fallback``) said 1.2 where the slow difference between a reversal and a latency
+    (a 0.05 µm Ornstein–Uhlenbeck noise of 2.9 s at 22 Hz) was ~12 times noisier than white
+    (``latency/bidirectional-one-speed/s4002``: Δχ² +18 where physics says the two are one)."""
+    g = np.asarray(gap, float).reshape(problem.res.n, -1)[_time_order(problem)]
+    if not np.any(g) or resid_t.shape[0] < 3:
+        return fallback
+    max_lag = max(int(MAX_LAG_SHARE * resid_t.shape[0]), 1)
+    rho = _autocorrelation(resid_t, max_lag)
+    stop = np.flatnonzero(rho <= 0.0)
+    rho = rho[: stop[0]] if len(stop) else rho
+    if not len(rho):
+        return 1.0
+    c = _autocorrelation(g, len(rho))
+    return float(min(max(1.0 + 2.0 * float(rho @ c), 1.0), MAX_DEPENDENCE))
+
+
 def decide_sources(
     problem: Problem,
     accepted: list[Term],
@@ -323,6 +370,7 @@ def decide_sources(
             sigma2 = max(rss_full / max(n_obs - rank, 1), 1e-300) * kappa
             others = accepted[:i] + accepted[i + 1 :]
             target = _contribution(problem, accepted, beta, i)
+            resid_t = _residual_in_time(problem, accepted, beta)
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
@@ -336,8 +384,16 @@ def decide_sources(
                 t_term, delta, judged_with = _twin_with_table(
                     problem, others, term, twin, plain, table, rss_full, sigma2
                 )
-                misfit = _imitation_misfit(problem, judged_with, t_term, target)
-                apart = misfit / sigma2
+                gap = _imitation_gap(problem, judged_with, t_term, target)
+                misfit = float(gap @ gap)
+                # σ² per effective observation *along the difference the twin cannot follow*:
+                # slow differences (a reversal's slope, a drift's shape) are as noisy as the
+                # residual's slow part, a cyclic one is not (:func:`direction_factor`)
+                k_gap = direction_factor(problem, resid_t, gap, kappa)
+                extra = t_term.candidate.n_params - term.candidate.n_params
+                extra += sum(t.candidate.n_params for t in judged_with[len(others) :])
+                delta = (delta - extra) * kappa / k_gap + extra
+                apart = misfit / (sigma2 / kappa * k_gap)
                 # separable only by a difference that is a sizeable part of the term itself
                 # (≥ 1 % of its energy: a cyclic error moved by ~0.03 period between the
                 # directions), not by the imperfections of the map in a quiet session
@@ -386,9 +442,10 @@ def _contribution(problem: Problem, terms: Sequence[Term], beta: Any, index: int
     return problem.design(terms[index]) @ beta[start:stop]
 
 
-def _imitation_misfit(problem: Problem, others: list[Term], twin: Term, target: Any) -> float:
+def _imitation_gap(problem: Problem, others: list[Term], twin: Term, target: Any) -> Any:
     """How badly the twin (with the other terms free) imitates the named term's fitted
-    contribution: the residual sum of squares (µm²) — what the data could at best show."""
+    contribution: the part of it the twin cannot follow (stacked, µm) — its sum of squares is
+    what the data could at best show."""
     x = problem.stacked([*others, twin])
     coef, *_ = np.linalg.lstsq(x, target, rcond=None)
-    return float(np.sum((target - x @ coef) ** 2))
+    return target - x @ coef
