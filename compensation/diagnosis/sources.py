@@ -344,6 +344,61 @@ def direction_factor(problem: Problem, resid_t: Any, gap: Any, fallback: float) 
     return float(min(max(1.0 + 2.0 * float(rho @ c), 1.0), MAX_DEPENDENCE))
 
 
+@dataclass
+class _Judged:
+    """The term a twin is judged against: the other terms, the term, its family, its fitted
+    contribution (stacked, µm) and the model's residual in time order."""
+
+    others: list[Term]
+    term: Term
+    root: Candidate
+    target: Any
+    resid_t: Any
+
+
+def _judge_twin(
+    problem: Problem,
+    j: _Judged,
+    twin: Candidate,
+    pool: Sequence[Candidate],
+    figures: tuple[float, float, float, float],
+) -> tuple[Term, float, float, list[Term]]:
+    """One twin refitted in place of the term (``figures``: the full model's RSS, σ² with the
+    lag-one factor, that factor, the χ²₁ band): (twin term, Δχ², separability, the others it was
+    judged with) — both figures in σ² along the difference the twin cannot follow."""
+    rss_full, sigma2, kappa, band = figures
+    others, term, root, target = j.others, j.term, j.root, j.target
+    plain = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
+    axis = _axis_of(root)
+    table = (
+        _table_of(axis, pool, others)
+        if (root.cause, twin.cause) in CARRIES_TABLE and axis is not None
+        else None
+    )
+    t_term, delta, judged_with = _twin_with_table(
+        problem, others, term, twin, plain, table, rss_full, sigma2
+    )
+    gap = _imitation_gap(problem, judged_with, t_term, target)
+    misfit = float(gap @ gap)
+    # σ² per effective observation *along the difference the twin cannot follow*: slow
+    # differences (a reversal's slope, a drift's shape) are as noisy as the residual's slow
+    # part, a cyclic one is not (:func:`direction_factor`)
+    k_gap = direction_factor(problem, j.resid_t, gap, kappa)
+    extra = t_term.candidate.n_params - term.candidate.n_params
+    extra += sum(t.candidate.n_params for t in judged_with[len(others) :])
+    delta = (delta - extra) * kappa / k_gap + extra
+    apart = misfit / (sigma2 / kappa * k_gap)
+    # separable only by a difference that is a sizeable part of the term itself (≥ 1 % of its
+    # energy: a cyclic error moved by ~0.03 period between the directions), not by the
+    # imperfections of the map in a quiet session (the floor is for twins through the map
+    # between position and reading: a reversal and a latency, or two drifts, differ by their
+    # own columns)
+    mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
+    if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
+        apart = min(apart, band)
+    return t_term, delta, apart, judged_with
+
+
 def decide_sources(
     problem: Problem,
     accepted: list[Term],
@@ -374,34 +429,10 @@ def decide_sources(
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
-                plain = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
-                axis = _axis_of(root)
-                table = (
-                    _table_of(axis, pool, others)
-                    if (root.cause, twin.cause) in CARRIES_TABLE and axis is not None
-                    else None
-                )
-                t_term, delta, judged_with = _twin_with_table(
-                    problem, others, term, twin, plain, table, rss_full, sigma2
-                )
-                gap = _imitation_gap(problem, judged_with, t_term, target)
-                misfit = float(gap @ gap)
-                # σ² per effective observation *along the difference the twin cannot follow*:
-                # slow differences (a reversal's slope, a drift's shape) are as noisy as the
-                # residual's slow part, a cyclic one is not (:func:`direction_factor`)
-                k_gap = direction_factor(problem, resid_t, gap, kappa)
-                extra = t_term.candidate.n_params - term.candidate.n_params
-                extra += sum(t.candidate.n_params for t in judged_with[len(others) :])
-                delta = (delta - extra) * kappa / k_gap + extra
-                apart = misfit / (sigma2 / kappa * k_gap)
-                # separable only by a difference that is a sizeable part of the term itself
-                # (≥ 1 % of its energy: a cyclic error moved by ~0.03 period between the
-                # directions), not by the imperfections of the map in a quiet session
-                # (the floor is for twins through the map between position and reading: a
-                # reversal and a latency, or two drifts, differ by their own columns)
-                mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
-                if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
-                    apart = min(apart, band)
+                t_term, delta, apart, judged_with = _judge_twin(
+                    problem, _Judged(others, term, root, target, resid_t), twin, pool,
+                    (rss_full, sigma2, kappa, band),
+                )  # fmt: skip
                 call.twins.append(
                     {
                         "cause": twin.cause,
