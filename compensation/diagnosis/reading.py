@@ -32,7 +32,7 @@ of phase; on `ripple_triangulation/bidirectional-separable/s1` the stops' coordi
 6.3 µm RMS against an 8.6 µm ripple of 0.092 mm, 0.2 µm once it is left out), and small cyclic
 terms of the machine took up the ripple's misfit there (docs/discovery.md, item 7).
 Where a position has one reading (one direction of travel) the map between the two
-coordinates stays exact (:func:`.reference_candidates.through_map`), as physics says.
+coordinates stays exact (:func:`.coordinate_map.through_map`), as physics says.
 """
 
 from __future__ import annotations

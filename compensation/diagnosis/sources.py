@@ -49,9 +49,12 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from ..parametric_errors import AXIS_INDEX
 from .candidate import Candidate
+from .coordinate_map import through_map
 from .fitting import Problem, Term, best_theta, fit
-from .reference_candidates import through_map
+from .reference_candidates import cyclic_builder, cyclic_design
+from .residuals import Residuals
 
 #: A twin is separable only when it misses at least this share of the named term's energy.
 SEPARATION_FLOOR = 0.01
@@ -147,21 +150,64 @@ class SourceCall:
 
 
 def _twin_fit(
-    problem: Problem, others: list[Term], term: Term, twin: Candidate, rich: bool
+    problem: Problem, others: list[Term], term: Term, cand: Candidate
 ) -> tuple[Term, float]:
-    """The twin at its default or rich shape (``rich``), its parameter profiled about the term's;
-    a twin in the other coordinate (position ↔ reading) through the session's map between them
-    (:func:`.reference_candidates.through_map`: a function of the reading beside functions of
+    """The twin ``cand`` (one of its shapes), its parameter profiled about the term's; a twin
+    in the other coordinate (position ↔ reading) through the session's map between them
+    (:func:`.coordinate_map.through_map`: a function of the reading beside functions of
     the position would otherwise span the observed error itself)."""
-    if {twin.locked_to, term.candidate.locked_to} == {"position", "reference"}:
-        twin = through_map(twin, problem.res)
-    cand = twin.rich if rich and twin.rich is not None else twin
+    if {cand.locked_to, term.candidate.locked_to} == {"position", "reference"}:
+        cand = through_map(cand, problem.res)
     near = term.theta if isinstance(term.theta, float) else None
     if isinstance(term.theta, tuple) and cand.theta_step is not None:
         # the same law to start from: only its continuous refinement is needed
         cand = replace(cand, thetas=(term.theta,), _cache={}, _statics={})
     theta, rss, _ = best_theta(problem, others, cand, near=near)
     return Term(cand, theta), rss
+
+
+def _cyclic_shape(cand: Candidate) -> tuple[int, int]:
+    """(harmonics, envelope order) of a cyclic candidate's columns."""
+    return cand.n_params // (2 * (cand.envelope + 1)), cand.envelope
+
+
+def mirror(res: Residuals, term: Term, twin: Candidate) -> Candidate | None:
+    """The cyclic twin at the *term's own* shape (harmonics and envelope), or ``None`` when
+    the pair is not two constant-period cyclic errors or the twin already has that shape.
+
+    Without a reversal a position has one reading, and a cyclic error of one coordinate *is*
+    the same columns of the other: the twin must be offered the term's shape, or the test
+    compares two shapes instead of two coordinates (a sensor's ripple whose amplitude changes
+    along its range, fitted with its envelope, refuted the machine's constant-amplitude twin
+    by Δχ² ≈ 5 000–60 000 in sessions without a reversal, where the physics has Δχ² = 0)."""
+    if {term.candidate.cause, twin.cause} != {"periodic", "reference_ripple"}:
+        return None
+    if twin.theta_step is not None or not isinstance(term.theta, float):
+        return None  # chirped laws: both instruments already have the same shapes
+    shape = _cyclic_shape(term.candidate)
+    own = [twin] + ([twin.rich] if twin.rich is not None else [])
+    if any(_cyclic_shape(c) == shape for c in own):
+        return None
+    axis = _axis_of(twin)
+    assert axis is not None
+    k = AXIS_INDEX[axis]
+    span = (float(np.min(res.q_mm[:, k])), float(np.max(res.q_mm[:, k])))
+    centre = 0.5 * (span[0] + span[1])
+    ref_point = float(res.machine.volume.reference_mm[k])
+    h, e = shape
+    return Candidate(
+        twin.cause,
+        dict(twin.keys),
+        2 * h * (e + 1),
+        cyclic_builder(axis, twin.locked_to, shape, centre, span),
+        thetas=twin.thetas,
+        look_elsewhere=twin.look_elsewhere,
+        design_fn=cyclic_design(axis, twin.locked_to, shape, centre, span, ref_point),
+        design_component=k,
+        source=twin.source,
+        locked_to=twin.locked_to,
+        envelope=e,
+    )
 
 
 def _best_twin_shape(
@@ -172,16 +218,19 @@ def _best_twin_shape(
     rss_full: float,
     sigma2: float,
 ) -> tuple[Term, float]:
-    """The twin at its default and at its rich shape (when it has one), each charged one σ² per
-    parameter beyond the term's (credited one per parameter fewer): the better of the two and
-    its Δχ² (in units of σ²). The twin's
-    fair shape is not the term's: a drift selected with its rich (position-dependent) shape has
-    a reference drift as twin that is the same everywhere, and a default reading-locked shape
-    may imitate a rich positional one with fewer parameters."""
-    shapes = [False] + ([True] if twin.rich is not None else [])
+    """The twin at its default and at its rich shape (when it has one) — and a cyclic twin at
+    the term's own shape (:func:`mirror`) — each charged one σ² per parameter beyond the
+    term's (credited one per parameter fewer): the better and its Δχ² (in units of σ²). The
+    twin's fair shape is not the term's: a drift selected with its rich (position-dependent)
+    shape has a reference drift as twin that is the same everywhere, and a default
+    reading-locked shape may imitate a rich positional one with fewer parameters."""
+    shapes = [twin] + ([twin.rich] if twin.rich is not None else [])
+    same = mirror(problem.res, term, twin)
+    if same is not None:
+        shapes.append(same)
     best: tuple[Term, float] | None = None
-    for rich in shapes:
-        t_term, rss = _twin_fit(problem, others, term, twin, rich)
+    for cand in shapes:
+        t_term, rss = _twin_fit(problem, others, term, cand)
         extra = t_term.candidate.n_params - term.candidate.n_params
         delta = (rss - rss_full) / sigma2 + extra
         if best is None or delta < best[1]:
@@ -248,6 +297,108 @@ def dependence_factor(problem: Problem, terms: Sequence[Term], beta: Any) -> flo
     return float(min((1.0 + rho) / (1.0 - rho), MAX_DEPENDENCE))
 
 
+def _time_order(problem: Problem) -> Any:
+    t = problem.res.data.t_s
+    return np.argsort(t, kind="stable") if t is not None else np.arange(problem.res.n)
+
+
+def _residual_in_time(problem: Problem, terms: Sequence[Term], beta: Any) -> Any:
+    """(N, axes) the model's residual in time order."""
+    r = problem.y - (problem.stacked(terms) @ beta).reshape(problem.y.shape)
+    return r.reshape(problem.res.n, -1)[_time_order(problem)]
+
+
+def _autocorrelation(x: Any, max_lag: int) -> Any:
+    """Lag 1…``max_lag`` autocorrelation of the columns of ``x`` (N, a) pooled (FFT)."""
+    n = x.shape[0]
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    f = np.fft.rfft(x, size, axis=0)
+    acov = np.fft.irfft(f * np.conj(f), size, axis=0)[: max_lag + 1].sum(axis=1)
+    return acov[1:] / acov[0] if acov[0] > 0 else np.zeros(max_lag)
+
+
+#: Longest lag (share of the record) of the residual's autocorrelation summed.
+MAX_LAG_SHARE = 0.25
+
+
+def direction_factor(problem: Problem, resid_t: Any, gap: Any, fallback: float) -> float:
+    """The variance inflation of a difference of fits along ``gap`` (stacked) for the
+    residual ``resid_t`` (in time order): 1 + 2·Σ_k ρ_k·c_k, ρ_k the residual's
+    autocorrelation at lag k (summed while positive: Geyer's initial positive sequence) and
+    c_k that of ``gap`` — noise correlated over seconds inflates a slow difference (a
+    reversal's change along the travel, a drift's shape) by its whole correlation time and a
+    cyclic one of a short period hardly at all. The lag-one factor :func:`dependence_factor`
+    (``fallback``) said 1.2 where the slow difference between a reversal and a latency
+    (a 0.05 µm Ornstein–Uhlenbeck noise of 2.9 s at 22 Hz) was ~12 times noisier than white
+    (``latency/bidirectional-one-speed/s4002``: Δχ² +18 where physics says the two are one)."""
+    g = np.asarray(gap, float).reshape(problem.res.n, -1)[_time_order(problem)]
+    if not np.any(g) or resid_t.shape[0] < 3:
+        return fallback
+    max_lag = max(int(MAX_LAG_SHARE * resid_t.shape[0]), 1)
+    rho = _autocorrelation(resid_t, max_lag)
+    stop = np.flatnonzero(rho <= 0.0)
+    rho = rho[: stop[0]] if len(stop) else rho
+    if not len(rho):
+        return 1.0
+    c = _autocorrelation(g, len(rho))
+    return float(min(max(1.0 + 2.0 * float(rho @ c), 1.0), MAX_DEPENDENCE))
+
+
+@dataclass
+class _Judged:
+    """The term a twin is judged against: the other terms, the term, its family, its fitted
+    contribution (stacked, µm) and the model's residual in time order."""
+
+    others: list[Term]
+    term: Term
+    root: Candidate
+    target: Any
+    resid_t: Any
+
+
+def _judge_twin(
+    problem: Problem,
+    j: _Judged,
+    twin: Candidate,
+    pool: Sequence[Candidate],
+    figures: tuple[float, float, float, float],
+) -> tuple[Term, float, float, list[Term]]:
+    """One twin refitted in place of the term (``figures``: the full model's RSS, σ² with the
+    lag-one factor, that factor, the χ²₁ band): (twin term, Δχ², separability, the others it was
+    judged with) — both figures in σ² along the difference the twin cannot follow."""
+    rss_full, sigma2, kappa, band = figures
+    others, term, root, target = j.others, j.term, j.root, j.target
+    plain = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
+    axis = _axis_of(root)
+    table = (
+        _table_of(axis, pool, others)
+        if (root.cause, twin.cause) in CARRIES_TABLE and axis is not None
+        else None
+    )
+    t_term, delta, judged_with = _twin_with_table(
+        problem, others, term, twin, plain, table, rss_full, sigma2
+    )
+    gap = _imitation_gap(problem, judged_with, t_term, target)
+    misfit = float(gap @ gap)
+    # σ² per effective observation *along the difference the twin cannot follow*: slow
+    # differences (a reversal's slope, a drift's shape) are as noisy as the residual's slow
+    # part, a cyclic one is not (:func:`direction_factor`)
+    k_gap = direction_factor(problem, j.resid_t, gap, kappa)
+    extra = t_term.candidate.n_params - term.candidate.n_params
+    extra += sum(t.candidate.n_params for t in judged_with[len(others) :])
+    delta = (delta - extra) * kappa / k_gap + extra
+    apart = misfit / (sigma2 / kappa * k_gap)
+    # separable only by a difference that is a sizeable part of the term itself (≥ 1 % of its
+    # energy: a cyclic error moved by ~0.03 period between the directions), not by the
+    # imperfections of the map in a quiet session (the floor is for twins through the map
+    # between position and reading: a reversal and a latency, or two drifts, differ by their
+    # own columns)
+    mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
+    if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
+        apart = min(apart, band)
+    return t_term, delta, apart, judged_with
+
+
 def decide_sources(
     problem: Problem,
     accepted: list[Term],
@@ -274,29 +425,14 @@ def decide_sources(
             sigma2 = max(rss_full / max(n_obs - rank, 1), 1e-300) * kappa
             others = accepted[:i] + accepted[i + 1 :]
             target = _contribution(problem, accepted, beta, i)
+            resid_t = _residual_in_time(problem, accepted, beta)
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
-                plain = _best_twin_shape(problem, others, term, twin, rss_full, sigma2)
-                axis = _axis_of(root)
-                table = (
-                    _table_of(axis, pool, others)
-                    if (root.cause, twin.cause) in CARRIES_TABLE and axis is not None
-                    else None
-                )
-                t_term, delta, judged_with = _twin_with_table(
-                    problem, others, term, twin, plain, table, rss_full, sigma2
-                )
-                misfit = _imitation_misfit(problem, judged_with, t_term, target)
-                apart = misfit / sigma2
-                # separable only by a difference that is a sizeable part of the term itself
-                # (≥ 1 % of its energy: a cyclic error moved by ~0.03 period between the
-                # directions), not by the imperfections of the map in a quiet session
-                # (the floor is for twins through the map between position and reading: a
-                # reversal and a latency, or two drifts, differ by their own columns)
-                mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
-                if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
-                    apart = min(apart, band)
+                t_term, delta, apart, judged_with = _judge_twin(
+                    problem, _Judged(others, term, root, target, resid_t), twin, pool,
+                    (rss_full, sigma2, kappa, band),
+                )  # fmt: skip
                 call.twins.append(
                     {
                         "cause": twin.cause,
@@ -337,9 +473,10 @@ def _contribution(problem: Problem, terms: Sequence[Term], beta: Any, index: int
     return problem.design(terms[index]) @ beta[start:stop]
 
 
-def _imitation_misfit(problem: Problem, others: list[Term], twin: Term, target: Any) -> float:
+def _imitation_gap(problem: Problem, others: list[Term], twin: Term, target: Any) -> Any:
     """How badly the twin (with the other terms free) imitates the named term's fitted
-    contribution: the residual sum of squares (µm²) — what the data could at best show."""
+    contribution: the part of it the twin cannot follow (stacked, µm) — its sum of squares is
+    what the data could at best show."""
     x = problem.stacked([*others, twin])
     coef, *_ = np.linalg.lstsq(x, target, rcond=None)
-    return float(np.sum((target - x @ coef) ** 2))
+    return target - x @ coef
