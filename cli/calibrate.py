@@ -22,7 +22,7 @@ from .common import Subparsers, load_machine, write_json_atomic
 __all__ = ["add_parsers", "cmd_calibrate"]
 
 USAGE = """\
-cmm-comp calibrate PLAN.toml -o MACHINE.toml [--report DIR] [--quiet]
+cmm-comp calibrate PLAN.toml -o MACHINE.toml [--report DIR [--no-figures]] [--quiet]
        cmm-comp calibrate plan PLAN.toml [PLAN.toml ...] --machine GUESS.toml [--json OUT] [--trials N] [--seed S]
        cmm-comp calibrate apply MACHINE.toml RUN.dat --axis {x,y,z} [--line X Y Z] [--optic X Y Z] [--cycles C ...] [--uncorrected] -o OUT.dat"""
 
@@ -44,9 +44,11 @@ def _calibrate(args: argparse.Namespace, words: list[str]) -> int:
         raise ValueError(f"calibrate takes one plan, got {len(words)}: {' '.join(words)}")
     if args.output is None:
         raise ValueError("calibrate PLAN.toml needs -o MACHINE.toml (the identified machine)")
+    if args.no_figures and args.report is None:
+        raise ValueError("--no-figures leaves the figures out of a report: give --report DIR")
     plan = read_plan(words[0])
     result = calibrate(plan, progress=_say(args))
-    written = write_outputs(result, args.output, args.report)
+    written = write_outputs(result, args.output, args.report, figures=not args.no_figures)
     for w in result.warnings:
         print(f"cmm-comp: warning: {w}", file=sys.stderr)
     vol = result.volumetric.summary()
@@ -165,6 +167,11 @@ def add_parsers(sub: Subparsers) -> None:
         type=Path,
         help="calibrate: write calibration.json, "
         "volumetric_u.csv, PNGs and index.html into this folder",
+    )
+    p.add_argument(
+        "--no-figures",
+        action="store_true",
+        help="calibrate: the report without its PNGs (faster; index.html says they were not drawn)",
     )
     p.add_argument("--machine", type=Path, help="plan: the machine you expect (GUESS.toml)")
     p.add_argument("--json", type=Path, help="plan: the prediction as JSON")

@@ -1,7 +1,10 @@
 """The worked example of docs/calibration.md, run exactly as the page prints it (each line of its
 first ``bash`` block, in a fresh folder holding a copy of ``examples/``, through the CLI's own
 ``main()`` in this process: what the installed script calls), and the example's data regenerated
-bit for bit by ``examples/calibration/generate.py``.
+bit for bit by ``examples/calibration/generate.py``. The page's two ``calibrate`` lines are the
+README's too: they run once per test run (tests/worked_example.py) and their outputs are copied
+here. This is the test that checks the calibration report's figures (the other calibrations of
+the suite pass ``--no-figures``).
 
 Oracles independent of the calibration code: the truth the example was simulated from
 (``truth.toml``, through the public machine API), the grid file read back by the daemon's own
@@ -20,6 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from doc_commands import cli
+from matplotlib.image import imread
+from worked_example import LINES, calibrated_example, take
 
 from cmm_comp.compensation import Machine
 
@@ -39,7 +44,9 @@ def _commands() -> list[str]:
 
 
 @pytest.mark.timeout(900)
-def test_worked_example_runs_as_printed(tmp_path: Path) -> None:
+def test_worked_example_runs_as_printed(
+    tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
+) -> None:
     shutil.copytree(ROOT / "examples", tmp_path / "examples")
     # the one change to what the page runs: the copied daemon.toml's metrics port 9108 becomes
     # 0 (any free port), so another test's daemon on this host cannot make --check fail with
@@ -53,11 +60,21 @@ def test_worked_example_runs_as_printed(tmp_path: Path) -> None:
     for line in commands:
         argv = shlex.split(line)
         assert argv[0] == "cmm-comp"
+        if line in LINES:  # run once per test run (the README prints it too): its outputs
+            shared = take(line, calibrated_example(tmp_path_factory), tmp_path)
+            assert shared["code"] == 0, f"{line}\n{shared['err']}"
+            continue
         proc = cli(*argv[1:], cwd=tmp_path)
         assert proc.returncode == 0, f"{line}\n{proc.stdout}\n{proc.stderr}"
     # the daemon accepted the signed grid of the calibrated machine
     assert "ok; grid machine.grid" in proc.stdout
     report = json.loads((tmp_path / "calibration-report" / "calibration.json").read_text())
+    # the report's figures: each decodes (Pillow) to a real image and the page shows it
+    page = (tmp_path / "calibration-report" / "index.html").read_text()
+    for png in ("errors.png", "residuals.png", "volumetric_u.png"):
+        image = imread(tmp_path / "calibration-report" / png)
+        assert image.ndim == 3 and min(image.shape[:2]) > 100, png
+        assert f'src="{png}"' in page, png
     assert report["checks"]["resimulation"]["max_abs"] < 1e-9
     # the identified machine against the machine the data were simulated from
     machine = Machine.from_toml(tmp_path / "machine.toml")

@@ -46,9 +46,12 @@ Scored = Callable[[int, str, str], CaseScore]
 
 
 def run_cli(plan: Path, out_toml: Path, report_dir: Path) -> tuple[int, str, str]:
-    """``cmm-comp calibrate PLAN -o OUT --report DIR`` in this process (the harness' contract:
-    exit code, stdout, stderr)."""
-    proc = cli("calibrate", plan, "-o", out_toml, "--report", report_dir)
+    """``cmm-comp calibrate PLAN -o OUT --report DIR --no-figures`` in this process (the
+    harness' contract: exit code, stdout, stderr). The scoring reads the report's
+    ``volumetric_u.csv`` and ``calibration.json``, never its PNGs, and drawing them was about
+    half of these cases' CPU; tests/test_readme.py checks the figures of a calibration (the
+    README's line, drawn once)."""
+    proc = cli("calibrate", plan, "-o", out_toml, "--report", report_dir, "--no-figures")
     return proc.returncode, proc.stdout, proc.stderr
 
 
@@ -122,10 +125,19 @@ def test_bad_input_gets_one_clear_error_and_nothing_written(
 def test_the_plan_the_bad_cases_start_from_is_valid(
     bad_cases: dict[str, BadCase], tmp_path: Path
 ) -> None:
-    """Each bad case is this plan with one defect: it must calibrate (exit 0) untouched."""
+    """Each bad case is this plan with one defect: it must calibrate (exit 0) untouched. With
+    ``--no-figures`` the report is whole but for its PNGs, and its page links none."""
     template = bad_cases["missing_file"].plan.parent.parent / "template" / "calibration.toml"
     rc, _, stderr = run_cli(template, tmp_path / "out.toml", tmp_path / "report")
     assert rc == 0, stderr
     assert (tmp_path / "out.toml").is_file() and (
         tmp_path / "report" / "volumetric_u.csv"
     ).is_file()
+    report = tmp_path / "report"
+    assert sorted(p.name for p in report.iterdir()) == [
+        "calibration.json",
+        "index.html",
+        "volumetric_u.csv",
+    ]
+    page = (report / "index.html").read_text()
+    assert "<img" not in page and "errors.png not drawn, --no-figures" in page
