@@ -4,8 +4,8 @@
 measurement positions, and the stretches of the travel that no data set reaches — there every
 error is the smoothness prior's extrapolation.
 
-**Gaps between plate placements** (:func:`plate_gaps`): a ball plate's placements each have an unknown
-translation, so a plate sees the shape of ``dA_A`` inside each placement's reach but not the rise
+**Gaps between plate placements** (:func:`plate_gaps`): a ball plate's placements each have an
+unknown translation, so a plate sees the shape of ``dA_A`` inside each placement's reach but not the rise
 between two placements that do not overlap along axis A. A laser linear run along A, or a
 multilateration (one dead path per station for all its points), spans such a gap; without
 either, only the smoothness prior bridges it. Units: mm.
@@ -145,13 +145,8 @@ def reach_summary(datasets: list[Any], lower_mm: Any, upper_mm: Any) -> dict[str
     for axis, name in enumerate(AXES):
         lo_v, hi_v = float(lower_mm[axis]), float(upper_mm[axis])
         travel = hi_v - lo_v
-        spans = _merged(
-            [
-                (max(r[name]["from_mm"], lo_v), min(r[name]["to_mm"], hi_v))
-                for r in reaches
-                if r[name] is not None
-            ]
-        )
+        ranges = [span for r in reaches if (span := r[name]) is not None]
+        spans = _merged([(max(r["from_mm"], lo_v), min(r["to_mm"], hi_v)) for r in ranges])
         covered = sum(hi - lo for lo, hi in spans)
         per_axis[name] = {
             "travel_mm": [lo_v, hi_v],
