@@ -362,6 +362,22 @@ def test_full_reach_plate_plan_reaches_the_ends_of_every_axis(model: str) -> Non
     assert limited_worst < 0.95  # the variant leaves part of some axis unreached
 
 
+def test_one_position_reaching_both_ends_is_pushed_to_them() -> None:
+    """With a 15 % margin a plate of 80 % of the shortest travel reaches both ends of that axis
+    from one central position: each end ball still lies within the margin of its end."""
+    for k, model in enumerate(MODELS):
+        truth = machine_for(3000 + k, model)
+        span = truth.upper_mm - truth.lower_mm
+        design = PlateDesign(reach_margin=0.15)
+        rng = np.random.default_rng(k)
+        side = plate_side_mm(truth, design)
+        plate = random_plate(rng, side, design)
+        poses = placements(rng, truth, side, design)
+        balls = np.concatenate([(p.rotation @ plate.true_mm.T).T + p.translation_mm for p in poses])
+        assert np.all(balls.min(0) - truth.lower_mm <= 0.15 * span + 1e-6), model
+        assert np.all(truth.upper_mm - balls.max(0) <= 0.15 * span + 1e-6), model
+
+
 def test_plate_plan_is_checked() -> None:
     with pytest.raises(ValueError, match="plate plan"):
         PlateDesign(plan="everywhere")

@@ -145,7 +145,7 @@ def _reach_positions(
     reach within ``reach_margin`` of both ends, neighbours overlapping by ``overlap`` × side."""
     margin = design.reach_margin * (hi - lo)
     usable = hi - lo - 2.0 * margin
-    if side >= usable:
+    if side >= usable + 1.0:  # one position reaches both ends (1 mm: a 1° tilt's shortening)
         return [((lo + hi) / 2.0, "both")]
     n = 1 + int(np.ceil((usable - side) / ((1.0 - design.overlap) * side) - 1e-9))
     first, last = lo + margin / 2.0 + side / 2.0, hi - margin / 2.0 - side / 2.0
