@@ -20,6 +20,8 @@ cases), each case is rebuilt by the independent generator (``tests/calibration_g
   zero error; each placement's nominal pose from a rigid fit of the certificate to the centres.
 
 Prints one line per machine and the summary; writes ``--out`` (JSON, every case).
+``--plate-plan`` (default ``reach_limited``, the plan the recorded results were run with: the
+generator's default is now ``full_reach``, whose balls reach the ends of every axis).
 
     .venv/bin/python benchmarks/bench_calibration_plate_reach.py \
         --replay benchmarks/results/calibration_truth_previous.json
@@ -51,6 +53,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from calibration_generator.case import MODELS, Case, build_case  # noqa: E402
 from calibration_generator.machine import COMPONENTS, SQUARENESS, TrueMachine  # noqa: E402
+from calibration_generator.plate import PLATE_PLANS  # noqa: E402
 from calibration_generator.scoring import (  # noqa: E402
     calibrate_and_score,
     match_nodes,
@@ -178,7 +181,7 @@ def reach_scores(
 
 
 def run_one(seed: int, model: str, tmp: Path, args: argparse.Namespace) -> dict[str, Any]:
-    case = build_case(tmp / f"plate-{model}-{seed}", seed, "plate", model)
+    case = build_case(tmp / f"plate-{model}-{seed}", seed, "plate", model, args.plate_plan)
     work = tmp / f"run-{seed}"
     score = calibrate_and_score(case, work, lambda p, o, r: run_cli(p, o, r, args.timeout))
     row: dict[str, Any] = {"seed": seed, "model": model, "calibrate": score.as_dict()}
@@ -221,6 +224,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first", type=int, help="only the first N machines of the file")
     ap.add_argument("--timeout", type=float, default=900.0, help="s per calibrate")
     ap.add_argument("--out", default=str(RESULTS))
+    ap.add_argument(
+        "--plate-plan",
+        choices=PLATE_PLANS,
+        default="reach_limited",
+        help="the generator's plate plan (default reach_limited: the plan this diagnosis was "
+        "written for and its recorded results were run with; full_reach: the lab's plan)",
+    )
     args = ap.parse_args(argv)
     args.orders = [int(p) for p in args.orders.split(",")]
     seeds = [int(s) for s in json.loads(Path(args.replay).read_text())["seeds"]]
@@ -252,6 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
         "command": " ".join([Path(sys.argv[0]).name, *(argv or sys.argv[1:])]),
         "replay": args.replay,
+        "plate_plan": args.plate_plan,
         "rcond": args.rcond,
         "summary": summary,
         "cases": rows,

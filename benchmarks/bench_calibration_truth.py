@@ -22,6 +22,12 @@ Prints one table per data kind (rows per model, then all models with the verdict
     .venv/bin/python benchmarks/bench_calibration_truth.py --machines 10    # quicker look
     .venv/bin/python benchmarks/bench_calibration_truth.py --replay benchmarks/results/calibration_truth.json
     .venv/bin/python benchmarks/bench_calibration_truth.py --oracle montecarlo   # harness check, no CLI
+    .venv/bin/python benchmarks/bench_calibration_truth.py --kinds plate --plate-plan reach_limited
+
+``--plate-plan`` chooses the generator's ball-plate plan (tests/calibration_generator/README.md):
+``full_reach`` (default since 2026-12-06; the balls reach within 2.5 % of both ends of every
+in-plane axis, as a lab lays a plate out) or ``reach_limited`` (the plan of the runs before: the
+ball centres span 60–99 % of an axis).
 
 ``--oracle truth|montecarlo`` replaces the CLI by a stand-in that "identifies" the true machine
 (coverage must be 100 %, RMS 0: too good for the 98 % bar, by design) or a machine drawn around
@@ -54,6 +60,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from calibration_generator.case import KINDS, MODELS, Case, build_case  # noqa: E402
 from calibration_generator.oracle import answer_with, montecarlo_u, perturbed  # noqa: E402
+from calibration_generator.plate import PLATE_PLANS  # noqa: E402
 from calibration_generator.scoring import (  # noqa: E402
     COVERAGE_BAR,
     RMS_RATIO_BAR,
@@ -79,7 +86,7 @@ def _oracle(name: str, case: Case) -> Calibrate:
 
 def run_case(seed: int, model: str, kind: str, root: Path, args: argparse.Namespace) -> CaseScore:
     name = f"{kind}-{model}-{seed}"
-    case = build_case(root / name, seed, kind, model)
+    case = build_case(root / name, seed, kind, model, args.plate_plan)
     calibrate: Calibrate
     if args.oracle:
         calibrate = _oracle(args.oracle, case)
@@ -188,6 +195,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", help="comma list of seeds to replay instead of fresh ones")
     ap.add_argument("--replay", help="a results JSON whose seeds to replay")
     ap.add_argument("--oracle", choices=["truth", "montecarlo"], help="stand-in for the CLI")
+    ap.add_argument(
+        "--plate-plan",
+        choices=PLATE_PLANS,
+        default="full_reach",
+        help="the generator's ball-plate plan (plate and mixed cases; default full_reach, the "
+        "balls reaching the ends of every axis; reach_limited: the former, shorter plan)",
+    )
     ap.add_argument("--out", default=str(RESULTS), help=f"JSON output (default {RESULTS})")
     args = ap.parse_args(argv)
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
@@ -268,6 +282,7 @@ def _document(
         "fresh_seeds": meta["fresh"],
         "seeds": meta["seeds"],
         "kinds": meta["kinds"],
+        "plate_plan": args.plate_plan,
         "bars": {"coverage": list(COVERAGE_BAR), "rms_ratio": RMS_RATIO_BAR},
         "cli_startup_s": meta["baseline"],
         "wall_s": time.perf_counter() - t0,

@@ -35,6 +35,14 @@ def _say(args: argparse.Namespace) -> Any:
     return say
 
 
+def _reach_text(reach: dict[str, Any]) -> str:
+    """``x 97 %, y 95 %, z —``: per axis the % of the travel a data set's positions span."""
+    return ", ".join(
+        f"{axis} {span['percent_of_travel']:.0f} %" if span else f"{axis} —"
+        for axis, span in reach.items()
+    )
+
+
 def _calibrate(args: argparse.Namespace, words: list[str]) -> int:
     from cmm_comp.compensation.calibration.calibrate import calibrate
     from cmm_comp.compensation.calibration.plan import read_plan
@@ -62,13 +70,14 @@ def _calibrate(args: argparse.Namespace, words: list[str]) -> int:
     for d in result.datasets_summary:
         print(
             f"  {d['where']:<20} {Path(d['file']).name:<24} RMS {d['rms_before_um']:.4g} → "
-            f"{d['rms_after_um']:.4g} {d['unit']}"
+            f"{d['rms_after_um']:.4g} {d['unit']}; reach {_reach_text(d['reach'])} of the travel"
         )
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
 
 
 def _plan(args: argparse.Namespace, words: list[str]) -> int:
+    from cmm_comp.compensation.calibration.gaps import reach_warning
     from cmm_comp.compensation.calibration.plan import read_plan
     from cmm_comp.compensation.calibration.planner import predict_plan
 
@@ -99,6 +108,16 @@ def _plan(args: argparse.Namespace, words: list[str]) -> int:
             mc = r["monte_carlo"]
             line += f" {mc['spread_over_predicted_u']['overall']:>11.2f} {mc['coverage_of_predicted_U']:>8.3f}"
         print(line)
+    for word, r in zip(words, results, strict=True):
+        axes = r["reach"]["per_axis"]
+        print(
+            f"  {word}: the data reach "
+            + ", ".join(f"{a} {v['percent_of_travel']:.0f} %" for a, v in axes.items())
+            + " of the travel"
+        )
+        warning = reach_warning(r["reach"]["unreached"])
+        if warning:
+            print(f"cmm-comp: warning: {word}: {warning}", file=sys.stderr)
     if args.json:
         write_json_atomic(args.json, results if len(results) > 1 else results[0])
         print(f"wrote {args.json}")

@@ -325,6 +325,64 @@ def test_plate_centres_are_the_posed_balls_minus_the_machine_error(
         assert np.abs(tip - placed).max() < 1e-9
 
 
+def _ball_reach(truth, plan: str, planes: tuple[str, ...], seed: int):
+    """(placements, reach per axis as a fraction of the travel, per-end gaps (mm)) of the
+    placed true ball centres — brute force over every ball of every placement."""
+    design = PlateDesign(planes=planes, plan=plan)
+    rng = np.random.default_rng(seed)
+    side = plate_side_mm(truth, design)
+    plate = random_plate(rng, side, design)
+    poses = placements(rng, truth, side, design)
+    balls = np.concatenate([(p.rotation @ plate.true_mm.T).T + p.translation_mm for p in poses])
+    lo, hi = truth.lower_mm, truth.upper_mm
+    assert np.all(balls >= lo) and np.all(balls <= hi)  # every ball inside the travel
+    gaps = np.stack([balls.min(0) - lo, hi - balls.max(0)])
+    return poses, (balls.max(0) - balls.min(0)) / (hi - lo), gaps
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_full_reach_plate_plan_reaches_the_ends_of_every_axis(model: str) -> None:
+    """The default plan (the PTB practice): over 8 machines per model the placed ball centres
+    reach within 2.5 % of both ends of every axis that lies in one of the planes (≤ 5 % of the
+    travel unreached), ≥ 4 placements, two planes, two orientations; the reach-limited variant
+    is kept and reaches less (it is the plan a single or two-position layout gives)."""
+    limited_worst = 1.0
+    for k in range(8):
+        truth = machine_for(2000 + k, model)
+        span = truth.upper_mm - truth.lower_mm
+        for planes in (("XY", "XZ", "YZ"), ("XY", "XZ"), ("XY", "YZ")):
+            poses, reach, gaps = _ball_reach(truth, "full_reach", planes, k)
+            assert len(poses) >= 4 and len({p.plane for p in poses}) >= 2
+            assert {p.orientation_deg for p in poses} == {0.0, 90.0}
+            axes = sorted({"XYZ".index(c) for p in planes for c in p})
+            assert np.all(reach[axes] >= 0.95), (model, k, planes, reach)
+            assert np.all(gaps[:, axes] <= 0.025 * span[axes] + 1e-6), (model, k, planes, gaps)
+            _, reach_lim, _ = _ball_reach(truth, "reach_limited", planes, k)
+            limited_worst = min(limited_worst, float(reach_lim[axes].min()))
+    assert limited_worst < 0.95  # the variant leaves part of some axis unreached
+
+
+def test_one_position_reaching_both_ends_is_pushed_to_them() -> None:
+    """With a 15 % margin a plate of 80 % of the shortest travel reaches both ends of that axis
+    from one central position: each end ball still lies within the margin of its end."""
+    for k, model in enumerate(MODELS):
+        truth = machine_for(3000 + k, model)
+        span = truth.upper_mm - truth.lower_mm
+        design = PlateDesign(reach_margin=0.15)
+        rng = np.random.default_rng(k)
+        side = plate_side_mm(truth, design)
+        plate = random_plate(rng, side, design)
+        poses = placements(rng, truth, side, design)
+        balls = np.concatenate([(p.rotation @ plate.true_mm.T).T + p.translation_mm for p in poses])
+        assert np.all(balls.min(0) - truth.lower_mm <= 0.15 * span + 1e-6), model
+        assert np.all(truth.upper_mm - balls.max(0) <= 0.15 * span + 1e-6), model
+
+
+def test_plate_plan_is_checked() -> None:
+    with pytest.raises(ValueError, match="plate plan"):
+        PlateDesign(plan="everywhere")
+
+
 # ------------------------------------------------------------------------------ multilateration
 @pytest.mark.parametrize("model", ["MH2", "FB1", "CY1"])
 def test_multilateration_lengths_are_distance_plus_dead_path(model: str, tmp_path: Path) -> None:

@@ -28,7 +28,7 @@ from .covariance import (
     volumetric_u,
 )
 from .datasets import Dataset, build_problem, load_datasets
-from .gaps import gap_warning, plate_gaps
+from .gaps import dataset_reach, gap_warning, plate_gaps, reach_summary, reach_warning
 from .gauge import analyse_gauge
 from .plan import Plan
 from .posterior import residuals_without_errors, with_smoothness_spread
@@ -65,6 +65,8 @@ class CalibrationResult:
     datasets_summary: list[dict[str, Any]]
     elapsed_s: float
     warnings: list[str] = field(default_factory=list)
+    #: what the data reach per axis and the stretches no data set reaches (gaps.reach_summary)
+    reach: dict[str, Any] = field(default_factory=dict)
 
 
 def _rms(values: FloatArray) -> float | None:
@@ -76,8 +78,10 @@ def dataset_summary(
 ) -> list[dict[str, Any]]:
     """Per data set: the residual RMS before (no errors, nuisance fitted) and after the fit, per
     quantity with its a-priori and estimated σ. ``rms_*_um`` over the µm readings (a data set of
-    angles only: over all its readings, µrad, said by ``unit``)."""
+    angles only: over all its readings, µrad, said by ``unit``); ``reach`` the range of its
+    measurement positions per axis (mm, % of the travel: :func:`.gaps.dataset_reach`)."""
     out = []
+    lay = problem.model.layout
     for bi, (block, ds) in enumerate(zip(problem.blocks, datasets, strict=True)):
         quantities = {}
         um_rows = np.zeros(block.n_rows, dtype=bool)
@@ -108,6 +112,7 @@ def dataset_summary(
                 "rms_after_um": _rms(after[bi][rows]),
                 "unit": "um" if um_rows.any() else "urad",
                 "quantities": quantities,
+                "reach": dataset_reach(ds, lay.lower_mm, lay.upper_mm),
                 "nuisance": None,  # the fitted poses / stations, filled in by calibrate()
             }
         )
@@ -197,6 +202,7 @@ def _calibrate(
         checks=checks,
         datasets_summary=summary,
         elapsed_s=time.perf_counter() - t0,
+        reach=reach_summary(datasets, layout.lower_mm, layout.upper_mm),
     )
     result.warnings = _warnings(result)
     return result
@@ -252,6 +258,9 @@ def _warnings(r: CalibrationResult) -> list[str]:
     gaps = gap_warning(plate_gaps(r.datasets, lay.lower_mm, lay.upper_mm))
     if gaps:
         out.append(gaps)
+    unreached = reach_warning(r.reach.get("unreached", []))
+    if unreached:
+        out.append(unreached)
     unseen = [
         f"{'+'.join(f['errors'])} ({f['what']})"
         for f in r.gauge["all_data"]["freedoms"]

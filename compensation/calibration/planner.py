@@ -81,6 +81,7 @@ def _summary(r: CalibrationResult) -> dict[str, Any]:
         "squareness": {k: {"u_urad": v["u_urad"]} for k, v in r.squareness.items()},
         "volumetric_U_um": r.volumetric.summary(),
         "null_dimension": r.gauge["all_data"]["null_dimension"],
+        "reach": r.reach,
         "condition": r.gauge["condition"],
         "smoothness_tau": {c: float(1.0 / np.sqrt(v)) for c, v in r.solution.lam.items()},
     }
@@ -106,7 +107,10 @@ def predict_plan(
         "plan": str(plan.source),
         "guess": guess.source,
         "model": plan.model,
-        "datasets": [{"kind": d.kind, "where": d.where, "file": d.source} for d in geometry],
+        "datasets": [
+            {"kind": d["kind"], "where": d["where"], "file": d["file"], "reach": d["reach"]}
+            for d in result.datasets_summary
+        ],
         "readings": sum(b.n_rows for b in result.problem.blocks),
         **_summary(result),
         "warnings": result.warnings,

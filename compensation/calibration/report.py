@@ -72,6 +72,7 @@ def report_json(r: CalibrationResult, machine_path: str | None) -> dict[str, Any
         "squareness": r.squareness,
         "volumetric_U_um": {**r.volumetric.summary(), "csv": "volumetric_u.csv"},
         "datasets": r.datasets_summary,
+        "reach": r.reach,
         "gauge": _gauge_list(gauge),
         "gauge_summary": {
             "null_dimension_all_data": gauge["all_data"]["null_dimension"],
@@ -129,6 +130,58 @@ def _fmt(c: Any) -> str:
     if c is None:
         return "—"
     return str(c)
+
+
+def reach_rows(datasets: list[dict[str, Any]]) -> list[list[Any]]:
+    """Rows (data set, file, axis, from mm, to mm, % of travel) of the data sets' reach."""
+    rows: list[list[Any]] = []
+    for d in datasets:
+        for axis, span in d["reach"].items():
+            if span is None:
+                rows.append([d["where"], Path(d["file"]).name, axis, None, None, "no run along"])
+            else:
+                rows.append(
+                    [
+                        d["where"],
+                        Path(d["file"]).name,
+                        axis,
+                        round(span["from_mm"], 1),
+                        round(span["to_mm"], 1),
+                        round(span["percent_of_travel"], 1),
+                    ]
+                )
+    return rows
+
+
+def _reach_html(payload: dict[str, Any]) -> str:
+    """The report's reach section: per data set and axis, then the union and what no set
+    reaches."""
+    reach = payload["reach"]
+    union = [
+        [
+            axis,
+            f"{a['travel_mm'][0]:.1f} … {a['travel_mm'][1]:.1f}",
+            "; ".join(f"{lo:.1f} … {hi:.1f}" for lo, hi in a["covered_mm"]) or None,
+            round(a["percent_of_travel"], 1),
+        ]
+        for axis, a in reach["per_axis"].items()
+    ]
+    missing = "".join(
+        f"<li>{html.escape(u['axis'])} = {u['from_mm']:.1f} … {u['to_mm']:.1f} mm "
+        f"({u['percent_of_travel']:.1f} % of its travel): extrapolated by the smoothness "
+        "prior</li>"
+        for u in reach["unreached"]
+    )
+    limit = reach["warn_above_percent_of_travel"]
+    return (
+        _table(
+            ["data set", "file", "axis", "from mm", "to mm", "% of travel"],
+            reach_rows(payload["datasets"]),
+        )
+        + _table(["axis", "travel mm", "reached by some data set, mm", "% of travel"], union)
+        + f"<p>Stretches longer than {limit:g} % of an axis' travel that no data set reaches: "
+        + (f"</p><ul>{missing}</ul>" if missing else "none.</p>")
+    )
 
 
 def report_html(r: CalibrationResult, payload: dict[str, Any], figures: bool = True) -> str:
@@ -212,6 +265,8 @@ Machine file: {esc(str(payload["machine_file"]))}.</p>
 <h2>Data sets: residuals before (no errors) and after</h2>
 {_table(["data set", "file", "quantity", "n", "RMS before", "RMS after", "unit", "σ a priori", "σ estimated"], ds_rows)}
 {img("residuals", "residuals.png")}
+<h2>Where the data reach (measurement positions along each axis)</h2>
+{_reach_html(payload)}
 <h2>What the data could not identify</h2>
 {_table(["scope", "errors / freedom", "what", "consequence / seen by", "dimension"], gauge_rows)}
 <p>Condition of the data's information (whitened by the prior, directions seen):

@@ -34,17 +34,39 @@ PLANE_FRAMES = {
     "YZ": np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
 }
 PLANE_AXES = {"XY": (0, 1, 2), "XZ": (0, 2, 1), "YZ": (1, 2, 0)}  # in-plane a, b; normal
+PLATE_PLANS = ("full_reach", "reach_limited")
 
 
 @dataclass(frozen=True)
 class PlateDesign:
-    """Balls per side, the largest plate, the placements' planes and orientations."""
+    """Balls per side, the largest plate, the placements' planes and orientations, the plan.
+
+    ``plan`` is how the placements are laid out along each in-plane axis:
+
+    * ``"full_reach"`` (the PTB ball-plate practice): as many positions as it takes for the
+      ball centres to reach within ``reach_margin`` × travel of both ends of the axis (5 % of
+      the travel left unreached at most), neighbours overlapping by ``overlap`` × side; the
+      end positions are pushed against the ends (their misalignment kept, their shift bounded
+      so that the end ball stays within the margin);
+    * ``"reach_limited"``: the middle of the axis, or (``tile``) two positions when the axis is
+      at least 1.8 plate sides long — the ball centres then span 60–99 % of an axis and the
+      rest is reached by no plate (kept to measure what a plan short of the ends costs).
+    """
+
+    def __post_init__(self) -> None:
+        if self.plan not in PLATE_PLANS:
+            raise ValueError(f"unknown plate plan {self.plan!r}; allowed: {PLATE_PLANS}")
 
     balls_per_side: int = 5
     max_side_mm: float = 800.0
     planes: tuple[str, ...] = ("XY", "XZ", "YZ")
     orientations_deg: tuple[float, ...] = (0.0, 90.0)
-    tile: bool = True  # more positions along an axis much longer than the plate
+    #: "full_reach" (default, the lab's plan: the balls reach the ends of every in-plane axis)
+    #: or "reach_limited" (the former plan: the middle, or two positions on long axes only)
+    plan: str = "full_reach"
+    reach_margin: float = 0.025  # full_reach: the most of an axis' travel left at either end
+    overlap: float = 0.1  # full_reach: the least overlap of neighbouring positions, of the side
+    tile: bool = True  # reach_limited: two positions along an axis ≥ 1.8 plate sides
     probe_um: float = 0.30
     certificate_um: tuple[float, float] = (0.2, 0.5)  # u of the calibrated centres, drawn
 
@@ -108,48 +130,108 @@ def plate_side_mm(machine: TrueMachine, design: PlateDesign) -> float:
 
 
 def _centres(lo: float, hi: float, side: float, tile: bool) -> list[float]:
-    """Plate-centre coordinates along one in-plane axis: the middle, or two ends when long."""
+    """reach_limited: plate-centre coordinates along one in-plane axis: the middle, or two
+    positions when the axis is long."""
     if not tile or hi - lo < 1.8 * side:
         return [(lo + hi) / 2.0]
     return [lo + 0.55 * side, hi - 0.55 * side]
 
 
+def _reach_positions(
+    lo: float, hi: float, side: float, design: PlateDesign
+) -> list[tuple[float, str]]:
+    """full_reach: (plate-centre coordinate, which end it must reach: "lo", "hi", "both" or
+    "") along one in-plane axis (mm): enough positions, evenly spaced, for the ball centres to
+    reach within ``reach_margin`` of both ends, neighbours overlapping by ``overlap`` × side."""
+    margin = design.reach_margin * (hi - lo)
+    usable = hi - lo - 2.0 * margin
+    if side >= usable + 1.0:  # one position reaches both ends (1 mm: a 1° tilt's shortening)
+        return [((lo + hi) / 2.0, "both")]
+    n = 1 + int(np.ceil((usable - side) / ((1.0 - design.overlap) * side) - 1e-9))
+    first, last = lo + margin / 2.0 + side / 2.0, hi - margin / 2.0 - side / 2.0
+    ends = ["lo"] + [""] * (n - 2) + ["hi"]
+    return list(zip(np.linspace(first, last, n).tolist(), ends, strict=True))
+
+
+def _axis_positions(
+    lo: float, hi: float, side: float, design: PlateDesign
+) -> list[tuple[float, str]]:
+    if design.plan == "reach_limited":
+        return [(c, "") for c in _centres(lo, hi, side, design.tile)]
+    return _reach_positions(lo, hi, side, design)
+
+
+def _shift_to_reach(
+    ends_mm: FloatArray, lo: float, hi: float, anchor: str, margin_mm: float
+) -> float | None:
+    """The smallest shift (mm) along one axis that keeps the plate's corners ``ends_mm`` inside
+    [lo + 1, hi − 1] and, for an end position, its end ball within ``margin_mm`` of that end;
+    None when impossible (draw again)."""
+    low, high = lo + 1.0 - ends_mm.min(), hi - 1.0 - ends_mm.max()
+    if anchor in ("lo", "both"):
+        high = min(high, lo + margin_mm - ends_mm.min())
+    if anchor in ("hi", "both"):
+        low = max(low, hi - margin_mm - ends_mm.max())
+    if low > high:
+        return None
+    return float(np.clip(0.0, low, high))
+
+
 def placements(
     rng: np.random.Generator, machine: TrueMachine, side_mm: float, design: PlateDesign
 ) -> list[Placement]:
-    """Placements of every plane × orientation (× tiles), each with a random misalignment."""
+    """Placements of every plane × position (:class:`PlateDesign` ``plan``) × orientation, each
+    with a random misalignment."""
     lo, hi = machine.lower_mm, machine.upper_mm
     out: list[Placement] = []
-    centre_plate = np.array([side_mm / 2.0, side_mm / 2.0, 0.0])
     for plane in design.planes:
-        a, b, w = PLANE_AXES[plane]
-        for ca in _centres(lo[a], hi[a], side_mm, design.tile):
-            for cb in _centres(lo[b], hi[b], side_mm, design.tile):
+        a, b, _ = PLANE_AXES[plane]
+        for ca, end_a in _axis_positions(lo[a], hi[a], side_mm, design):
+            for cb, end_b in _axis_positions(lo[b], hi[b], side_mm, design):
                 for deg in design.orientations_deg:
-                    for _ in range(100):
-                        th = np.deg2rad(deg)
-                        rz = np.array(
-                            [[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]]
-                        )
-                        rot = _small_rotation(rng, 1.0) @ PLANE_FRAMES[plane] @ rz
-                        centre = np.empty(3)
-                        centre[a], centre[b] = ca, cb
-                        depth = 0.15 if plane == "XY" else 0.5  # XY: low on the table
-                        centre[w] = lo[w] + rng.uniform(depth - 0.1, depth + 0.1) * (hi[w] - lo[w])
-                        centre += rng.uniform(-20.0, 20.0, 3)
-                        t = centre - rot @ centre_plate
-                        ends = (
-                            rot
-                            @ np.array(
-                                [[0, 0, 0], [side_mm, side_mm, 0], [side_mm, 0, 0], [0, side_mm, 0]]
-                            ).T
-                        ).T + t
-                        if np.all(ends >= lo + 1.0) and np.all(ends <= hi - 1.0):
-                            out.append(Placement(rot, t, plane, deg))
-                            break
-                    else:
-                        raise RuntimeError(f"a {side_mm} mm plate does not fit the {plane} plane")
+                    target = {a: (ca, end_a), b: (cb, end_b)}
+                    out.append(_one_placement(rng, machine, side_mm, design, plane, deg, target))
     return out
+
+
+def _one_placement(
+    rng: np.random.Generator,
+    machine: TrueMachine,
+    side_mm: float,
+    design: PlateDesign,
+    plane: str,
+    deg: float,
+    target: dict[int, tuple[float, str]],
+) -> Placement:
+    """One placement: nominal plane and orientation, in-plane centre ``target[axis][0]``, a
+    random misalignment (≤ 1° per axis, ±20 mm); an end position (``target[axis][1]``) shifted
+    back so that its end ball stays within the plan's margin of that end."""
+    lo, hi = machine.lower_mm, machine.upper_mm
+    w = PLANE_AXES[plane][2]
+    centre_plate = np.array([side_mm / 2.0, side_mm / 2.0, 0.0])
+    corners = np.array([[0, 0, 0], [side_mm, side_mm, 0], [side_mm, 0, 0], [0, side_mm, 0]]).T
+    for _ in range(100):
+        th = np.deg2rad(deg)
+        rz = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
+        rot = _small_rotation(rng, 1.0) @ PLANE_FRAMES[plane] @ rz
+        centre = np.empty(3)
+        for k, (c, _) in target.items():
+            centre[k] = c
+        depth = 0.15 if plane == "XY" else 0.5  # XY: low on the table
+        centre[w] = lo[w] + rng.uniform(depth - 0.1, depth + 0.1) * (hi[w] - lo[w])
+        centre += rng.uniform(-20.0, 20.0, 3)
+        t = centre - rot @ centre_plate
+        if design.plan == "full_reach":
+            for k, (_, anchor) in target.items():
+                margin = design.reach_margin * (hi[k] - lo[k])
+                shift = _shift_to_reach((rot @ corners)[k] + t[k], lo[k], hi[k], anchor, margin)
+                if shift is None:
+                    break
+                t[k] += shift
+        ends = (rot @ corners).T + t
+        if np.all(ends >= lo + 1.0) and np.all(ends <= hi - 1.0):
+            return Placement(rot, t, plane, deg)
+    raise RuntimeError(f"a {side_mm} mm plate does not fit the {plane} plane")
 
 
 def indicated_for_true(
