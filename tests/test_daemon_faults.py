@@ -225,7 +225,7 @@ def test_bad_frames_are_counted_and_service_continues() -> None:
     with daemon_and_controller(base_config(channel())) as (d, ctl, bus):
         send_temps(ctl)
         block = IDS.block_start
-        bus.send(can.Message(arbitration_id=block + 0x5, data=bytes(8), is_extended_id=False))
+        bus.send(can.Message(arbitration_id=block + 0x6, data=bytes(8), is_extended_id=False))
         bus.send(can.Message(arbitration_id=block + 0x0, data=bytes(5), is_extended_id=False))
         bus.send(can.Message(arbitration_id=block + 0x1, data=bytes(8), is_extended_id=False))
         bus.send(can.Message(arbitration_id=block, is_remote_frame=True, is_extended_id=False))
@@ -234,7 +234,7 @@ def test_bad_frames_are_counted_and_service_continues() -> None:
         bus.send(can.Message(arbitration_id=0x12345, data=bytes(8), is_extended_id=True))
         faults = d.metrics.faults
         assert _wait(lambda: sum(faults.values()) >= 5)
-        assert faults.get("unknown_id", 0) >= 1  # 0x205 is in our block but undefined
+        assert faults.get("unknown_id", 0) >= 1  # 0x206 is in our block but undefined
         assert faults.get("bad_length", 0) == 1
         assert faults.get("bad_value", 0) == 1  # axis field X on the RAW_Y id
         assert faults.get("remote_frame", 0) == 1
