@@ -88,13 +88,10 @@ def _u16(value: int, name: str) -> int:
     return value
 
 
-def _nm3(data: bytes, offset: int = 0) -> tuple[int, int, int]:
+def _nm3(x: bytes, y: bytes, z: bytes) -> tuple[int, int, int]:
+    """The three int40 fields the layout unpacked, as nm."""
     f = int.from_bytes
-    return (
-        f(data[offset : offset + 5], "little", signed=True),
-        f(data[offset + 5 : offset + 10], "little", signed=True),
-        f(data[offset + 10 : offset + 15], "little", signed=True),
-    )
+    return (f(x, "little", signed=True), f(y, "little", signed=True), f(z, "little", signed=True))
 
 
 def _check_len(name: str, data: bytes | bytearray | memoryview, size: int) -> None:
@@ -147,14 +144,14 @@ class RawReading:
     def decode(cls, data: bytes | bytearray | memoryview) -> Self:
         """Inverse of :meth:`encode`; ValueError on a bad length or an undefined direction."""
         _check_len(cls.__name__, data, RAW_XYZ_SIZE)
-        _x, _y, _z, seq, dirs, valid = RAW_XYZ_LAYOUT.unpack(data)
+        x, y, z, seq, dirs, valid = RAW_XYZ_LAYOUT.unpack(data)
         codes = (dirs & 3, dirs >> 2 & 3, dirs >> 4 & 3)
         for axis, code in zip("XYZ", codes, strict=True):
             if code == 3:
                 raise ValueError(f"direction code 3 of {axis} is not defined; allowed: 0, 1, 2")
         return cls(
             seq,
-            _nm3(bytes(data)),
+            _nm3(x, y, z),
             (Direction(codes[0]), Direction(codes[1]), Direction(codes[2])),
             (bool(valid & 1), bool(valid & 2), bool(valid & 4)),
         )
@@ -231,15 +228,14 @@ class CorrectedReading:
     def decode(cls, data: bytes | bytearray | memoryview) -> Self:
         """Inverse of :meth:`encode`; ValueError on a bad length or an undefined status."""
         _check_len(cls.__name__, data, CORRECTED_XYZ_SIZE)
-        fields = CORRECTED_XYZ_LAYOUT.unpack(data)
-        seq, status, applied, latency, corr, ux, uy, uz = fields[3:]
+        x, y, z, seq, status, applied, latency, corr, ux, uy, uz = CORRECTED_XYZ_LAYOUT.unpack(data)
         try:
             st = Status(status)
         except ValueError:
             raise ValueError(f"status code {status} is not defined") from None
         return cls(
             seq,
-            _nm3(bytes(data)),
+            _nm3(x, y, z),
             st,
             Applied(applied & APPLIED_MASK),
             latency,
