@@ -104,9 +104,9 @@ def test_fd_reading_on_a_classic_bus_is_refused_by_name() -> None:
     assert faults.get("fd_frame_on_classic_bus") == 1
 
 
-def test_replay_re_sends_fd_frames_as_fd_frames(tmp_path: Path) -> None:
-    """A session of RAW_XYZ readings, logged to MCAP, replayed onto a fresh bus: the receiver
-    gets each reading back as the same 20-byte CAN FD frame (replay used to drop ``is_fd``)."""
+def _fd_session_log(tmp_path: Path) -> tuple[Path, list[RawReading]]:
+    """A daemon session on CAN FD (RAW_XYZ in, CORRECTED_XYZ out), logged to MCAP: the log
+    and the readings the controller sent."""
     cfg = base_config(channel(), u_grid_path())
     cfg.can.fd = True
     cfg.metrics.enabled = False
@@ -123,12 +123,46 @@ def test_replay_re_sends_fd_frames_as_fd_frames(tmp_path: Path) -> None:
             bus.shutdown()
     logs = sorted(tmp_path.glob("*.mcap"))
     assert logs, "no session log written"
+    return logs[0], sent
+
+
+def test_fd_session_log_reads_in_foxglove_s_reader(tmp_path: Path, mcap_ts) -> None:
+    """The official TypeScript reader (``@mcap/core``, indexed and stream) reads a session of
+    CAN FD frames whole: one 20-byte FD frame in and one 32-byte FD frame out per reading,
+    counted against what the controller sent (not against the project's Python reader)."""
+    log, sent = _fd_session_log(tmp_path)
+    got = mcap_ts(log, "dlc", "is_fd", "arbitration_id")
+    idx, stream = got["indexed"], got["stream"]
+    assert "error" not in idx, f"McapIndexedReader: {idx['error']}"
+    assert "error" not in stream and stream["done"], f"McapStreamReader: {stream}"
+    assert idx["values"] == stream["values"] and idx["topics"] == stream["topics"]
+    assert idx["json_errors"] == 0 and idx["out_of_order"] == 0
+    n = len(sent)
+    assert idx["topics"]["/cmm/raw"] == idx["topics"]["/cmm/corrected"] == n
+    rx, tx = idx["values"]["/cmm/can_rx"], idx["values"]["/cmm/can_tx"]
+    ids = {k: str(IDS.id_of(k)) for k in (MessageKind.RAW_XYZ, MessageKind.CORRECTED_XYZ)}
+    heartbeat = str(IDS.id_of(MessageKind.HEARTBEAT))
+    # the temperature frames in and the heartbeats out are classic (8 bytes, not FD); each
+    # reading is one 20-byte FD frame in and one 32-byte FD frame out, and nothing else is FD
+    assert rx["arbitration_id"][ids[MessageKind.RAW_XYZ]] == n
+    assert rx["dlc"]["20"] == rx["is_fd"]["true"] == n
+    assert tx["arbitration_id"][ids[MessageKind.CORRECTED_XYZ]] == n
+    assert set(tx["arbitration_id"]) == {ids[MessageKind.CORRECTED_XYZ], heartbeat}
+    assert tx["dlc"]["32"] == tx["is_fd"]["true"] == n
+    assert sum(tx["dlc"].values()) == sum(tx["arbitration_id"].values())
+    assert set(tx["dlc"]) <= {"32", "8"} and tx["is_fd"].get("false", 0) == tx["dlc"].get("8", 0)
+
+
+def test_replay_re_sends_fd_frames_as_fd_frames(tmp_path: Path) -> None:
+    """A session of RAW_XYZ readings, logged to MCAP, replayed onto a fresh bus: the receiver
+    gets each reading back as the same 20-byte CAN FD frame (replay used to drop ``is_fd``)."""
+    log, sent = _fd_session_log(tmp_path)
     ch = channel()
     with (
         can.Bus(interface="virtual", channel=ch, fd=True) as out,
         can.Bus(interface="virtual", channel=ch, fd=True) as rx,
     ):
-        report = replay_to_bus(logs[0], out, speed=0.0)
+        report = replay_to_bus(log, out, speed=0.0)
         got = []
         while (msg := rx.recv(0.2)) is not None:
             got.append(msg)
