@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from cmm_comp.cli.sessionlog.reader import read_messages
 from cmm_comp.daemon.can_endpoint import frame_record
 from cmm_comp.daemon.sessionlog.encoding import message_struct
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.reader import read_messages
 from cmm_comp.daemon.sessionlog.schemas import check_message
 from cmm_comp.daemon.sessionlog.schemas import corrected_fields as corrected_payload
 from cmm_comp.daemon.sessionlog.schemas import frame_fields as frame_payload
