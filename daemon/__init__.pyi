@@ -7,18 +7,13 @@ from .grid_trust import GridTrust, GridTrustError
 from .metrics import LatencyHistogram, Metrics
 from .service import DaemonService
 from .sessionlog import (
-    TOPIC_SCHEMAS,
     LoggerStats,
     McapProcessLogger,
     SessionLogger,
     SessionWriter,
-    ns_from_can_timestamp,
-    ns_from_stamp,
-    stamp_from_ns,
 )
 
 __all__ = [
-    "TOPIC_SCHEMAS",
     "Answer",
     "ConfigError",
     "CorrectionEngine",
@@ -37,7 +32,4 @@ __all__ = [
     "SessionLogger",
     "SessionWriter",
     "load_grid",
-    "ns_from_can_timestamp",
-    "ns_from_stamp",
-    "stamp_from_ns",
 ]

@@ -26,7 +26,7 @@ from cmm_comp.cli.sessionlog.reader import read_messages
 from cmm_comp.daemon.config import ConfigError, add_override_flags, config_from_dict, load_config
 from cmm_comp.daemon.service import DaemonService
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS, check_message, stamp_from_ns
 from cmm_comp.sim_controller.controller import CanController, RawReading
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="needs POSIX processes and signals")

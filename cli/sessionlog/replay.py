@@ -35,9 +35,9 @@ from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.grid import CorrectionGrid
 from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
 from cmm_comp.daemon.engine import GRID_STATUS
-from cmm_comp.daemon.sessionlog.schemas import ns_from_stamp
 from cmm_comp.protocol.can_ids import sent_by_daemon
 from cmm_comp.protocol.codes import Status
+from cmm_comp.protocol.session_topics import ns_from_stamp
 
 from .reader import read_messages
 
