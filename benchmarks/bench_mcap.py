@@ -20,8 +20,8 @@ from typing import Any
 
 from mcap.writer import CompressionType, Writer
 
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, stamp_from_ns
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS, stamp_from_ns
 
 RESULTS = Path(__file__).resolve().parent / "results" / "mcap.json"
 CHUNK_SIZE = 256 * 1024

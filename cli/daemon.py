@@ -135,12 +135,12 @@ def _toml_options(items: list[str]) -> dict[str, Any]:
 
 
 def cmd_daemon_init(args: argparse.Namespace) -> int:
-    """``cmm-comp daemon init DIR --machine MACHINE.toml``: see :mod:`cmm_comp.daemon.init_dir`."""
+    """``cmm-comp daemon init DIR --machine MACHINE.toml``: see :mod:`cmm_comp.cli.daemon_init`."""
     import shlex
 
+    from cmm_comp.cli.daemon_check import preflight
+    from cmm_comp.cli.daemon_init import CONFIG_NAME, init_daemon_dir
     from cmm_comp.daemon.config import load_config
-    from cmm_comp.daemon.init_dir import CONFIG_NAME, init_daemon_dir
-    from cmm_comp.daemon.preflight import preflight
 
     def progress(fraction: float, message: str) -> None:
         if sys.stderr.isatty():
@@ -207,8 +207,8 @@ def print_check(config: Any, problems: list[str], warnings: list[str], loaded: A
 
 def check_daemon(args: argparse.Namespace) -> int:
     """``cmm-comp daemon --check``: every problem of the configuration and of what it names."""
+    from cmm_comp.cli.daemon_check import preflight
     from cmm_comp.daemon.config import ConfigError, load_config_and_problems
-    from cmm_comp.daemon.preflight import preflight
 
     try:
         config, problems = load_config_and_problems(args.config, args)
@@ -281,7 +281,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """Re-correct a session (default) or re-send it to a bus (``--to-bus``)."""
     import can
 
-    from cmm_comp.daemon.sessionlog.replay import ReplayError, replay_offline, replay_to_bus
+    from cmm_comp.cli.sessionlog.replay import ReplayError, replay_offline, replay_to_bus
 
     try:
         if args.to_bus:

@@ -33,7 +33,7 @@ def add_parsers(subparsers: Any) -> None:
 
 def cmd_recover(args: argparse.Namespace) -> int:
     """Recover ``args.source`` into ``args.output``; print what was recovered."""
-    from cmm_comp.daemon.sessionlog.recover import recover
+    from cmm_comp.cli.sessionlog.recover import recover
 
     try:
         report = recover(args.source, args.output, overwrite=args.force)

@@ -113,8 +113,8 @@ def can_open_error(cfg: CanSection, exc: BaseException) -> str:
 
 def frame_record(msg: can.Message, channel: str, direction: str) -> tuple[object, ...]:
     """The compact ``/cmm/can_rx`` / ``/cmm/can_tx`` record of one frame (the MCAP writer
-    turns it into a :class:`.sessionlog.schemas.CanFrame`: ``schemas.frame_fields``);
-    ``direction``: ``rx``, ``tx`` or ``tx_echo`` (:data:`.sessionlog.schemas.FRAME_DIRECTIONS`)."""
+    turns it into a ``protocol.session_topics.CanFrame``: ``session_topics.frame_fields``);
+    ``direction``: ``rx``, ``tx`` or ``tx_echo`` (``session_topics.FRAME_DIRECTIONS``)."""
     return (
         msg.arbitration_id,
         msg.is_extended_id,
@@ -232,9 +232,6 @@ class CanEndpoint(can.Listener):
         self.last_error = exc
         self.metrics.fault("can_error")
         self.events.emit("can_error", "error", error=message or repr(exc))
-
-    def stop_listener(self) -> None:  # can.Listener API
-        self.stop()
 
     # ------------------------------------------------------------------ bus
     def _open(self) -> bool:

@@ -362,7 +362,7 @@ class CorrectionEngine:
 
     def report_many(self, batch: Sequence[tuple[Reading, Answer, float]]) -> None:
         """Events and MCAP records (compact: the writer builds the JSON,
-        ``sessionlog.schemas.RECORD_FIELDS``) of each ``(reading, answer, latency_us)``, after
+        ``protocol.session_topics.RECORD_FIELDS``) of each ``(reading, answer, latency_us)``, after
         the reply (may wait until the line is quiet): the events one by one, the records of all
         with one ``log_many`` per topic (one log time)."""
         for _, answer, _ in batch:
@@ -384,7 +384,7 @@ class CorrectionEngine:
             )
 
     def _raw_record(self, reading: Reading) -> tuple[object, ...]:
-        """The compact ``/cmm/raw`` record (``sessionlog.schemas.raw_fields``)."""
+        """The compact ``/cmm/raw`` record (``protocol.session_topics.raw_fields``)."""
         return (
             reading.seq,
             *reading.position_mm,
@@ -400,7 +400,7 @@ class CorrectionEngine:
     def _corrected_record(
         self, reading: Reading, answer: Answer, latency_us: float
     ) -> tuple[object, ...]:
-        """The compact ``/cmm/corrected`` record (``sessionlog.schemas.corrected_fields``): U
+        """The compact ``/cmm/corrected`` record (``protocol.session_topics.corrected_fields``): U
         appended when the answer's grid carries U (None = unknown: logged as nulls)."""
         rec = (
             answer.seq,

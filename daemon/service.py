@@ -31,7 +31,15 @@ from .can_endpoint import BusFactory, CanEndpoint, open_bus
 from .config import DaemonConfig
 from .engine import CorrectionEngine
 from .events import EventLog
-from .grid_slot import GridLoadError, GridReloader, GridSlot, LoadedGrid, load_grid
+from .grid_slot import (
+    KERNEL_CACHE_OFF,
+    GridLoadError,
+    GridReloader,
+    GridSlot,
+    LoadedGrid,
+    load_grid,
+    stylus_note,
+)
 from .grid_trust import GridTrust
 from .grid_worker import ProcessGridLoader
 from .live import LiveDownError, LiveFanOut, LiveProcessSink, LiveStartError
@@ -39,7 +47,6 @@ from .memory import DAEMON_MMAP_THRESHOLD_BYTES, fix_mmap_threshold
 from .metrics import Metrics, MetricsServer
 from .modbus_server import ModbusEndpoint
 from .osthread import name_os_thread
-from .preflight import KERNEL_CACHE_OFF, stylus_note
 from .sessionlog import McapProcessLogger, SessionLogger
 from .state import StateBoard
 from .temperatures import TemperatureTable
@@ -307,7 +314,7 @@ class DaemonService:
 
     def _report_kernel_cache(self) -> None:
         """Say where the compiled grid kernels are cached, or loudly that they are not (each
-        start then compiles them: :data:`.preflight.KERNEL_CACHE_OFF`)."""
+        start then compiles them: :data:`.grid_slot.KERNEL_CACHE_OFF`)."""
         from cmm_comp.compensation.grid.kernels import kernels_cache_dir
 
         folder = kernels_cache_dir()

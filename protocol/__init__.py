@@ -1,7 +1,9 @@
-"""Bus contracts of cmm-comp: the CAN message set, the Modbus TCP register map, their codecs.
+"""The contracts of cmm-comp with the outside world: the CAN message set and the Modbus TCP
+register map with their codecs (the bus), and the session log's topics (the file every reader
+of a session gets: :mod:`.session_topics`).
 
 Pure codecs and contracts only (no daemon logic). ``protocol`` imports nothing from ``daemon``
-or ``sim_controller``. See docs/can.md and docs/modbus.md.
+or ``sim_controller``. See docs/can.md, docs/modbus.md and docs/formats.md §6.
 """
 
 import lazy_loader as _lazy

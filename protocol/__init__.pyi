@@ -44,9 +44,22 @@ from .modbus_devid import DeviceIdentity, device_id_response
 from .modbus_map import ExceptionCode, check_request, check_write, commits_reading
 from .modbus_pdu import FrameError, Request, parse_request
 from .modbus_tcp import DIRECT_UNIT_IDS, MbapListener, MbapServer
+from .session_topics import (
+    RECORD_FIELDS,
+    TOPIC_SCHEMAS,
+    TOPIC_TYPES,
+    TopicSchema,
+    check_message,
+    ns_from_can_timestamp,
+    ns_from_stamp,
+    stamp_from_ns,
+)
 
 __all__ = [
     "DIRECT_UNIT_IDS",
+    "RECORD_FIELDS",
+    "TOPIC_SCHEMAS",
+    "TOPIC_TYPES",
     "AnswerBlock",
     "AnswerTimeoutError",
     "Applied",
@@ -88,10 +101,12 @@ __all__ = [
     "Superseded",
     "TemperatureSample",
     "TemperatureSlot",
+    "TopicSchema",
     "Triplet",
     "TripletAssembler",
     "Undecodable",
     "UnknownId",
+    "check_message",
     "check_request",
     "check_write",
     "commits_reading",
@@ -105,7 +120,10 @@ __all__ = [
     "encode_correction_uncertainty",
     "encode_message",
     "grid_id_from_sha256",
+    "ns_from_can_timestamp",
+    "ns_from_stamp",
     "parse_request",
     "sent_by_daemon",
     "seq_distance",
+    "stamp_from_ns",
 ]

@@ -14,6 +14,7 @@ from typing import Any
 import jsonschema
 import pytest
 
+from cmm_comp.cli.config_doc import BEGIN, END, reference_markdown
 from cmm_comp.compensation.formats.machine_schema import (
     ArmDeflectionSection,
     ErrorTableSection,
@@ -26,7 +27,6 @@ from cmm_comp.compensation.formats.machine_schema import (
 from cmm_comp.compensation.toml_schema import Num, Vec, adapter, rules_of
 from cmm_comp.compensation.uncertainty.model import TableUncertaintySection, UncertaintySection
 from cmm_comp.daemon.config import DaemonConfig
-from cmm_comp.daemon.config_doc import BEGIN, END, reference_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 DAEMON_DOC = ROOT / "docs" / "daemon.md"
@@ -37,7 +37,7 @@ def test_the_daemon_reference_is_generated_from_the_current_definitions() -> Non
     text = DAEMON_DOC.read_text(encoding="utf-8")
     block = text[text.index(BEGIN) : text.index(END) + len(END)]
     assert block == reference_markdown(), (
-        "docs/daemon.md is stale: python -m cmm_comp.daemon.config_doc docs/daemon.md"
+        "docs/daemon.md is stale: python -m cmm_comp.cli.config_doc docs/daemon.md"
     )
 
 

@@ -14,8 +14,8 @@ import pytest
 from test_daemon_support import base_config, channel, send_temps
 from test_daemon_uncertainty import OK_POINTS_MM, TEMP_C, u_grid_path
 
+from cmm_comp.cli.sessionlog.replay import replay_to_bus
 from cmm_comp.daemon.service import DaemonService
-from cmm_comp.daemon.sessionlog.replay import replay_to_bus
 from cmm_comp.protocol import CanIds, MessageKind, dbc_text, encode_message
 from cmm_comp.protocol import RawReading as RawReadingFrame
 from cmm_comp.protocol.codes import nm3_from_mm

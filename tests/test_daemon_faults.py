@@ -285,7 +285,7 @@ def test_bus_error_reconnects() -> None:
 def test_structured_logs_and_mcap(tmp_path) -> None:
     import io
 
-    from cmm_comp.daemon.sessionlog.reader import read_messages
+    from cmm_comp.cli.sessionlog.reader import read_messages
 
     cfg = base_config(channel())
     cfg.mcap.path = str(tmp_path / "s.mcap")
@@ -325,7 +325,7 @@ def test_a_slow_mcap_logger_never_delays_an_answer(tmp_path) -> None:
     bookkeeping to finish; the MCAP file then holds every answer and every frame."""
     import threading
 
-    from cmm_comp.daemon.sessionlog.reader import read_messages
+    from cmm_comp.cli.sessionlog.reader import read_messages
 
     cfg = base_config(channel())
     cfg.mcap.path = str(tmp_path / "s.mcap")

@@ -35,14 +35,14 @@ from test_daemon_support import (
     signing_key,
 )
 
+from cmm_comp.cli.daemon_check import NOT_CORRECTING
+from cmm_comp.cli.daemon_init import InitError, init_daemon_dir
 from cmm_comp.cli.main import main
 from cmm_comp.compensation import Machine
 from cmm_comp.compensation.grid import CorrectionGrid, generate_signing_key, sign_grid
 from cmm_comp.daemon.config import DaemonConfig
 from cmm_comp.daemon.grid_slot import load_grid
 from cmm_comp.daemon.grid_trust import GridTrust
-from cmm_comp.daemon.init_dir import InitError, init_daemon_dir
-from cmm_comp.daemon.preflight import NOT_CORRECTING
 from cmm_comp.daemon.service import DaemonService
 from cmm_comp.sim_controller.controller import RawReading
 

@@ -43,6 +43,7 @@ from test_daemon_support import (
 from test_protocol_modbus_support import RawClient
 from test_protocol_uncertainty import expected_raw, u_values
 
+from cmm_comp.cli.sessionlog.replay import replay_offline
 from cmm_comp.compensation.grid import CorrectionGrid, sign_grid
 from cmm_comp.compensation.grid.uncertainty import (
     COVARIANCE_COMPONENTS,
@@ -51,7 +52,6 @@ from cmm_comp.compensation.grid.uncertainty import (
 )
 from cmm_comp.daemon.engine import U_UNKNOWN, Answer, CorrectionEngine, Reading
 from cmm_comp.daemon.service import DaemonService
-from cmm_comp.daemon.sessionlog.replay import replay_offline
 from cmm_comp.protocol import Applied, Axis, CanIds, Heartbeat, Status, dbc_text
 from cmm_comp.protocol.codes import NM_PER_MM
 from cmm_comp.sim_controller.controller import RawReading

@@ -19,8 +19,8 @@ from test_daemon_support import (
     npl_machine,
 )
 
+from cmm_comp.cli.sessionlog.reader import read_messages
 from cmm_comp.compensation.grid import CorrectionGrid
-from cmm_comp.daemon.sessionlog.reader import read_messages
 from cmm_comp.protocol.codes import grid_id_from_sha256
 from cmm_comp.sim_controller.controller import RawReading
 from cmm_comp.sim_controller.runner import build_program, evaluate, make_readings, run_can

@@ -32,7 +32,7 @@ from cmm_comp.daemon.live import (
 )
 from cmm_comp.daemon.live import sink as sink_module
 from cmm_comp.daemon.sessionlog.encoding import encode_message
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS, check_message
 
 T0_NS = 1_700_000_000_123_456_789
 

@@ -15,7 +15,7 @@ import pytest
 from foxglove_ws_client import FoxgloveClient
 from test_daemon_support import base_config, channel, daemon_and_controller, send_temps
 
-from cmm_comp.daemon.sessionlog.reader import read_messages
+from cmm_comp.cli.sessionlog.reader import read_messages
 from cmm_comp.sim_controller.controller import RawReading
 
 

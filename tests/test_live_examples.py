@@ -17,7 +17,7 @@ from foxglove_ws_client import FoxgloveClient, protobuf_class
 
 from cmm_comp.daemon.live import SCENE_TOPIC, STREAMED_TOPICS, SUBPROTOCOL
 from cmm_comp.daemon.live.scene import FRAME_ID
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS, check_message
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUT = ROOT / "examples" / "foxglove-layout.json"

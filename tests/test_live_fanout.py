@@ -11,10 +11,10 @@ import pytest
 from foxglove_ws_client import FoxgloveClient, protobuf_class
 from test_daemon_support import base_config, channel
 
+from cmm_comp.cli.sessionlog.reader import read_messages
 from cmm_comp.daemon.engine import CorrectionEngine, Reading
 from cmm_comp.daemon.live import SCENE_TOPIC, LiveFanOut, LiveProcessSink, LiveSection
 from cmm_comp.daemon.service import DaemonService
-from cmm_comp.daemon.sessionlog.reader import read_messages
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 NOW_S = 1000.0

@@ -15,8 +15,8 @@ from mcap.reader import make_reader
 from test_mcap_log import T0_NS, sample
 
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS, check_message
 
 
 class Opaque:

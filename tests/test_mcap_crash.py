@@ -12,7 +12,7 @@ import pytest
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from cmm_comp.daemon.sessionlog.reader import read_messages
+from cmm_comp.cli.sessionlog.reader import read_messages
 
 ROOT = Path(__file__).resolve().parents[1]
 FLUSH_PERIOD_S = 0.2

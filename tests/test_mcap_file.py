@@ -26,8 +26,8 @@ from mcap.records import Chunk, Message, MessageIndex
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
+from cmm_comp.cli.sessionlog.recover import recover
 from cmm_comp.daemon.sessionlog.mcapfile import McapFileWriter
-from cmm_comp.daemon.sessionlog.recover import recover
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 WRITER_PY = Path(__file__).resolve().parents[1] / "daemon" / "sessionlog"

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from cmm_comp.daemon.sessionlog.reader import load_session, read_messages, session_files
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
+from cmm_comp.cli.sessionlog.reader import load_session, read_messages, session_files
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS, check_message, stamp_from_ns
 
 T0_NS = 1_700_000_000_123_456_789
 

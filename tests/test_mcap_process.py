@@ -22,11 +22,11 @@ from mcap.reader import make_reader
 from test_daemon_support import ROOT, base_config, channel, send_temps
 from test_mcap_log import T0_NS, sample, without_log_counters
 
+from cmm_comp.cli.sessionlog.reader import read_messages
 from cmm_comp.daemon.config import ConfigError, add_override_flags, config_from_dict, load_config
 from cmm_comp.daemon.service import DaemonService
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.reader import read_messages
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS, check_message, stamp_from_ns
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS, check_message, stamp_from_ns
 from cmm_comp.sim_controller.controller import CanController, RawReading
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="needs POSIX processes and signals")

@@ -1,4 +1,4 @@
-"""Compact log records (``daemon.sessionlog.schemas.RECORD_FIELDS``): the payload the writer
+"""Compact log records (``protocol.session_topics.RECORD_FIELDS``): the payload the writer
 builds from a record equals the one written out by hand from the CAN message / reading, passes the
 topic's schema, and a malformed record is counted as an encode error without stopping the writer."""
 
@@ -12,15 +12,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from cmm_comp.cli.sessionlog.reader import read_messages
 from cmm_comp.daemon.can_endpoint import frame_record
 from cmm_comp.daemon.sessionlog.encoding import message_struct
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.reader import read_messages
-from cmm_comp.daemon.sessionlog.schemas import check_message
-from cmm_comp.daemon.sessionlog.schemas import corrected_fields as corrected_payload
-from cmm_comp.daemon.sessionlog.schemas import frame_fields as frame_payload
-from cmm_comp.daemon.sessionlog.schemas import raw_fields as raw_payload
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
+from cmm_comp.protocol.session_topics import check_message
+from cmm_comp.protocol.session_topics import corrected_fields as corrected_payload
+from cmm_comp.protocol.session_topics import frame_fields as frame_payload
+from cmm_comp.protocol.session_topics import raw_fields as raw_payload
 
 T0_S = 1_700_000_000
 

@@ -29,8 +29,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from test_mcap_log import T0_NS, sample
 
 from cmm_comp.cli.main import main
+from cmm_comp.cli.sessionlog.recover import recover
 from cmm_comp.daemon.sessionlog.process_writer import McapProcessLogger
-from cmm_comp.daemon.sessionlog.recover import recover
 from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cmm_comp.daemon.sessionlog.schemas import (
+from cmm_comp.protocol.session_topics import (
     NS_PER_S,
     TOPIC_SCHEMAS,
     check_message,

@@ -29,8 +29,8 @@ import pytest
 from doc_commands import cli
 from test_mcap_recover import acknowledged, session_writer
 
-from cmm_comp.daemon.sessionlog.schemas import TOPIC_SCHEMAS
 from cmm_comp.daemon.sessionlog.writer import LIBRARY
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS
 
 ROOT = Path(__file__).resolve().parents[1]
 # the session fixtures (npm ci, a daemon run of 300 readings, the demo) run inside the first

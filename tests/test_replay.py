@@ -12,7 +12,7 @@ import pytest
 from doc_commands import cli
 from test_daemon_support import base_config, channel, daemon_and_controller, npl_grid_path
 
-from cmm_comp.daemon.sessionlog.replay import ReplayError, replay_offline, replay_to_bus
+from cmm_comp.cli.sessionlog.replay import ReplayError, replay_offline, replay_to_bus
 from cmm_comp.sim_controller.controller import RawReading
 
 
@@ -81,7 +81,7 @@ def test_replay_reads_a_cut_session_with_a_one_line_warning(session, tmp_path, c
     from mcap.stream_reader import StreamReader, breakup_chunk
 
     from cmm_comp.cli.main import main
-    from cmm_comp.daemon.sessionlog.reader import read_messages
+    from cmm_comp.cli.sessionlog.reader import read_messages
     from cmm_comp.daemon.sessionlog.writer import SessionWriter
 
     small = tmp_path / "small-chunks.mcap"  # the same session in many small chunks
@@ -120,8 +120,8 @@ def test_replay_counts_a_logged_answer_that_is_not_a_number(session, monkeypatch
     not compared and is counted; the other answers compare as before, every figure finite and
     the JSON standard. Oracle: the two answers doctored here."""
     from cmm_comp.cli.main import main
-    from cmm_comp.daemon.sessionlog import replay as replay_mod
-    from cmm_comp.daemon.sessionlog.reader import read_messages
+    from cmm_comp.cli.sessionlog import replay as replay_mod
+    from cmm_comp.cli.sessionlog.reader import read_messages
 
     res = read_messages(session)
     corrected = [m for m in res.messages if m.topic == "/cmm/corrected"]

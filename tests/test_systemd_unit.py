@@ -21,8 +21,8 @@ from pathlib import Path
 import pytest
 from systemd_unit import parse_unit, under
 
+from cmm_comp.cli.daemon_init import config_text, daemon_dir_paths
 from cmm_comp.daemon.config import config_from_dict
-from cmm_comp.daemon.init_dir import config_text, daemon_dir_paths
 from cmm_comp.daemon.service import SIGTERM_STOP_S
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@
 
 :func:`diagnose_task` and :func:`replay_task` call exactly what ``cmm-comp diagnose`` and
 ``cmm-comp replay`` call (:func:`cmm_comp.cli.diagnosis.run_diagnosis`,
-:func:`cmm_comp.daemon.sessionlog.replay.replay_offline`) and return a small dict: ``ok``, the
+:func:`cmm_comp.cli.sessionlog.replay.replay_offline`) and return a small dict: ``ok``, the
 result as the JSON text the one-by-one command writes (``json``), or the one-line ``error`` it
 would print; the machine's load ``warnings``; and the timings the benchmark and the overhead
 figures use (``compute_s`` wall and ``cpu_s`` CPU time inside the task, ``pid``). A bad file is
@@ -112,7 +112,7 @@ def replay_task(source: str, grid: str | None) -> dict[str, Any]:
     """``cmm-comp replay SOURCE [--grid GRID] --json OUT`` on a worker (module docstring); also
     returns ``grid_file_sha256``, the SHA-256 of the grid file used (a stored result of a
     session replayed with its own grid stays valid only while that file is unchanged)."""
-    from cmm_comp.daemon.sessionlog.replay import ReplayError, replay_offline
+    from cmm_comp.cli.sessionlog.replay import ReplayError, replay_offline
 
     def work(warnings: list[str]) -> dict[str, Any]:
         try:

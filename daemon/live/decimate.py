@@ -20,7 +20,7 @@ DECIMATED_TOPICS: frozenset[str] = frozenset({"/cmm/raw", "/cmm/corrected"})
 """Topics with a message per reading (up to kHz): decimated per update."""
 _CORRECTED = "/cmm/corrected"
 _STATUS_FIELD = 4
-"""Index of the status label in a ``/cmm/corrected`` record tuple (sessionlog.schemas.corrected_fields)."""
+"""Index of the status label in a ``/cmm/corrected`` record tuple (session_topics.corrected_fields)."""
 
 
 def pick_evenly(count: int, k: int) -> list[int]:

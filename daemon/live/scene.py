@@ -38,8 +38,8 @@ from foxglove.messages import (
 from msgspec import UNSET
 
 from cmm_comp.protocol.codes import Status
+from cmm_comp.protocol.session_topics import Corrected
 
-from ..sessionlog.schemas import Corrected
 from .decimate import pick_evenly as pick_evenly
 
 FRAME_ID = "cmm"

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from cmm_comp.compensation.errors import CmmCompError
+from cmm_comp.protocol.session_topics import TOPIC_SCHEMAS
 
-from ..sessionlog.schemas import TOPIC_SCHEMAS
 from .settings import LiveSection
 
 SUBPROTOCOL = "foxglove.sdk.v1"

@@ -1,7 +1,5 @@
-"""The daemon's session log: every message of a session in MCAP (JSON messages), and replay.
+"""The daemon's session log: every message of a session in MCAP (JSON messages).
 
-* :mod:`.schemas` - every topic as one ``msgspec`` Struct: its keys, its JSON Schema, the
-  compact record tuples the hot path logs, the log's time conversions;
 * :mod:`.encoding` - one message to the JSON of its Struct, or the error record that replaces it;
 * :mod:`.logger` - :class:`SessionLogger`, the protocol the daemon types against,
   :class:`LogSettings`, :class:`LoggerStats` and what the writers share;
@@ -11,9 +9,10 @@
   built by ``mcap.records``; the message path and the chunk index spooled to disk are ours);
 * :mod:`.process_writer` - :class:`McapProcessLogger`, the daemon's log: a :class:`SessionWriter`
   in a child process (:mod:`..childproc`), fed straight from shared memory;
-* :mod:`.reader` - read sessions back (rolled sets, files cut by a crash);
-* :mod:`.recover` - rewrite a file cut by a crash as a complete, indexed file;
-* :mod:`.replay` - re-correct a session offline, or re-send what the controller sent to a bus.
+
+Every topic's messages are defined once, in :mod:`cmm_comp.protocol.session_topics` (the
+contract with every reader of a session). Reading a log back (the reader, ``mcap recover``,
+replay) is offline work, never done in the daemon's processes: :mod:`cmm_comp.cli.sessionlog`.
 
 See docs/mcap.md.
 """

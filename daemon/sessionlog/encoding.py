@@ -1,7 +1,7 @@
 """One logged message to the JSON bytes of its topic's Struct, or else an error record.
 
 One path for every topic and both consumers (the MCAP writer and the live view): the payload
-— a compact record tuple (``schemas.RECORD_FIELDS``) or a dict of the topic's keys — gets its
+— a compact record tuple (``session_topics.RECORD_FIELDS``) or a dict of the topic's keys — gets its
 ``stamp`` from the log time when it has none, is converted to the topic's Struct
 (``msgspec.convert``: every declared key of its declared type and range, strict — no bool for
 an int, no bytes for a string, no numpy scalar, no undeclared key) and encoded by ``msgspec``.
@@ -23,7 +23,14 @@ from typing import Any
 
 import msgspec
 
-from .schemas import INT_MAX, INT_MIN, RECORD_FIELDS, TOPIC_TYPES, problem, stamp_from_ns
+from cmm_comp.protocol.session_topics import (
+    INT_MAX,
+    INT_MIN,
+    RECORD_FIELDS,
+    TOPIC_TYPES,
+    problem,
+    stamp_from_ns,
+)
 
 ERROR_TOPIC = "/cmm/log_error"
 """Topic of the error records that replace messages which could not be encoded."""
@@ -49,7 +56,7 @@ class NotJson:
 
 
 def message_struct(topic: str, payload: dict[str, Any] | tuple[Any, ...], t_ns: int) -> Any:
-    """The checked Struct of one message: a record tuple's keys (``schemas.RECORD_FIELDS``)
+    """The checked Struct of one message: a record tuple's keys (``session_topics.RECORD_FIELDS``)
     or a dict's, ``stamp`` from ``t_ns`` (integer ns) when absent. Raises KeyError for a topic
     that is not logged or takes no record, ValueError (naming the key path) or TypeError for
     a payload that is not a message of the topic."""

@@ -20,12 +20,12 @@ from typing import Any, Protocol, Self, TypedDict, cast
 
 from mcap.writer import CompressionType
 
-from .schemas import RECORD_FIELDS, TOPIC_SCHEMAS
+from cmm_comp.protocol.session_topics import RECORD_FIELDS, TOPIC_SCHEMAS
 
 _log = logging.getLogger(__name__)
 
 Payload = dict[str, Any] | tuple[Any, ...]
-"""A logged payload: the JSON object, or a compact record tuple (``schemas.RECORD_FIELDS``)."""
+"""A logged payload: the JSON object, or a compact record tuple (``session_topics.RECORD_FIELDS``)."""
 
 
 LOW_PRIORITY_TOPICS: frozenset[str] = frozenset({"/cmm/can_rx", "/cmm/can_tx", "/cmm/modbus"})
@@ -208,7 +208,7 @@ class LogConsumer:
 
         :param topic: one of the logged topics (KeyError for the writers otherwise: a
             programming error).
-        :param payload: the JSON object, or for the topics of :data:`.schemas.RECORD_FIELDS`
+        :param payload: the JSON object, or for the topics of :data:`.session_topics.RECORD_FIELDS`
             a compact record tuple. ``stamp`` is added from ``log_time_ns`` when absent.
         :param log_time_ns: MCAP log time, integer ns since the Unix epoch; now if None.
         """

@@ -26,17 +26,18 @@ from typing import IO, Any, Unpack
 
 from mcap.writer import CompressionType
 
-from ..events import Throttle
-from .encoding import ERROR_TOPIC, encode_error, encode_message, error_payload, safe_str
-from .logger import LoggerBase, LoggerStats, LogOptions, LogSettings, Payload
-from .mcapfile import McapFileWriter
-from .schemas import (
+from cmm_comp.protocol.session_topics import (
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
     TOPIC_SCHEMAS,
     TopicSchema,
     stamp_from_ns,
 )
+
+from ..events import Throttle
+from .encoding import ERROR_TOPIC, encode_error, encode_message, error_payload, safe_str
+from .logger import LoggerBase, LoggerStats, LogOptions, LogSettings, Payload
+from .mcapfile import McapFileWriter
 
 _log = logging.getLogger(__name__)
 

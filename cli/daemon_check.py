@@ -1,12 +1,12 @@
-"""What ``cmm-comp daemon --check`` verifies beyond the configuration's own values: every
+"""What ``cmm-comp daemon --check`` (and ``daemon init``) verifies beyond the configuration's own values: every
 problem at once, each one line naming the setting, the file and what to do.
 
 :func:`preflight` checks, each on its own (one failing check never hides another):
 
 * the grid and its trust: ``grid.path`` set and readable, ``grid.machine`` readable,
   ``grid.public_key`` a key, a machine bound, then the grid file's signature and machine
-  binding (:meth:`.grid_trust.GridTrust.problems`) and, when all of that holds, the full load
-  with its self-check (:func:`.grid_slot.load_grid`). Any of these failing means the daemon
+  binding (:meth:`cmm_comp.daemon.grid_trust.GridTrust.problems`) and, when all of that holds, the full load
+  with its self-check (:func:`cmm_comp.daemon.grid_slot.load_grid`). Any of these failing means the daemon
   would start and correct **nothing**: every answer ``no_grid`` with the indicated position;
 * the session log folder (``mcap.path``) can be created and written by this user;
 * the CAN bus opens (``can.interface`` / ``can.channel``; the message suggests ``virtual``
@@ -14,7 +14,8 @@ problem at once, each one line naming the setting, the file and what to do.
   skipped when the configuration itself has problems (its values are not to be trusted then);
 
 and notes (warnings, not problems) a ``grid.stylus_mm`` that differs from the grid's probe
-offset (:func:`stylus_note`) and a missing cache for the compiled grid kernels.
+offset (:func:`cmm_comp.daemon.grid_slot.stylus_note`, which the daemon also logs at
+start) and a missing cache for the compiled grid kernels.
 """
 
 from __future__ import annotations
@@ -24,32 +25,24 @@ import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from cmm_comp.compensation.errors import CmmCompError
+from cmm_comp.daemon.config import DaemonConfig
+from cmm_comp.daemon.grid_slot import (
+    KERNEL_CACHE_OFF,
+    GridLoadError,
+    LoadedGrid,
+    load_grid,
+    stylus_note,
+)
+from cmm_comp.daemon.grid_trust import GridTrust, TrustedMachine
 
-from .config import DaemonConfig
-from .grid_slot import GridLoadError, LoadedGrid, load_grid
-from .grid_trust import GridTrust, TrustedMachine
-
-__all__ = ["KERNEL_CACHE_OFF", "NOT_CORRECTING", "Preflight", "preflight", "stylus_note"]
+__all__ = ["NOT_CORRECTING", "Preflight", "preflight"]
 
 NOT_CORRECTING = (
     "the daemon would start but correct nothing: every answer says no_grid and carries the "
     "indicated position"
 )
 """Appended to each grid problem: what it means for the readings."""
-
-KERNEL_CACHE_OFF = (
-    "no writable cache folder for the compiled grid kernels (NUMBA_CACHE_DIR unset, the "
-    "installation read-only, no home): they are compiled in every daemon process at start "
-    "(~18 s of CPU measured, ~2 s with a cache) instead of once; set NUMBA_CACHE_DIR to a "
-    "folder this user can write (the systemd unit: CacheDirectory=)"
-)
-"""The warning (at start and in ``--check``) when numba has nowhere to cache the kernels."""
-
-STYLUS_TOL_MM = 1e-9
-"""A configured stylus closer than this to the grid's probe offset (per axis, mm) is equal."""
 
 
 @dataclass
@@ -62,22 +55,6 @@ class Preflight:
     """Worth knowing; the daemon corrects."""
     loaded: LoadedGrid | None = None
     """The grid as the daemon would load it (None when it would not)."""
-
-
-def stylus_note(
-    configured: list[float] | None, probe_mm: tuple[float, float, float], grid_path: str
-) -> str | None:
-    """The line saying a configured ``grid.stylus_mm`` differs from the grid's probe offset
-    (mm), or None when it is unset or equal."""
-    if configured is None or len(configured) != 3:  # a bad length is a configuration problem
-        return None
-    if np.all(np.abs(np.asarray(configured, float) - np.asarray(probe_mm)) <= STYLUS_TOL_MM):
-        return None
-    return (
-        f"grid.stylus_mm = {list(configured)} differs from the probe offset {list(probe_mm)} "
-        f"mm the grid {grid_path} was built with: every reading is corrected for the configured "
-        "stylus (remove grid.stylus_mm to use the grid's)"
-    )
 
 
 def preflight(config: DaemonConfig, config_ok: bool = True) -> Preflight:
@@ -165,9 +142,8 @@ def _check_mcap(config: DaemonConfig, out: Preflight) -> None:
 def _check_can(config: DaemonConfig, out: Preflight) -> None:
     if not config.can.enabled:
         return
+    from cmm_comp.daemon.can_endpoint import can_open_error, open_bus
     from cmm_comp.protocol.can_ids import CanIds
-
-    from .can_endpoint import can_open_error, open_bus
 
     try:
         bus = open_bus(config.can, CanIds(config.can.node_id, config.can.base_id))

@@ -23,7 +23,7 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Footer, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader
 
-from .schemas import ns_from_stamp
+from cmm_comp.protocol.session_topics import ns_from_stamp
 
 TRUNCATION_ERRORS: tuple[type[BaseException], ...] = (
     McapError,

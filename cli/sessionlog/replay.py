@@ -34,12 +34,12 @@ import numpy as np
 from cmm_comp.compensation.errors import CmmCompError
 from cmm_comp.compensation.grid import CorrectionGrid
 from cmm_comp.compensation.thermal import TEMPERATURE_ROLES
+from cmm_comp.daemon.engine import GRID_STATUS
 from cmm_comp.protocol.can_ids import sent_by_daemon
 from cmm_comp.protocol.codes import Status
+from cmm_comp.protocol.session_topics import ns_from_stamp
 
-from ..engine import GRID_STATUS
 from .reader import read_messages
-from .schemas import ns_from_stamp
 
 _GEOMETRY_APPLIED = tuple(s.label for s in Status if s.geometric_correction_applied)
 

@@ -5,9 +5,9 @@ keys are optional, the order they are written in. From it come
 
 * the JSON Schema of the topic's MCAP channel (``msgspec.json.schema``, made self-contained:
   :data:`TOPIC_SCHEMAS`), what Foxglove and the live view advertise;
-* the check of every message before it is written (:mod:`.encoding`: ``msgspec.convert``
-  against the Struct, a failure becomes an error record) and of a message read back
-  (:func:`check_message`);
+* the check of every message before it is written (:mod:`cmm_comp.daemon.sessionlog.encoding`:
+  ``msgspec.convert`` against the Struct, a failure becomes an error record) and of a message
+  read back (:func:`check_message`);
 * the record layouts of the hot path: the CAN endpoint and the engine log compact tuples,
   which :func:`record_fields` turns into the Struct's keys in the writer.
 
@@ -15,7 +15,7 @@ Times are ``{"sec", "nsec"}`` objects (:class:`Time`), never one int64 nanosecon
 Foxglove, and every JavaScript reader, parse JSON numbers as doubles. The only two time
 conversions of the log live here: :func:`stamp_from_ns` (MCAP ``log_time``) and
 :func:`ns_from_can_timestamp` (python-can's float seconds). Integers are 64-bit signed; a
-non-finite number is never written (:mod:`.encoding`).
+non-finite number is never written (:mod:`cmm_comp.daemon.sessionlog.encoding`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from typing import Annotated, Any, Literal
 import msgspec
 from msgspec import UNSET, Meta, Struct, UnsetType
 
-from cmm_comp.protocol.codes import mm3_from_nm
+from .codes import mm3_from_nm
 
 NS_PER_S = 1_000_000_000
 JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"

@@ -28,8 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from cmm_comp.compensation.errors import CmmCompError
-
-from .config import ConfigError, DaemonConfig, config_from_dict
+from cmm_comp.daemon.config import ConfigError, DaemonConfig, config_from_dict
 
 __all__ = [
     "CONFIG_NAME",

@@ -19,7 +19,8 @@ from pathlib import Path
 from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType
 
-from .mcapfile import MAGIC, McapFileWriter
+from cmm_comp.daemon.sessionlog.mcapfile import MAGIC, McapFileWriter
+
 from .reader import intact_records
 
 RECOVER_LIBRARY = "cmm-comp mcap recover"
