@@ -49,13 +49,42 @@ read logs with the TypeScript MCAP reader instead of skipping them."""
 
 
 def _child_pids() -> set[int]:
-    """Live child processes of this test process (Linux /proc; empty elsewhere)."""
+    """Live child processes of this test process (Linux /proc; empty elsewhere).
+
+    Read from each of this process's threads' ``/proc/PID/task/TID/children`` (the kernel's own
+    list; a child of a thread that has exited is moved to another thread of the process), then
+    zombies dropped: ~30 µs a call instead of ~2 ms for reading every process's ``stat`` (two
+    calls per test, 1,881 tests: ~7 s of CPU a run). Kernels built without those files
+    (``CONFIG_PROC_CHILDREN``) get the scan of every process."""
     me = os.getpid()
+    tasks = Path(f"/proc/{me}/task")
+    if not tasks.is_dir():
+        return set()
+    listed: set[int] = set()
+    try:
+        for task in tasks.iterdir():
+            try:
+                listed.update(int(pid) for pid in (task / "children").read_text().split())
+            except FileNotFoundError:
+                if (task / "stat").exists():  # the thread is alive: no children file here
+                    raise
+    except FileNotFoundError:
+        return _child_pids_by_scan(me)
+    return {pid for pid in listed if _state(Path(f"/proc/{pid}")) not in (None, "Z")}
+
+
+def _state(entry: Path) -> str | None:
+    """The process's state letter (``R``, ``S``, ``Z``, …), or None when it is gone."""
+    try:
+        return (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return None
+
+
+def _child_pids_by_scan(me: int) -> set[int]:
+    """:func:`_child_pids` by reading every process's ``stat`` (its parent and state)."""
     out: set[int] = set()
-    proc = Path("/proc")
-    if not proc.is_dir():
-        return out
-    for entry in proc.iterdir():
+    for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
         try:

@@ -96,6 +96,7 @@ def _sessions(
     return out
 
 
+@pytest.mark.slow  # soak-like: a statistical claim over many seeds (tests/README.md rule 8)
 def test_false_alarm_rate_by_monte_carlo() -> None:
     """Stable machines (the effect named at random with a fixed chance, parameters scattering
     about fixed values): the share of machines with any change reported stays within the stated

@@ -162,6 +162,7 @@ def sampler(nominal: Machine) -> _TrueMachines:
     return _TrueMachines(nominal)
 
 
+@pytest.mark.slow  # soak-like: a statistical claim over many seeds (tests/README.md rule 8)
 def test_fraction_of_true_errors_within_U95_is_95_percent(
     nominal: Machine, sampler: _TrueMachines
 ) -> None:
@@ -193,6 +194,7 @@ def test_fraction_of_true_errors_within_U95_is_95_percent(
     assert abs(frac_k2 - p_k2) <= 2.58 * math.sqrt(p_k2 * (1 - p_k2) / machines), frac_k2
 
 
+@pytest.mark.slow  # soak-like: 600 true machines for a statistical claim (rule 8)
 def test_e0_distribution_and_pass_probability_match_true_machines(
     nominal: Machine, sampler: _TrueMachines
 ) -> None:

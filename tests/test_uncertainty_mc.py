@@ -357,6 +357,7 @@ def test_extra_ratio_holds_the_run_until_it_is_stable() -> None:
     assert res.stable and res.runs == 4 and len(calls) == 3  # after runs 2, 3, 4
 
 
+@pytest.mark.slow  # soak-like: a statistical claim over many seeds (tests/README.md rule 8)
 def test_pass_probability_and_its_spread_match_the_binomial() -> None:
     """The E0 test's pass probability is a share of trials: over R runs of M its run-to-run
     standard deviation is √(p(1−p)/M) (binomial), so 2s of the mean is 2√(p(1−p)/(RM)); the
