@@ -209,8 +209,14 @@ def _calibrate(
 
 
 def _significant_reversals(problem: Problem, sol: Solution) -> tuple[tuple[int, ...], list[str]]:
-    """The axes whose estimated reversal is significant (Wald test, p < REVERSAL_P) and the
-    names of those that are not."""
+    """The axes whose estimated reversal is significant and the names of those that are not.
+
+    Two Wald tests at p < :data:`REVERSAL_P` each, the reversal kept when either rejects "no
+    reversal": its mean over the travel (1 degree of freedom: a backlash is mostly one step,
+    and a test spread over every node's value misses it) and its whole profile (all its
+    degrees of freedom). Dropping a real reversal is not harmless where the data's directions
+    of travel correlate with position (a multilateration program): the fit would read it as a
+    scale error."""
     from scipy.stats import chi2
 
     kept, dropped = [], []
@@ -223,7 +229,10 @@ def _significant_reversals(problem: Problem, sol: Solution) -> tuple[tuple[int, 
         w, v = np.linalg.eigh(c)
         ok = w > 1e-12 * max(float(w.max()), 1e-300)
         stat = float(np.sum((v[:, ok].T @ h) ** 2 / w[ok]))
-        if chi2.sf(stat, int(np.sum(ok))) < REVERSAL_P:
+        mean = fn.matrix(np.linspace(fn.lo_mm, fn.hi_mm, 201)).mean(axis=0)
+        var_mean = float(mean @ c @ mean)
+        p_mean = chi2.sf(float(mean @ h) ** 2 / var_mean, 1) if var_mean > 0 else 1.0
+        if min(chi2.sf(stat, int(np.sum(ok))), p_mean) < REVERSAL_P:
             kept.append(fn.axis)
         else:
             dropped.append(fn.component)
