@@ -31,7 +31,7 @@ from .datasets import Dataset, build_problem, load_datasets
 from .gaps import dataset_reach, gap_warning, plate_gaps, reach_summary, reach_warning
 from .gauge import analyse_gauge
 from .plan import Plan
-from .posterior import residuals_without_errors, with_smoothness_spread
+from .posterior import with_smoothness_spread
 from .solver import Problem, Solution, solve
 from .writer import build_machine, machine_description
 
@@ -146,8 +146,10 @@ def _calibrate(
         f"{problem.p} error parameters, {problem.n - problem.p} nuisance parameters, "
         f"{sum(b.n_rows for b in problem.blocks)} readings"
     )
-    before = residuals_without_errors(problem)
     sol = solve(problem, progress=say)
+    # the residuals with the nuisance alone fitted (θ = 0): the solver's first stage, the same
+    # computation as posterior.residuals_without_errors (not repeated: ~10 % of a run's CPU)
+    before = sol.before
     kept, dropped = _significant_reversals(problem, sol)
     if dropped:  # a reversal the data do not show is not written (it would need dir signals)
         say("no significant reversal on " + ", ".join(dropped) + ": fitted again without")
