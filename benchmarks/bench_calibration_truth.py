@@ -93,6 +93,8 @@ def run_case(seed: int, model: str, kind: str, root: Path, args: argparse.Namesp
     else:
 
         def calibrate(plan: Path, out: Path, report: Path) -> tuple[int, str, str]:
+            if args.no_figures:  # the scoring reads no PNG: skip drawing them (half the CPU)
+                return _run_cli_no_figures(plan, out, report, args.timeout)
             return run_cli(plan, out, report, args.timeout)
 
     try:
@@ -101,6 +103,16 @@ def run_case(seed: int, model: str, kind: str, root: Path, args: argparse.Namesp
         score = CaseScore(seed, kind, model, -9, args.timeout)
         score.problems.append(f"calibrate did not finish in {args.timeout} s")
         return score
+
+
+def _run_cli_no_figures(
+    plan: Path, out_toml: Path, report_dir: Path, timeout_s: float
+) -> tuple[int, str, str]:
+    """As the harness' ``run_cli``, with ``--no-figures`` (the report but its PNGs)."""
+    cmd = [*cmm_comp_command(), "calibrate", str(plan), "-o", str(out_toml)]
+    cmd += ["--report", str(report_dir), "--no-figures"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
+    return proc.returncode, proc.stdout, proc.stderr
 
 
 def cli_startup_s() -> float:
@@ -201,6 +213,11 @@ def main(argv: list[str] | None = None) -> int:
         default="full_reach",
         help="the generator's ball-plate plan (plate and mixed cases; default full_reach, the "
         "balls reaching the ends of every axis; reach_limited: the former, shorter plan)",
+    )
+    ap.add_argument(
+        "--no-figures",
+        action="store_true",
+        help="calibrate with --no-figures (the scores read no PNG; about half the CPU)",
     )
     ap.add_argument("--out", default=str(RESULTS), help=f"JSON output (default {RESULTS})")
     args = ap.parse_args(argv)

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from .obs_artefacts import MultilaterationBlock, PlateBlock, StationState
 from .obs_laser import LaserBlock
 from .observation import project
-from .simulate import run_values
+from .simulate import run_values, trac_inputs
 from .solver import Problem
 
 if TYPE_CHECKING:
@@ -53,7 +53,9 @@ def resimulation(
         elif isinstance(block, MultilaterationBlock):
             ss: StationState = state
             d2 = block.data
-            err = machine.volumetric_error(d2.q_mm, d2.spec.stylus_mm, dict(d2.temps_C) or None)
+            err = machine.volumetric_error(
+                d2.q_mm, d2.spec.stylus_mm, dict(d2.temps_C) or None, inputs=trac_inputs(d2)
+            )
             p_theirs = d2.q_mm + err / 1000.0
             mine, _ = problem.model.exact(theta, block.pts)
             p_mine = d2.q_mm + mine / 1000.0

@@ -60,7 +60,9 @@ def load_datasets(plan: Plan, *, need_values: bool = True) -> list[Dataset]:
 
 
 def reversal_axes(plan: Plan, datasets: list[Dataset]) -> tuple[int, ...]:
-    """Axes with a positional error to identify and bidirectional linear laser runs on them."""
+    """Axes with a positional error to identify and data that reach it from both directions:
+    bidirectional linear laser runs on the axis, or a multilateration program that moves it
+    both ways (its points' last directions of travel)."""
     if not plan.fit.reversal:
         return ()
     axes = set()
@@ -69,6 +71,9 @@ def reversal_axes(plan: Plan, datasets: list[Dataset]) -> tuple[int, ...]:
             for run in ds.data.runs:
                 if run.kind == "linear" and np.any(run.direction > 0) and np.any(run.direction < 0):
                     axes.add(run.axis)
+        elif isinstance(ds.data, MultilaterationData) and ds.data.direction.size:
+            d = ds.data.direction
+            axes.update(k for k in range(3) if np.any(d[:, k] > 0) and np.any(d[:, k] < 0))
     wanted = {k for k, a in enumerate("xyz") if f"d{a}_{a}" in plan.fit.components}
     return tuple(sorted(axes & wanted))
 

@@ -5,6 +5,13 @@ The machine moves the reflector to the indicated point (x, y, z) mm; the trackin
 interferometer at ``station`` reports a length (mm) with an unknown dead-path offset per
 station, so a length may be negative. Stations are numbered in order of first appearance; the
 plan gives one rough position per station (``station_guess_mm``).
+
+The rows of a station are in the order measured (the program's order): each axis' last
+direction of travel at a row is the sign of its move from the station's previous row (an axis
+that did not move keeps its direction; unknown, 0, before its first move). The machine's
+reversal (backlash) follows that direction: along a program of points in random order it is
+correlated with the position (a point near the top of an axis is mostly reached moving up), so
+a fit that ignored it would read half the reversal step as a scale error (docs/calibration.md).
 """
 
 from __future__ import annotations
@@ -19,7 +26,13 @@ from ..parametric_errors import AXES
 from .csvtable import TEMPERATURES, PointsFile, read_csv_table
 from .plan import MultilaterationSpec
 
-__all__ = ["MIN_POINTS_PER_STATION", "MIN_STATIONS", "MultilaterationData", "read_multilateration"]
+__all__ = [
+    "MIN_POINTS_PER_STATION",
+    "MIN_STATIONS",
+    "MultilaterationData",
+    "read_multilateration",
+    "travel_directions",
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -32,7 +45,9 @@ class MultilaterationData(PointsFile):
     """One ``[[multilateration]]`` entry: ``stations`` (names, order of first appearance),
     ``station`` index per row, ``q_mm`` (N, 3) indicated points, ``length_mm`` (N,), ``point``
     per row the index of its shared point (the same ``point`` label at the same indicated
-    position, measured from ≥ 2 stations; −1 for a point one station alone measured)."""
+    position, measured from ≥ 2 stations; −1 for a point one station alone measured);
+    ``direction`` (N, 3) each axis' last direction of travel at the row (±1, 0 unknown:
+    :func:`travel_directions`)."""
 
     spec: MultilaterationSpec
     stations: tuple[str, ...]
@@ -42,11 +57,27 @@ class MultilaterationData(PointsFile):
     lines: tuple[int, ...]
     temps_C: dict[str, FloatArray] = field(default_factory=dict)
     point: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    direction: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def n_points(self) -> int:
         """Shared points (measured from ≥ 2 stations)."""
         return int(self.point.max(initial=-1)) + 1
+
+
+def travel_directions(station: IntArray, q_mm: FloatArray) -> FloatArray:
+    """(N, 3) each axis' last direction of travel (+1, −1; 0 unknown) at every row: the sign
+    of the axis' move from the previous row of the same station (rows in the order measured);
+    an axis that did not move keeps its last direction; 0 until its first move."""
+    out = np.zeros((station.shape[0], 3))
+    for k in np.unique(station):
+        rows = np.flatnonzero(station == k)
+        step = np.sign(np.diff(q_mm[rows], axis=0))
+        last = np.zeros(3)
+        for i, s in zip(rows[1:], step, strict=True):
+            last = np.where(s != 0.0, s, last)
+            out[i] = last
+    return out
 
 
 def shared_points(labels: list[str], q_mm: FloatArray) -> IntArray:
@@ -124,4 +155,5 @@ def read_multilateration(
         lines=table.lines,
         temps_C=temps,
         point=shared_points(labels, q),
+        direction=travel_directions(idx, q),
     )

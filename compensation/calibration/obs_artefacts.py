@@ -150,7 +150,9 @@ class MultilaterationBlock(Block):
         self.variance_groups = [VarianceGroup(dataset, "length_um", "um", data.spec.u_um)]
         self.groups = np.zeros(data.n, dtype=np.intp)
         self.lines = data.lines
-        self.pts = model.points(data.q_mm, data.spec.stylus_mm, None, data.temps_C or None)
+        # each axis' last direction of travel (the reversal) from the program's order
+        direction = data.direction if data.direction.shape == data.q_mm.shape else None
+        self.pts = model.points(data.q_mm, data.spec.stylus_mm, direction, data.temps_C or None)
         self.s = len(data.stations)
         self.np = data.n_points
         self._jac: FloatArray | None = None

@@ -33,6 +33,7 @@ __all__ = [
     "simulate_laser",
     "simulate_multilateration",
     "simulate_plate",
+    "trac_inputs",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -45,6 +46,14 @@ def _noise(rng: np.random.Generator | None, sigma: float, shape: tuple[int, ...]
 def _inputs(run: LaserRun) -> dict[str, FloatArray]:
     name = f"dir_{'xyz'[run.axis]}"
     return {name: run.direction} if run.kind != "squareness" else {}
+
+
+def trac_inputs(data: MultilaterationData) -> dict[str, FloatArray]:
+    """The machine API's runtime inputs at a multilateration's rows: each axis' last direction
+    of travel (``dir_x`` …, which the reversal follows), when the file's order gives them."""
+    if data.direction.shape != data.q_mm.shape:
+        return {}
+    return {f"dir_{a}": data.direction[:, k] for k, a in enumerate("xyz")}
 
 
 def run_values(machine: Machine, run: LaserRun) -> FloatArray:
@@ -149,7 +158,8 @@ def simulate_multilateration(
     s = data.spec.station_guess_mm if stations_mm is None else stations_mm
     d = np.zeros(len(data.stations)) if dead_path_mm is None else dead_path_mm
     temps = dict(data.temps_C) or None
-    true = data.q_mm + machine.volumetric_error(data.q_mm, data.spec.stylus_mm, temps) / 1000.0
+    err = machine.volumetric_error(data.q_mm, data.spec.stylus_mm, temps, inputs=trac_inputs(data))
+    true = data.q_mm + err / 1000.0
     length = np.linalg.norm(true - s[data.station], axis=1) + d[data.station]
     length = length + _noise(rng, data.spec.u_um, length.shape) / 1000.0
     return replace(data, length_mm=length)

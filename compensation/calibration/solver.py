@@ -110,6 +110,9 @@ class Solution:
     converged: bool
     history: list[dict[str, float]] = field(default_factory=list)
     stats: list[Any] = field(default_factory=list)  # per group (JᵀJ, Jᵀr, rᵀr) at the solution
+    #: each block's residuals with θ = 0 and only the nuisance fitted (the solver's first stage):
+    #: what the data show before any error is identified (the report's "before")
+    before: list[FloatArray] = field(default_factory=list)
 
 
 class Problem:
@@ -508,6 +511,7 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         frozen[: problem.p] = True
         theta, states, total_it, _ = _lm(problem, theta, states, lam, max_iter, frozen)
     res, jac = problem.linearize(theta, states)
+    before = [r.copy() for r in res]  # θ is still zero: the nuisance alone fitted
     problem.find_null_space(problem.group_stats(res, jac), lam)
     for rnd in range(12):
         theta, states, it, ok = _lm(problem, theta, states, lam, max_iter)
@@ -552,4 +556,5 @@ def solve(problem: Problem, *, max_iter: int = 60, progress: Any = None) -> Solu
         converged=converged,
         history=history,
         stats=stats,
+        before=before,
     )
