@@ -53,10 +53,16 @@ from ..parametric_errors import AXIS_INDEX
 from .candidate import Candidate
 from .coordinate_map import through_map
 from .fitting import Problem, Term, best_theta, fit
+from .locking import shift_noncentrality
 from .reference_candidates import cyclic_builder, cyclic_design
 from .residuals import Residuals
 
-#: A twin is separable only when it misses at least this share of the named term's energy.
+_DEBUG = bool(__import__("os").environ.get("CMM_DEBUG_SOURCES"))
+
+#: A smooth twin through the map (a table ↔ a nonlinearity of the reading) is separable only
+#: when it misses at least this share of the term's energy: a smooth curve moved by a reversal
+#: changes by f′·r, far below its own size, and what separates it in a quiet session is the
+#: map's imperfection. (Cyclic twins are judged by their phase shift against its noise.)
 SEPARATION_FLOOR = 0.01
 
 #: Twins that are smooth functions of the reference's reading: never named in place of a machine
@@ -210,6 +216,19 @@ def mirror(res: Residuals, term: Term, twin: Candidate) -> Candidate | None:
     )
 
 
+DRIFTS = ("drift", "reference_drift")
+
+
+def time_order(cand: Candidate, theta: Any) -> int | None:
+    """The Legendre order in time of a drift (its offsets' count; a shaped drift's time
+    orders), or ``None`` for any other cause."""
+    if cand.cause not in DRIFTS:
+        return None
+    effect = cand.build([0.0] * cand.n_params, theta if theta is not None else cand.thetas[0])
+    offsets = getattr(effect, "offset_um", None)
+    return len(offsets) if offsets is not None else None
+
+
 def _best_twin_shape(
     problem: Problem,
     others: list[Term],
@@ -225,6 +244,14 @@ def _best_twin_shape(
     shape has a reference drift as twin that is the same everywhere, and a default
     reading-locked shape may imitate a rich positional one with fewer parameters."""
     shapes = [twin] + ([twin.rich] if twin.rich is not None else [])
+    cap = time_order(term.candidate, term.theta)
+    if cap is not None:
+        # a drift's twin has the term's own time history (its order), not a richer one: the
+        # test asks whether the change along the axis is real, not which of two time
+        # freedoms fits better (thermal_drift/one-directional/s5001: an expansion of time order
+        # 3 was `either` against a reference drift of order 10 plus a table, Δχ² +7.6, where the
+        # same order in time leaves λ ≈ 1400 between them)
+        shapes = [c for c in shapes if (time_order(c, None) or 0) <= cap] or shapes[:1]
     same = mirror(problem.res, term, twin)
     if same is not None:
         shapes.append(same)
@@ -354,6 +381,9 @@ class _Judged:
     root: Candidate
     target: Any
     resid_t: Any
+    terms: list[Term]  # the full model (the term at ``index``) and its fit ``beta``
+    index: int
+    beta: Any
 
 
 def _judge_twin(
@@ -386,6 +416,12 @@ def _judge_twin(
     k_gap = direction_factor(problem, j.resid_t, gap, kappa)
     extra = t_term.candidate.n_params - term.candidate.n_params
     extra += sum(t.candidate.n_params for t in judged_with[len(others) :])
+    if _DEBUG:
+        print(
+            f"[sources] {term.candidate.label} vs {twin.cause}({t_term.candidate.n_params}): "
+            f"raw delta {delta:.4g} extra {extra} kappa {kappa:.3g} k_gap {k_gap:.3g} "
+            f"misfit/σ² {misfit / (sigma2 / kappa):.4g} table {judged_with is not others}"
+        )
     delta = (delta - extra) * kappa / k_gap + extra
     apart = misfit / (sigma2 / kappa * k_gap)
     # separable only by a difference that is a sizeable part of the term itself (≥ 1 % of its
@@ -394,7 +430,18 @@ def _judge_twin(
     # between position and reading: a reversal and a latency, or two drifts, differ by their
     # own columns)
     mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
-    if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
+    if mapped and {root.cause, twin.cause} == {"periodic", "reference_ripple"}:
+        # two cyclic errors of the two coordinates are told apart only by how far the
+        # coordinates move apart between the directions (the reversal), as the term's own
+        # phase shows it against its noise — not by the map's imperfections in a quiet session
+        z2 = shift_noncentrality(problem, j.terms, j.index, j.beta, twin, np.sqrt(sigma2))
+        if _DEBUG:
+            print(
+                f"[sources] {term.candidate.label} vs {twin.cause}: apart {apart:.4g} "
+                f"shift z² {z2:.4g} misfit/energy {misfit / float(target @ target):.3g}"
+            )
+        apart = min(apart, z2)
+    elif mapped and misfit < SEPARATION_FLOOR * float(target @ target):
         apart = min(apart, band)
     return t_term, delta, apart, judged_with
 
@@ -430,7 +477,8 @@ def decide_sources(
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
                 t_term, delta, apart, judged_with = _judge_twin(
-                    problem, _Judged(others, term, root, target, resid_t), twin, pool,
+                    problem, _Judged(others, term, root, target, resid_t, accepted, i, beta),
+                    twin, pool,
                     (rss_full, sigma2, kappa, band),
                 )  # fmt: skip
                 call.twins.append(
