@@ -5,7 +5,6 @@ coordinate can carry — the twins of :mod:`.sources` are compared through it.""
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -15,7 +14,7 @@ from ..parametric_errors import AXIS_INDEX
 from .candidate import Candidate
 from .residuals import FloatArray, Residuals
 
-__all__ = ["mapped_coordinate", "through_map"]
+__all__ = ["through_map"]
 
 
 def _pass_duration_s(
@@ -86,31 +85,6 @@ class _ErrorMap:
         return out
 
 
-def _mapper(res: Residuals, locked: str, k: int) -> Callable[[Residuals], FloatArray]:
-    """The coordinate (mm) of axis ``k`` a term locked to ``locked`` is evaluated at through
-    the session's map (:func:`through_map`), as a function of a session or a subset of it."""
-    own = res.q_mm[:, k] if locked == "position" else res.ref_mm[:, k]
-    err = (res.ref_mm[:, k] - res.q_mm[:, k]) * 1000.0
-    direction = res.signals.get(f"dir_{'xyz'[k]}", np.zeros(res.n))
-    emap = _ErrorMap(own, err, direction, res.data.t_s)
-    sign = 1.0 if locked == "position" else -1.0
-
-    def coordinate(r: Residuals) -> FloatArray:
-        # the reading as the coordinate (its noise out, :mod:`.reading`), as ``err`` above
-        col = (r.q_mm if locked == "position" else r.ref_mm)[:, k]
-        own_err = (r.ref_mm[:, k] - r.q_mm[:, k]) * 1000.0
-        own_dir = r.signals.get(f"dir_{'xyz'[k]}", np.zeros(r.n))
-        return np.asarray(col + sign * emap.ebar(col, r.data.t_s, own_err, own_dir) / 1000.0)
-
-    return coordinate
-
-
-def mapped_coordinate(res: Residuals, locked: str, axis: str) -> FloatArray:
-    """(N,) the coordinate (mm) along ``axis`` at which a term locked to ``locked``
-    (``position`` | ``reference``) is evaluated through the session's map."""
-    return _mapper(res, locked, AXIS_INDEX[axis])(res)
-
-
 def through_map(cand: Candidate, res: Residuals) -> Candidate:
     """``cand`` (a term of one coordinate) evaluated through the session's own map between the
     axis' position x and the reference's reading r: a position-locked term at x + ē/1000, a
@@ -129,11 +103,19 @@ def through_map(cand: Candidate, res: Residuals) -> Candidate:
     contract names."""
     k = AXIS_INDEX[cand.keys["axis"]]
     locked = cand.locked_to
-    coordinate = _mapper(res, locked, k)
+    own = res.q_mm[:, k] if locked == "position" else res.ref_mm[:, k]
+    err = (res.ref_mm[:, k] - res.q_mm[:, k]) * 1000.0
+    direction = res.signals.get(f"dir_{'xyz'[k]}", np.zeros(res.n))
+    emap = _ErrorMap(own, err, direction, res.data.t_s)
+
+    sign = 1.0 if locked == "position" else -1.0
 
     def mapped(r: Residuals) -> Residuals:
+        # the reading as the coordinate (its noise out, :mod:`.reading`), as ``err`` above
         col = (r.q_mm if locked == "position" else r.ref_mm).copy()
-        col[:, k] = coordinate(r)
+        own_err = (r.ref_mm[:, k] - r.q_mm[:, k]) * 1000.0
+        own_dir = r.signals.get(f"dir_{'xyz'[k]}", np.zeros(r.n))
+        col[:, k] = col[:, k] + sign * emap.ebar(col[:, k], r.data.t_s, own_err, own_dir) / 1000.0
         if locked == "reference":
             return replace(r, reading_mm=col)
         data = r.data.subset(slice(None))
