@@ -43,7 +43,7 @@ from .outcome import Diagnosis, Finding, describe_terms, public_refusal, session
 from .periods import CYCLIC, check_period
 from .reading import denoised_reading
 from .residuals import Residuals, compute_residuals
-from .sources import contribution, decide_sources, direction_factor, residual_in_time
+from .sources import decide_sources
 from .steps import (
     Slot,
     backward,
@@ -51,6 +51,7 @@ from .steps import (
     model_cv,
     other_gain,
     reprofile,
+    slow_noise,
     terms_of,
 )
 from .unexplained import is_local, local_candidates
@@ -88,8 +89,6 @@ def _round(
             _, rss0s, rank0s = fit(problem, base_s)
             _, rss1s, rank1s = fit(problem, [*base_s, Term(cand, theta)])
             p = max(p, f_test_p(rss0s, rss1s, rank1s - rank0s, n_obs, rank1s))
-        if cand.timed and p * n_tried * cand.look_elsewhere < alpha:
-            p = max(p, _timed_p(problem, base, Term(cand, theta), rss0, n_obs))
         p_adj = min(1.0, p * n_tried * cand.look_elsewhere)
         rows.append(
             {"candidate": cand, "theta": theta, "label": cand.label, "rss": rss1, "p_adj": p_adj}
@@ -141,21 +140,6 @@ def _round(
         local_hits.append(pick)
         eligible = [r for r in eligible if r is not pick]
     return None, rows
-
-
-def _timed_p(problem: Problem, base: list[Term], term: Term, rss0: float, n_obs: int) -> float:
-    """The F-test p-value of a cause of time (a drift) with the noise variance inflated along
-    its own contribution by the residual's correlation in time
-    (:func:`.sources.direction_factor`): a slow term fitted to noise correlated over seconds
-    gains as many σ² as that noise's correlation time holds points, not one per parameter —
-    a drift of 4 parameters took 1.9 % of a 126-s session's noise (an Ornstein–Uhlenbeck part
-    of 2.1 s) beside a latency and was named (latency/bidirectional-rest/s5001)."""
-    terms = [*base, term]
-    beta, rss1, rank1 = fit(problem, terms)
-    resid_t = residual_in_time(problem, terms, beta)
-    factor = direction_factor(problem, resid_t, contribution(problem, terms, beta, len(base)), 1.0)
-    rss1_eff = rss0 - (rss0 - rss1) / factor
-    return f_test_p(rss0, rss1_eff, term.candidate.n_params, n_obs, rank1)
 
 
 def _refusal(term: Term, evidence: dict[str, Any]) -> dict[str, Any]:
@@ -449,6 +433,7 @@ def _resume_after_replacement(
     _after_change(problem, search, say)
     _rounds(problem, pool, search, max_effects, say)
     _final_periods(problem, search, say)  # a cyclic error named now is tested like the others
+    slow_noise(problem, search.slots, search.n_tried, search.alpha, say)
     return [id(s.root) for s in slots] != before
 
 
@@ -471,6 +456,7 @@ def _search_all(
             search.cv_history.append(model_cv(problem, terms_of(search.slots)))
         if not _final_periods(problem, search, say):
             break
+    slow_noise(problem, search.slots, search.n_tried, search.alpha, say)
     # the distance the sensor looked at includes the machine's named cyclic errors, not the
     # sensor's own; with the sensor's ripple named, a cyclic error of the machine named beside
     # it is judged again there (:func:`_cyclic_beside_ripple`)
