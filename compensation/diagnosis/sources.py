@@ -222,19 +222,6 @@ def mirror(res: Residuals, term: Term, twin: Candidate) -> Candidate | None:
     )
 
 
-DRIFTS = ("drift", "reference_drift")
-
-
-def time_order(cand: Candidate, theta: Any) -> int | None:
-    """The Legendre order in time of a drift (its offsets' count; a shaped drift's time
-    orders), or ``None`` for any other cause."""
-    if cand.cause not in DRIFTS:
-        return None
-    effect = cand.build([0.0] * cand.n_params, theta if theta is not None else cand.thetas[0])
-    offsets = getattr(effect, "offset_um", None)
-    return len(offsets) if offsets is not None else None
-
-
 def _best_twin_shape(
     problem: Problem,
     others: list[Term],
@@ -250,14 +237,6 @@ def _best_twin_shape(
     shape has a reference drift as twin that is the same everywhere, and a default
     reading-locked shape may imitate a rich positional one with fewer parameters."""
     shapes = [twin] + ([twin.rich] if twin.rich is not None else [])
-    cap = time_order(term.candidate, term.theta)
-    if cap is not None:
-        # a drift's twin has the term's own time history (its order), not a richer one: the
-        # test asks whether the change along the axis is real, not which of two time
-        # freedoms fits better (thermal_drift/one-directional/s5001: an expansion of time order
-        # 3 was `either` against a reference drift of order 10 plus a table, Δχ² +7.6, where the
-        # same order in time leaves λ ≈ 1400 between them)
-        shapes = [c for c in shapes if (time_order(c, None) or 0) <= cap] or shapes[:1]
     same = mirror(problem.res, term, twin)
     if same is not None:
         shapes.append(same)
