@@ -20,8 +20,10 @@ mode × source, the quiet sessions, times, every miss; writes
 
 Seeds: the test (tests/test_discovery_reference.py) and development use seeds 0–999; this
 benchmark's seeds start at 1000 (``--first-seed``) and are the held-out figures. Seeds already
-run (no longer held out): 1000–1003 (their misses guided the changes of 2026-12-05) and
-3000–3002 (run once, 2026-12-05, for that round's figure); the next fresh range starts at 4000.
+run (no longer held out): 1000–1003 (their misses guided the changes of 2026-12-05),
+3000–3002 and 4000–4002 (guided the round of 2026-12-06), 5000–5002 (held out once, then their
+misses guided the second round of 2026-12-06) and 6000–6002 (run once, at the end of that round,
+for its held-out figure); the next fresh range starts at 7000.
 
     .venv/bin/python benchmarks/bench_discovery_reference.py --jobs 2          # 144 sessions
     .venv/bin/python benchmarks/bench_discovery_reference.py --quick           # 1 seed, 33

@@ -21,10 +21,10 @@ import numpy as np
 
 from .candidate import Candidate
 from .fitting import Problem, Term
-from .periods import _first_harmonic, cyclic_axis, partial_residual
+from .periods import _first_harmonic, _harmonic_cov, cyclic_axis, partial_residual
 from .residuals import FloatArray
 
-__all__ = ["cyclic_locking"]
+__all__ = ["cyclic_locking", "passes_in_time", "shift_noncentrality"]
 
 #: A pass must hold this many points to get a phase of its own.
 MIN_PASS_POINTS = 30
@@ -40,7 +40,7 @@ def _wrap(d: float) -> float:
     return float((d + np.pi) % (2.0 * np.pi) - np.pi)
 
 
-def _passes(direction: FloatArray, t: FloatArray | None) -> list[Any]:
+def passes_in_time(direction: FloatArray, t: FloatArray | None) -> list[Any]:
     order = np.argsort(t, kind="stable") if t is not None else np.arange(len(direction))
     d = direction[order]
     cuts = np.flatnonzero(np.diff(d) != 0) + 1
@@ -87,7 +87,7 @@ def cyclic_locking(
     if d is not None:
         x = term.candidate.design_uncached(res, theta)[:, k, :]
         phases = []
-        for rows in _passes(d, res.data.t_s):
+        for rows in passes_in_time(d, res.data.t_s):
             if len(rows) >= MIN_PASS_POINTS:
                 amp, phi = _phase(x[rows], y[rows], env)
                 if amp > 0:
@@ -96,3 +96,57 @@ def cyclic_locking(
             out["passes"] = len(phases)
             out["pass_phase_coherence"] = float(np.abs(np.mean(np.exp(1j * np.array(phases)))))
     return out
+
+
+def _phase_and_var(
+    x: FloatArray, y: FloatArray, envelope: int, sigma: float
+) -> tuple[float, float]:
+    """(phase rad, its variance rad²) of the first harmonic at the centre of the travel."""
+    a = np.column_stack([np.ones(len(y)), x])
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    c = np.asarray(coef[1:], float)
+    amp, phi = _first_harmonic(c, envelope, 0.0)
+    if amp <= 0:
+        return phi, float("inf")
+    cov = _harmonic_cov(x, sigma, envelope, 0.0)
+    pj = np.polynomial.legendre.legvander(np.array([0.0]), envelope)[0]
+    qa, qb = float(pj @ c[0 : 2 * (envelope + 1) : 2]), float(pj @ c[1 : 2 * (envelope + 1) : 2])
+    grad = np.array([-qb, qa]) / amp**2  # ∂φ/∂(a, b) of φ = atan2(b, a)
+    return phi, float(grad @ cov @ grad)
+
+
+def shift_noncentrality(
+    problem: Problem,
+    terms: Sequence[Term],
+    index: int,
+    beta: FloatArray,
+    twin: Candidate,
+    sigma_um: float,
+) -> float:
+    """How clearly the cyclic ``terms[index]`` shows the two coordinates apart between the
+    directions of travel: z² = (r/σ_r)², r (µm) the difference between its shift from the + to
+    the − passes in its own coordinate and in the ``twin``'s (the coordinates' own difference
+    between the directions — the reversal — as the term's phase sees it, modulo its period), σ_r
+    that shift's standard deviation from the fit's covariance (residual σ ``sigma_um``). 0 when
+    the session does not have both directions: a position then has one reading."""
+    term = terms[index]
+    k = cyclic_axis(term)
+    res = problem.res
+    d = res.signals.get(f"dir_{'xyz'[k]}") if k is not None else None
+    if k is None or d is None or not (np.any(d > 0) and np.any(d < 0)):
+        return 0.0
+    y = partial_residual(problem, terms, beta, {index})[:, k]
+    theta = term.theta
+    period_um = 1000.0 * float(theta[1] if isinstance(theta, tuple) else theta)
+    moved, var = [], 0.0
+    for cand in (term.candidate, twin):
+        x = cand.design_uncached(res, theta)[:, k, :]
+        phi_p, v_p = _phase_and_var(x[d > 0], y[d > 0], cand.envelope, sigma_um)
+        phi_m, v_m = _phase_and_var(x[d < 0], y[d < 0], cand.envelope, sigma_um)
+        moved.append(phi_m - phi_p)
+        var = max(var, v_p + v_m)  # the two coordinates' phases share their noise: the larger
+    if not np.isfinite(var) or var <= 0:
+        return 0.0
+    r = _wrap(moved[1] - moved[0]) / (2.0 * np.pi) * period_um
+    sigma_r = float(np.sqrt(var)) / (2.0 * np.pi) * period_um
+    return float((r / sigma_r) ** 2)

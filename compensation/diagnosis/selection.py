@@ -51,6 +51,7 @@ from .steps import (
     model_cv,
     other_gain,
     reprofile,
+    slow_noise,
     terms_of,
 )
 from .unexplained import is_local, local_candidates
@@ -432,6 +433,7 @@ def _resume_after_replacement(
     _after_change(problem, search, say)
     _rounds(problem, pool, search, max_effects, say)
     _final_periods(problem, search, say)  # a cyclic error named now is tested like the others
+    slow_noise(problem, search.slots, search.n_tried, search.alpha, say)
     return [id(s.root) for s in slots] != before
 
 
@@ -454,6 +456,7 @@ def _search_all(
             search.cv_history.append(model_cv(problem, terms_of(search.slots)))
         if not _final_periods(problem, search, say):
             break
+    slow_noise(problem, search.slots, search.n_tried, search.alpha, say)
     # the distance the sensor looked at includes the machine's named cyclic errors, not the
     # sensor's own; with the sensor's ripple named, a cyclic error of the machine named beside
     # it is judged again there (:func:`_cyclic_beside_ripple`)

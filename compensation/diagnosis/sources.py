@@ -53,10 +53,14 @@ from ..parametric_errors import AXIS_INDEX
 from .candidate import Candidate
 from .coordinate_map import through_map
 from .fitting import Problem, Term, best_theta, fit
+from .locking import shift_noncentrality
 from .reference_candidates import cyclic_builder, cyclic_design
 from .residuals import Residuals
 
-#: A twin is separable only when it misses at least this share of the named term's energy.
+#: A smooth twin through the map (a table ↔ a nonlinearity of the reading) is separable only
+#: when it misses at least this share of the term's energy: a smooth curve moved by a reversal
+#: changes by f′·r, far below its own size, and what separates it in a quiet session is the
+#: map's imperfection. (Cyclic twins are judged by their phase shift against its noise.)
 SEPARATION_FLOOR = 0.01
 
 #: Twins that are smooth functions of the reference's reading: never named in place of a machine
@@ -65,7 +69,15 @@ SEPARATION_FLOOR = 0.01
 #: data); they can only make an entry ``either``.
 READING_SHAPES = ("reference_nonlinearity", "reference_scale")
 
-__all__ = ["TWINS", "SourceCall", "decide_sources", "twins_of"]
+__all__ = [
+    "TWINS",
+    "SourceCall",
+    "contribution",
+    "decide_sources",
+    "direction_factor",
+    "residual_in_time",
+    "twins_of",
+]
 
 #: cause → the causes that may be its twins (same axis).
 TWINS: dict[str, tuple[str, ...]] = {
@@ -302,7 +314,7 @@ def _time_order(problem: Problem) -> Any:
     return np.argsort(t, kind="stable") if t is not None else np.arange(problem.res.n)
 
 
-def _residual_in_time(problem: Problem, terms: Sequence[Term], beta: Any) -> Any:
+def residual_in_time(problem: Problem, terms: Sequence[Term], beta: Any) -> Any:
     """(N, axes) the model's residual in time order."""
     r = problem.y - (problem.stacked(terms) @ beta).reshape(problem.y.shape)
     return r.reshape(problem.res.n, -1)[_time_order(problem)]
@@ -321,10 +333,24 @@ def _autocorrelation(x: Any, max_lag: int) -> Any:
 MAX_LAG_SHARE = 0.25
 
 
+def initial_positive_lags(rho: Any) -> int:
+    """How many lags (1…) of the autocorrelation ``rho`` (lags 1, 2, …) Geyer's initial
+    positive sequence keeps: the sums of adjacent pairs Γ_m = ρ_2m + ρ_2m+1 (ρ_0 = 1) are
+    positive for any stationary series; the sequence stops before the first Γ_m ≤ 0 (m ≥ 1).
+    Single lags of a weak, long correlation dip below zero by chance (ρ ≈ 0.04 ± 0.03 over 88
+    lags of an Ornstein–Uhlenbeck part of 2.3 s at 38 Hz: cut at lag 5, a factor 1.4 for a
+    drift's slow direction where the noise holds ~20)."""
+    full = np.r_[1.0, np.asarray(rho, float)]
+    m = 1
+    while 2 * m + 1 < len(full) and full[2 * m] + full[2 * m + 1] > 0.0:
+        m += 1
+    return min(2 * m - 1, len(rho))
+
+
 def direction_factor(problem: Problem, resid_t: Any, gap: Any, fallback: float) -> float:
     """The variance inflation of a difference of fits along ``gap`` (stacked) for the
     residual ``resid_t`` (in time order): 1 + 2·Σ_k ρ_k·c_k, ρ_k the residual's
-    autocorrelation at lag k (summed while positive: Geyer's initial positive sequence) and
+    autocorrelation at lag k (Geyer's initial positive sequence, :func:`initial_positive_lags`) and
     c_k that of ``gap`` — noise correlated over seconds inflates a slow difference (a
     reversal's change along the travel, a drift's shape) by its whole correlation time and a
     cyclic one of a short period hardly at all. The lag-one factor :func:`dependence_factor`
@@ -336,8 +362,7 @@ def direction_factor(problem: Problem, resid_t: Any, gap: Any, fallback: float) 
         return fallback
     max_lag = max(int(MAX_LAG_SHARE * resid_t.shape[0]), 1)
     rho = _autocorrelation(resid_t, max_lag)
-    stop = np.flatnonzero(rho <= 0.0)
-    rho = rho[: stop[0]] if len(stop) else rho
+    rho = rho[: initial_positive_lags(rho)]
     if not len(rho):
         return 1.0
     c = _autocorrelation(g, len(rho))
@@ -354,6 +379,9 @@ class _Judged:
     root: Candidate
     target: Any
     resid_t: Any
+    terms: list[Term]  # the full model (the term at ``index``) and its fit ``beta``
+    index: int
+    beta: Any
 
 
 def _judge_twin(
@@ -388,13 +416,17 @@ def _judge_twin(
     extra += sum(t.candidate.n_params for t in judged_with[len(others) :])
     delta = (delta - extra) * kappa / k_gap + extra
     apart = misfit / (sigma2 / kappa * k_gap)
-    # separable only by a difference that is a sizeable part of the term itself (≥ 1 % of its
-    # energy: a cyclic error moved by ~0.03 period between the directions), not by the
-    # imperfections of the map in a quiet session (the floor is for twins through the map
-    # between position and reading: a reversal and a latency, or two drifts, differ by their
-    # own columns)
+    # a twin through the map between position and reading is separable only by the physical
+    # difference between the coordinates, not by the map's imperfections in a quiet session
+    # (a reversal and a latency, or two drifts, differ by their own columns: no map)
     mapped = {twin.locked_to, root.locked_to} == {"position", "reference"}
-    if mapped and misfit < SEPARATION_FLOOR * float(target @ target):
+    if mapped and {root.cause, twin.cause} == {"periodic", "reference_ripple"}:
+        # two cyclic errors of the two coordinates are told apart only by how far the
+        # coordinates move apart between the directions (the reversal), as the term's own
+        # phase shows it against its noise — not by the map's imperfections in a quiet session
+        z2 = shift_noncentrality(problem, j.terms, j.index, j.beta, twin, np.sqrt(sigma2))
+        apart = min(apart, z2)
+    elif mapped and misfit < SEPARATION_FLOOR * float(target @ target):
         apart = min(apart, band)
     return t_term, delta, apart, judged_with
 
@@ -424,13 +456,14 @@ def decide_sources(
             kappa = dependence_factor(problem, accepted, beta)
             sigma2 = max(rss_full / max(n_obs - rank, 1), 1e-300) * kappa
             others = accepted[:i] + accepted[i + 1 :]
-            target = _contribution(problem, accepted, beta, i)
-            resid_t = _residual_in_time(problem, accepted, beta)
+            target = contribution(problem, accepted, beta, i)
+            resid_t = residual_in_time(problem, accepted, beta)
             call = SourceCall(root.source, root.locked_to, replaced=replaced)
             better: tuple[float, Term, Candidate] | None = None
             for twin in twins_of(root, pool, term.theta):
                 t_term, delta, apart, judged_with = _judge_twin(
-                    problem, _Judged(others, term, root, target, resid_t), twin, pool,
+                    problem, _Judged(others, term, root, target, resid_t, accepted, i, beta),
+                    twin, pool,
                     (rss_full, sigma2, kappa, band),
                 )  # fmt: skip
                 call.twins.append(
@@ -466,7 +499,7 @@ def decide_sources(
     return calls
 
 
-def _contribution(problem: Problem, terms: Sequence[Term], beta: Any, index: int) -> Any:
+def contribution(problem: Problem, terms: Sequence[Term], beta: Any, index: int) -> Any:
     """The stacked fitted contribution of ``terms[index]`` (µm)."""
     start = problem.n_nuisance + sum(t.candidate.n_params for t in terms[:index])
     stop = start + terms[index].candidate.n_params

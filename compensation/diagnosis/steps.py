@@ -3,7 +3,7 @@ backward elimination (used by :mod:`.selection`)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from .candidate import Candidate
 from .fitting import Problem, Term, best_theta, cv_gain, cv_mse, f_test_p, fit
+from .sources import contribution, direction_factor, residual_in_time
 
 __all__ = [
     "Slot",
@@ -20,8 +21,10 @@ __all__ = [
     "model_cv",
     "other_gain",
     "reprofile",
+    "slow_noise",
     "still_significant",
     "terms_of",
+    "timed_p",
 ]
 
 
@@ -196,3 +199,44 @@ def still_significant(
         if gain >= min_cv_gain:
             out.append({**h, "theta": theta, "p_adj": p_adj, "cv_gain": gain})
     return out
+
+
+def timed_p(problem: Problem, base: list[Term], term: Term, rss0: float, n_obs: int) -> float:
+    """The F-test p-value of a cause of time (a drift) with the noise variance inflated along
+    its own contribution by the residual's correlation in time
+    (:func:`.sources.direction_factor`): a slow term fitted to noise correlated over seconds
+    gains as many σ² as that noise's correlation time holds points, not one per parameter —
+    a drift of 4 parameters took 1.9 % of a 126-s session's noise (an Ornstein–Uhlenbeck part
+    of 2.1 s) beside a latency and was named (latency/bidirectional-rest/s5001)."""
+    terms = [*base, term]
+    beta, rss1, rank1 = fit(problem, terms)
+    resid_t = residual_in_time(problem, terms, beta)
+    factor = direction_factor(problem, resid_t, contribution(problem, terms, beta, len(base)), 1.0)
+    rss1_eff = rss0 - (rss0 - rss1) / factor
+    return f_test_p(rss0, rss1_eff, term.candidate.n_params, n_obs, rank1)
+
+
+def slow_noise(
+    problem: Problem, slots: list[Slot], n_tried: int, alpha: float, say: Callable[[str], None]
+) -> None:
+    """Drop, one at a time, a named cause of time (a drift) whose F-test beside the others fails
+    once σ² is inflated along its contribution by the residual's correlation in time
+    (:func:`timed_p`), at the final model, whose residual is the noise: judged while other
+    causes were still in the residual, that correlation would be theirs, not the noise's."""
+    n_obs = problem.y.size
+    while True:
+        weakest: tuple[float, int] | None = None
+        for i, s in enumerate(slots):
+            if not s.root.timed:
+                continue
+            others = terms_of(slots[:i] + slots[i + 1 :])
+            _, rss0, _ = fit(problem, others)
+            p = timed_p(problem, others, s.term, rss0, n_obs)
+            p_adj = p * n_tried * s.root.look_elsewhere
+            if p_adj >= alpha and (weakest is None or p_adj > weakest[0]):
+                weakest = (p_adj, i)
+        if weakest is None:
+            return
+        gone = slots.pop(weakest[1])
+        say(f"  dropped {gone.root.label}: not beyond the noise's correlation in time")
+        reprofile(problem, slots)
