@@ -1,8 +1,9 @@
-"""The period scans' kept columns (``candidate.kept_scan``): what a periodic or a reference
-reading candidate returns for a block of periods is, bit for bit, the columns computed afresh by
-the same formula written out here (cos/sin of 2π·q/period minus their value at the reference
-point), whether it is the first call or a repeat; kept columns cannot be written to; another
-data set gets its own columns."""
+"""Work the diagnosis keeps instead of redoing, against what it must equal. The period scans'
+kept columns (``candidate.kept_scan``): what a periodic or a reference reading candidate returns
+for a block of periods is, bit for bit, the columns computed afresh by the same formula written
+out here (cos/sin of 2π·q/period minus their value at the reference point), whether it is the
+first call or a repeat; kept columns cannot be written to; another data set gets its own
+columns. A cross-validation fold's training rows (kept per fold): a set difference."""
 
 from __future__ import annotations
 
@@ -78,3 +79,17 @@ def test_store_is_bounded_and_recomputes_beyond_it() -> None:
     x = scan(res, small)
     assert scan(res, small) is x and len(calls) == 3
     assert scan(object(), small) is not x and len(calls) == 4  # another data set
+
+
+def test_training_rows_are_the_rows_not_held_out() -> None:
+    """``Problem.training_rows`` (kept per fold) against a set difference written out."""
+    from cmm_comp.compensation.diagnosis.fitting import make_problem
+
+    problem = make_problem(_residuals(3))
+    for test in problem.folds:
+        expected = sorted(set(range(problem.res.n)) - set(test.tolist()))
+        first = problem.training_rows(test)
+        assert first.tolist() == expected
+        assert problem.training_rows(test.copy()) is first  # same fold: kept
+        with pytest.raises(ValueError):
+            first[0] = -1
