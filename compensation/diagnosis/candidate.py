@@ -279,6 +279,36 @@ def is_finite_design(x: FloatArray) -> bool:
     return bool(np.all(np.isfinite(x))) and float(np.max(np.abs(x), initial=0.0)) > 0.0
 
 
+#: Values (float64) of scan columns one candidate keeps between calls (:func:`kept_scan`).
+SCAN_STORE_VALUES = 2_000_000
+
+
+def kept_scan(
+    design_many: Callable[[Residuals, Sequence[Any]], FloatArray],
+) -> Callable[[Residuals, Sequence[Any]], FloatArray]:
+    """``design_many`` whose (N, T, p) columns for a block of grid values are kept (read-only)
+    and returned again for the same block on the same data set (identity of ``res``) while the
+    kept blocks hold at most :data:`SCAN_STORE_VALUES` values: a scan is profiled against a new
+    base in every selection round, on the same positions — the same numbers, computed once."""
+    store: dict[tuple[Any, ...], FloatArray] = {}
+    held: list[Residuals] = []  # the data set the store belongs to
+
+    def design(res: Residuals, thetas: Sequence[Any]) -> FloatArray:
+        if not held or held[0] is not res:
+            store.clear()
+            held[:] = [res]
+        key = tuple(thetas)
+        x = store.get(key)
+        if x is None:
+            x = design_many(res, thetas)
+            if x.size + sum(v.size for v in store.values()) <= SCAN_STORE_VALUES:
+                x.flags.writeable = False
+                store[key] = x
+        return x
+
+    return design
+
+
 __all__ = [
     "Candidate",
     "EffectBuilder",
@@ -287,6 +317,7 @@ __all__ = [
     "frozen",
     "imaged",
     "is_finite_design",
+    "kept_scan",
     "span_of",
     "with_static_image",
 ]

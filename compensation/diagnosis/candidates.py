@@ -30,6 +30,7 @@ from .candidate import (
     contract_keys,
     effect_displacement_um,
     is_finite_design,
+    kept_scan,
     span_of,
     with_static_image,
 )
@@ -68,7 +69,7 @@ def _periodic_design_many(
     def design(res: Residuals, periods: Sequence[Any]) -> FloatArray:
         return _periodic_columns(res, axis, periods, harmonics)
 
-    return design
+    return kept_scan(design)
 
 
 #: Cycles per travel scanned by the periodic candidate; a dense record (:func:`dense_record`)

@@ -49,6 +49,19 @@ class Problem:
     #: is whether it predicts the points between those it was fitted on. None without times.
     time_folds: list[NDArray[np.intp]] | None = None
     _q_cache: dict[Any, FloatArray | None] = field(default_factory=dict, repr=False)
+    _train_cache: dict[Any, NDArray[np.intp]] = field(default_factory=dict, repr=False)
+
+    def training_rows(self, test: NDArray[np.intp]) -> NDArray[np.intp]:
+        """The sorted rows not in ``test`` (cached, read-only: every model's cross-validation
+        holds out the same folds)."""
+        key = (test.dtype.str, test.tobytes())
+        if key not in self._train_cache:
+            if len(self._train_cache) > 64:
+                self._train_cache.clear()
+            train = np.setdiff1d(np.arange(self.res.n), test)
+            train.flags.writeable = False
+            self._train_cache[key] = train
+        return self._train_cache[key]
 
     def projector(self, base: Sequence[Term], rows: Any) -> FloatArray | None:
         """Orthonormal basis of the columns of ``base`` on ``rows`` (cached: every candidate of
@@ -423,9 +436,8 @@ def cv_predictions(
     pred = np.zeros((res.n, 3))
     if not terms and not problem.offsets:
         return pred
-    all_rows = np.arange(res.n)
     for test in problem.folds if folds is None else folds:
-        train = np.setdiff1d(all_rows, test)
+        train = problem.training_rows(np.asarray(test))
         fold_terms: list[Term] = []
         for i, t in enumerate(terms):
             # (a ripple's period law is kept: its few numbers are pinned by thousands of points)

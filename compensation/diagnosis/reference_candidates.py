@@ -29,7 +29,7 @@ from numpy.polynomial import legendre
 
 from ..effects import DriftEffect, PeriodicEffect, PeriodLaw, ripple_columns, ripple_terms
 from ..parametric_errors import AXES, AXIS_INDEX
-from .candidate import Candidate, EffectBuilder, span_of
+from .candidate import Candidate, EffectBuilder, kept_scan, span_of
 from .reference_effects import (
     LatencyEffect,
     ReferenceDriftEffect,
@@ -372,7 +372,7 @@ def _reading_scan(k: int) -> Callable[[Residuals, Sequence[Any]], FloatArray]:
         ph = np.outer(r.ref_mm[:, k], 2.0 * np.pi / np.asarray([float(p) for p in periods]))
         return np.stack([np.cos(ph), np.sin(ph)], axis=2)
 
-    return design
+    return kept_scan(design)
 
 
 def _nonlinearity_twin(res: Residuals, axis: str) -> Candidate:
