@@ -409,17 +409,14 @@ class CanEndpoint(can.Listener):
     def _on_assembler(self, event: object, t_rx: float) -> None:
         if isinstance(event, Triplet):
             x, y, z = event.x, event.y, event.z
-            reading = Reading(
-                seq=event.seq,
-                position_nm=(x.position_nm, y.position_nm, z.position_nm),
-                directions=(x.direction.sign, y.direction.sign, z.direction.sign),
-                valid=(x.valid, y.valid, z.valid),
-                probe=self._probe.pop(event.seq, None),
-                received_s=t_rx,
-                source="can",
+            self._add_ready(
+                event.seq,
+                (x.position_nm, y.position_nm, z.position_nm),
+                (x.direction.sign, y.direction.sign, z.direction.sign),
+                (x.valid, y.valid, z.valid),
+                t_rx,
+                fd=False,
             )
-            self._ready.append(reading)  # answered with the others of this wake-up
-            self._ready_fd.append(False)
         elif isinstance(event, Incomplete | Superseded):
             self._answer_ready()
             self._answer_incomplete(event.seq, event.reason, t_rx)
@@ -434,17 +431,38 @@ class CanEndpoint(can.Listener):
         """A whole reading in one CAN FD frame: ready to answer (no assembly; a repeat of a
         seq is a new reading, as a restarted controller's would be)."""
         d = frame.directions
-        reading = Reading(
-            seq=frame.seq,
-            position_nm=frame.position_nm,
-            directions=(d[0].sign, d[1].sign, d[2].sign),
-            valid=frame.valid,
-            probe=self._probe.pop(frame.seq, None),
-            received_s=t_rx,
-            source="can",
+        self._add_ready(
+            frame.seq,
+            frame.position_nm,
+            (d[0].sign, d[1].sign, d[2].sign),
+            frame.valid,
+            t_rx,
+            fd=True,
         )
-        self._ready.append(reading)
-        self._ready_fd.append(True)
+
+    def _add_ready(
+        self,
+        seq: int,
+        position_nm: tuple[int, int, int],
+        directions: tuple[int, int, int],
+        valid: tuple[bool, bool, bool],
+        t_rx: float,
+        fd: bool,
+    ) -> None:
+        """One completed reading, answered with the others of this wake-up; ``fd``: it came as
+        one RAW_XYZ frame and is answered in kind (the ready list and its flags stay paired)."""
+        self._ready.append(
+            Reading(
+                seq=seq,
+                position_nm=position_nm,
+                directions=directions,
+                valid=valid,
+                probe=self._probe.pop(seq, None),
+                received_s=t_rx,
+                source="can",
+            )
+        )
+        self._ready_fd.append(fd)
 
     def _answer_incomplete(self, seq: int, reason: str, t_rx: float) -> None:
         self.metrics.fault("incomplete_reading")
