@@ -7,7 +7,8 @@
 * :mod:`.model`, :mod:`.obs_laser`, :mod:`.obs_artefacts` — the observation models on the
   project's exact chain;
 * :mod:`.solver` — Gauss–Newton with nuisance poses/stations, variance groups, smoothness;
-  :mod:`.posterior` — the residuals before the fit, U marginalised over the smoothness;
+  :mod:`.posterior` — U marginalised over the smoothness (the residuals before the fit are the
+  solver's first stage, :attr:`.solver.Solution.before`);
 * :mod:`.gauge` — what the data cannot see; :mod:`.covariance` — U of every identified error
   and of the volumetric error;
 * :mod:`.writer` — ``machine.toml`` with ``[uncertainty]``; :mod:`.report` — JSON, PNG, HTML;

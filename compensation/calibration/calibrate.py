@@ -147,8 +147,7 @@ def _calibrate(
         f"{sum(b.n_rows for b in problem.blocks)} readings"
     )
     sol = solve(problem, progress=say)
-    # the residuals with the nuisance alone fitted (θ = 0): the solver's first stage, the same
-    # computation as posterior.residuals_without_errors (not repeated: ~10 % of a run's CPU)
+    # the residuals with the nuisance alone fitted (θ = 0): the solver's first stage
     before = sol.before
     kept, dropped = _significant_reversals(problem, sol)
     if dropped:  # a reversal the data do not show is not written (it would need dir signals)

@@ -1,5 +1,4 @@
-"""What follows the fit (:mod:`.solver`): the residuals the data show before any error is
-identified (the report's "before"), and the covariance marginalised over the estimated
+"""What follows the fit (:mod:`.solver`): the covariance marginalised over the estimated
 smoothness (docs/calibration.md §5) — the smoothness is an estimate, not a known constant, and a
 U conditional on it is too small where the data end. Units: µm, µrad.
 """
@@ -12,9 +11,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .normal import Normal
-from .solver import CLASS_WEIGHT, LAMBDA_RANGE, Problem, Solution, _lm
+from .solver import CLASS_WEIGHT, LAMBDA_RANGE, Problem, Solution
 
-__all__ = ["residuals_without_errors", "smoothness_spread", "with_smoothness_spread"]
+__all__ = ["smoothness_spread", "with_smoothness_spread"]
 
 FloatArray = NDArray[np.float64]
 
@@ -60,17 +59,3 @@ def smoothness_spread(
             shift = (normal.step() - step)[problem.kept]  # θ̂(λ') − θ̂(λ), linearised
             out += (normal.kept_inverse() - cov + np.outer(shift, shift)) / 6.0
     return out
-
-
-def residuals_without_errors(problem: Problem) -> list[FloatArray]:
-    """Each block's residuals with θ = 0 and only the nuisance fitted: what the data show
-    before any error is identified (the report's "before")."""
-    theta = np.zeros(problem.p)
-    states = [b.initial_state(problem.model, theta) for b in problem.blocks]
-    if problem.n > problem.p:
-        frozen = np.zeros(problem.n, dtype=bool)
-        frozen[: problem.p] = True
-        lam = {c: 1.0 for c in problem.classes}
-        theta, states, _, _ = _lm(problem, theta, states, lam, 60, frozen)
-    res, _ = problem.linearize(theta, states)
-    return res
